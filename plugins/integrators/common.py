@@ -1,0 +1,273 @@
+"""Pieces shared by the lab's unidirectional path tracers.
+
+``LabPathIntegrator.sample`` is the one path loop, written in the sections that
+Mitsuba's ``path.cpp`` and ``prb.py`` use (Configure loop state, Direct
+emission, Emitter sampling, BSDF sampling, Update loop variables, Stopping
+criterion). The estimators differ only in how they weight the two ways a path
+can reach an emitter, so each subclass supplies two small methods:
+
+* ``emitter_hit_weight``: the weight of emission found by a BSDF-sampled ray;
+* ``emitter_sample_weight``: the weight of one next-event (shadow-ray) sample,
+  or ``None`` when the estimator does not sample emitters at all.
+
+With these, ``lab_naive``, ``lab_nee`` and ``lab_mis`` can be read side by side
+and their differences are exactly those two sections (Veach 1997, ch. 9).
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+#: Mitsuba's convention: max_depth = -1 means unbounded.
+UNBOUNDED = -1
+#: Survival probability cap: every path stops with probability >= 5% per bounce
+#: past rr_depth, so even a closed box of albedo 1 terminates.
+RR_MAX_SURVIVAL = 0.95
+
+HEURISTICS = ("balance", "power", "max", "average")
+
+
+def parse_depth(value: int, name: str, plugin: str) -> int:
+    """-1 (unbounded) or a non-negative int; unbounded maps to 2^32 - 1."""
+    if value == UNBOUNDED:
+        return 0xFFFFFFFF
+    if value < 0:
+        raise ValueError(f"{plugin}: parameter '{name}' must be -1 (unbounded) or >= 0, got {value}")
+    return int(value)
+
+
+def mis_weight(pdf_self, pdf_other, heuristic: str = "power", beta: float = 2.0):
+    """MIS weight of a sample drawn by the technique with effective density ``pdf_self``.
+
+    ``pdf_self`` and ``pdf_other`` are n_i * p_i(x) (Veach's multi-sample
+    estimator), in the same measure. The weights of the two techniques sum to 1
+    wherever either density is positive, for densities anywhere in [0, inf]:
+
+    * power (beta) / balance (beta = 1): 1 / (1 + r^beta) with r = pdf_other / pdf_self.
+      Working with the ratio avoids pdf^beta, which overflows float32 once
+      pdf > 3.4e38^(1/beta); an overflowing r^beta gives the right limit (0).
+    * max: 1 for the larger density, 1/2 each on a tie.
+    * average: 1/2 wherever both densities are positive (the plain average,
+      Veach's cautionary example), 1 where only this technique can sample x.
+    A zero (or NaN) ``pdf_self`` gets weight 0; inf against a finite pdf gets 1.
+    """
+    both_inf = dr.isinf(pdf_self) & dr.isinf(pdf_other)
+    if heuristic in ("balance", "power"):
+        if heuristic == "balance":
+            beta = 1.0
+        r = dr.select(both_inf, 1.0, pdf_other / pdf_self)
+        if beta == 1.0:
+            r_beta = r
+        elif beta == 2.0:
+            r_beta = dr.square(r)
+        else:
+            r_beta = dr.power(r, beta)
+        w = dr.rcp(1.0 + r_beta)
+    elif heuristic == "max":
+        w = dr.select(pdf_self > pdf_other, 1.0, dr.select(pdf_self == pdf_other, 0.5, 0.0))
+    elif heuristic == "average":
+        w = dr.select(pdf_other > 0, 0.5, 1.0)
+    else:
+        raise ValueError(f"unknown MIS heuristic '{heuristic}'; expected one of {', '.join(HEURISTICS)}")
+    return dr.select(pdf_self > 0, w, 0.0)
+
+
+def russian_roulette_probability(beta, eta):
+    """Survival probability q = min(max(beta) * eta^2, 0.95).
+
+    Tying q to the throughput kills dim paths early (seed text, "Russian
+    roulette"); eta^2 undoes the radiance scaling at refractive boundaries so a
+    path inside glass is not culled for a throughput that will come back.
+    """
+    return dr.minimum(dr.max(mi.unpolarized_spectrum(beta)) * dr.square(eta), RR_MAX_SURVIVAL)
+
+
+class RayCounters:
+    """Camera, extension (BSDF) and shadow rays traced, summed over all lanes.
+
+    Each lane counts in registers inside the path loop; one atomic add per
+    lane and kind after the loop (reduced within each SIMD packet first)
+    keeps the cost to a few instructions per sample.
+    """
+    KINDS = ("camera", "extension", "shadow")
+
+    def __init__(self):
+        self.totals = dr.zeros(mi.UInt64, len(self.KINDS))
+
+    def add(self, kind: str, per_lane, active):
+        dr.scatter_reduce(dr.ReduceOp.Add, self.totals, mi.UInt64(per_lane),
+                          self.KINDS.index(kind), active, mode=dr.ReduceMode.Local)
+
+    def read(self, reset: bool = True) -> dict[str, int]:
+        dr.eval(self.totals)
+        values = self.totals.numpy().tolist()
+        if reset:
+            self.totals = dr.zeros(mi.UInt64, len(self.KINDS))
+        return {kind: int(v) for kind, v in zip(self.KINDS, values)}
+
+
+class LabPathIntegrator(mi.SamplingIntegrator):
+    """Base class: parameters shared by every lab path tracer and the path loop.
+
+    Parameters (read from the plugin's properties):
+
+    ============= ====== ==========================================================
+    max_depth     int    Longest path, in segments: 1 = only emitters seen
+                         directly, 2 = direct lighting, -1 = unbounded (Default: -1)
+    rr_depth      int    Depth at which Russian roulette starts (Default: 5)
+    hide_emitters bool   Emitters seen directly by the camera are black; the
+                         environment behind the scene counts as invalid
+                         (alpha 0). (Default: false)
+    count_rays    bool   Count camera, extension and shadow rays; read them with
+                         ``ray_counts()``. Costs one atomic add per sample.
+                         (Default: true)
+    ============= ====== ==========================================================
+    """
+
+    #: Plugin name, for messages.
+    plugin_name = "lab_path"
+
+    def __init__(self, props: mi.Properties):
+        super().__init__(props)
+        name = self.plugin_name
+        self.max_depth = parse_depth(props.get("max_depth", UNBOUNDED), "max_depth", name)
+        self.rr_depth = int(props.get("rr_depth", 5))
+        if self.rr_depth <= 0:
+            raise ValueError(f"{name}: parameter 'rr_depth' must be >= 1, got {self.rr_depth}")
+        self.hide_emitters = bool(props.get("hide_emitters", False))
+        self.count_rays = bool(props.get("count_rays", True))
+        self.counters = RayCounters()
+
+    # -- What differs between the estimators ------------------------------------
+
+    def emitter_hit_weight(self, scene, prev_it, ds, prev_bsdf_pdf, prev_bsdf_delta):
+        """Weight of emission found by a BSDF-sampled ray (camera rays and rays
+        after a delta bounce arrive with prev_bsdf_delta = True)."""
+        raise NotImplementedError
+
+    def emitter_sample_weight(self, ds, bsdf_pdf):
+        """Weight of one emitter sample (used only when ``samples_emitters``)."""
+        raise NotImplementedError
+
+    #: Whether the estimator samples emitters (next-event estimation) at all.
+    samples_emitters = False
+    #: Shadow rays per vertex (n_L in Veach's multi-sample estimator).
+    emitter_samples = 1
+
+    # -- The path loop ------------------------------------------------------------
+
+    @dr.syntax
+    def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,
+               medium: mi.Medium = None, active: mi.Bool = True):
+        bsdf_ctx = mi.BSDFContext()
+        samples_emitters = self.samples_emitters
+        n_L = self.emitter_samples
+
+        # --------------------- Configure loop state ----------------------
+        ray = mi.Ray3f(ray)
+        active = mi.Bool(active) & (self.max_depth > 0)
+        depth = mi.UInt32(0)
+        L = mi.Spectrum(0)
+        beta = mi.Spectrum(1)                  # path throughput
+        eta = mi.Float(1)                      # relative IOR along the path
+        prev_it = dr.zeros(mi.Interaction3f)   # previous vertex, for emitter pdfs
+        prev_bsdf_pdf = mi.Float(1)
+        prev_bsdf_delta = mi.Bool(True)        # camera rays count as "delta": no NEE could reach them
+        valid_ray = mi.Bool(False)
+        if dr.hint(not self.hide_emitters, mode="scalar"):
+            valid_ray = mi.Bool(scene.environment() is not None) & active
+        n_ext = mi.UInt32(0)
+        n_shadow = mi.UInt32(0)
+        camera_lanes = active & dr.full(mi.Bool, True, dr.width(ray))  # `active` may arrive as a scalar
+        pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
+        if dr.hint(self.hide_emitters, mode="scalar"):
+            # Mitsuba's meaning: camera rays pass through area emitters to what lies behind
+            ray, pi = self.skip_directly_visible_emitters(scene, ray, pi, active)
+
+        while dr.hint(active, max_iterations=-1, label=f"{self.plugin_name} path loop"):
+            si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
+
+            # ----------------------- Direct emission -----------------------
+            ds = mi.DirectionSample3f(scene, si=si, ref=prev_it)
+            w_hit = self.emitter_hit_weight(scene, prev_it, ds, prev_bsdf_pdf, prev_bsdf_delta)
+            emission_on = active & (w_hit > 0)   # (a new array: `&=` on an alias would change `active`)
+            if dr.hint(self.hide_emitters, mode="scalar"):
+                emission_on = emission_on & (depth > 0)
+            L += beta * w_hit * ds.emitter.eval(si, emission_on)
+
+            active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
+            bsdf = si.bsdf(ray)
+
+            # ----------------------- Emitter sampling ----------------------
+            if dr.hint(samples_emitters, mode="scalar"):
+                active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+                for _ in range(n_L):
+                    ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
+                    sampled = active_em & (ds_em.pdf != 0)
+                    bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, si.to_local(ds_em.d), sampled)
+                    w_em = self.emitter_sample_weight(ds_em, bsdf_pdf)
+                    contrib = beta * (w_em / n_L) * bsdf_val * em_weight
+                    L += dr.select(sampled, contrib, 0)
+                    n_shadow += dr.select(active_em, 1, 0)
+
+            # ------------------------ BSDF sampling ------------------------
+            bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(),
+                                                   active_next)
+
+            # ------------------- Update loop variables ---------------------
+            ray = si.spawn_ray(si.to_world(bsdf_sample.wo))
+            beta *= bsdf_weight
+            eta *= bsdf_sample.eta
+            valid_ray |= active & si.is_valid() & ~mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Null)
+            prev_it = dr.zeros(mi.Interaction3f)
+            prev_it.p, prev_it.n, prev_it.t, prev_it.time = si.p, si.n, si.t, si.time
+            prev_it.wavelengths = si.wavelengths
+            prev_bsdf_pdf = bsdf_sample.pdf
+            prev_bsdf_delta = mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Delta)
+
+            # --------------------- Stopping criterion ----------------------
+            depth[si.is_valid()] += 1
+            beta_max = dr.max(mi.unpolarized_spectrum(beta))
+            active_next &= (beta_max != 0) & dr.isfinite(beta_max)
+            q = russian_roulette_probability(beta, eta)
+            rr_active = depth >= self.rr_depth
+            beta[rr_active] *= dr.rcp(q)
+            active_next &= ~rr_active | (sampler.next_1d() < q)
+
+            pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
+            n_ext += dr.select(active_next, 1, 0)
+            active = active_next
+
+        if dr.hint(self.count_rays, mode="scalar"):
+            self.counters.add("camera", mi.UInt32(1), camera_lanes)
+            self.counters.add("extension", n_ext, camera_lanes)
+            if dr.hint(samples_emitters, mode="scalar"):
+                self.counters.add("shadow", n_shadow, camera_lanes)
+        return dr.select(valid_ray, L, 0), valid_ray, []
+
+    def skip_directly_visible_emitters(self, scene, ray, pi, active):
+        """(ray, first intersection) with area emitters hit by camera rays skipped."""
+        skip = active & pi.is_valid() & (pi.shape.emitter() != None)  # noqa: E711 (Dr.Jit pointer test)
+        si_skip = pi.compute_surface_interaction(ray, mi.RayFlags.Minimal, skip)
+        ray_skip = si_skip.spawn_ray(ray.d)
+        pi_skip = self.skip_area_emitters(scene, ray_skip, True, skip)
+        return dr.select(skip, ray_skip, ray), dr.select(skip, pi_skip, pi)
+
+    # -- Reporting --------------------------------------------------------------------
+
+    def ray_counts(self, reset: bool = True) -> dict[str, int]:
+        """Rays traced since the last reset, by kind (all zero when count_rays is off)."""
+        return self.counters.read(reset)
+
+    def settings(self) -> dict:
+        """The parameters in force, as plain values (for file metadata and messages)."""
+        depth = -1 if self.max_depth == 0xFFFFFFFF else self.max_depth
+        return {"max_depth": depth, "rr_depth": self.rr_depth,
+                "hide_emitters": self.hide_emitters, "count_rays": self.count_rays}
+
+    def to_string(self):
+        fields = ", ".join(f"{k}={v}" for k, v in self.settings().items())
+        return f"{type(self).__name__}[{fields}]"
+
+    def aov_names(self):
+        return []

@@ -1,0 +1,58 @@
+"""mitsuba_lab: a Monte Carlo light-transport laboratory on Mitsuba 3 and Dr.Jit.
+
+Importing the package makes the lab plugins usable from any Mitsuba scene:
+it points Dr.Jit at a usable libLLVM, selects a variant when none is set yet
+(``$MITSUBA_LAB_VARIANT``, else ``llvm_ad_rgb``), and registers every ``lab_*``
+integrator and sampler for that variant. The ``mitsuba-lab`` command defers
+this to after it has read ``--variant``, so that a bad environment is reported
+in one line and a GPU-only machine never has to start the LLVM backend.
+"""
+from __future__ import annotations
+
+import os as _os
+import sys as _sys
+
+__version__ = "0.1.0"
+__all__ = ["activate", "use_variant", "register_all"]
+
+
+def activate(variant: str | None = None) -> str:
+    """Configure libLLVM, select ``variant`` (or the default) and register the plugins.
+
+    Keeps an already selected Mitsuba variant when ``variant`` is None.
+    Raises ``LabError`` with one line when the environment cannot run it.
+    """
+    from . import runtime
+
+    runtime.configure_llvm()
+    import mitsuba as mi
+
+    if variant is not None or not mi.variant():
+        runtime.set_variant(runtime.requested_variant(variant))
+    from .plugins import register_all
+
+    register_all()
+    return mi.variant()
+
+
+def use_variant(name: str) -> str:
+    """Switch to another Mitsuba variant and register the lab plugins for it."""
+    return activate(name)
+
+
+def register_all():
+    from .plugins import register_all as _register_all
+
+    return _register_all()
+
+
+def _invoked_as_cli() -> bool:
+    """True for the ``mitsuba-lab`` script and for ``python -m mitsuba_lab``."""
+    if _sys.argv and _os.path.basename(_sys.argv[0]) == "mitsuba-lab":
+        return True
+    argv = getattr(_sys, "orig_argv", [])
+    return "-m" in argv[:-1] and argv[argv.index("-m") + 1] == "mitsuba_lab"
+
+
+if not _invoked_as_cli():
+    activate()

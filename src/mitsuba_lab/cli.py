@@ -1,0 +1,236 @@
+"""``mitsuba-lab``: the command line. The CLI owns the terminal; library code never prints.
+
+Every user error (bad scene, unknown plugin, bad value, unwritable output)
+ends in one line on stderr and exit status 2; ``--debug`` shows the traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import traceback
+
+EXIT_USAGE = 2
+
+INTEGRATOR_OPTIONS = (
+    # (option, parameter, type, help)
+    ("--max-depth", "max_depth", int, "longest path in segments; -1 = unbounded, 1 = emitters seen "
+                                      "directly, 2 = direct lighting (plugin default: -1)"),
+    ("--rr-depth", "rr_depth", int, "depth at which Russian roulette starts (plugin default: 5)"),
+    ("--heuristic", "heuristic", str, "lab_mis only: balance | power | max | average "
+                                      "(default: power)"),
+    ("--beta", "beta", float, "lab_mis only: power-heuristic exponent > 0 (default: 2)"),
+    ("--emitter-samples", "emitter_samples", int, "lab_mis only: shadow rays per vertex >= 1 "
+                                                  "(default: 1)"),
+)
+
+
+def parse_value(text: str):
+    """'8' -> 8, '0.5' -> 0.5, 'true' -> True, anything else stays a string."""
+    lowered = text.lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def parse_assignments(items: list[str] | None, option: str) -> dict:
+    params = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ValueError(f"{option} expects KEY=VALUE, got '{item}'")
+        params[key.strip()] = parse_value(value.strip())
+    return params
+
+
+def positive_int(text: str) -> int:
+    value = int(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def integrator_params(args) -> dict:
+    params = {}
+    for _, name, _, _ in INTEGRATOR_OPTIONS:
+        value = getattr(args, name)
+        if value is not None:
+            params[name] = value
+    if args.hide_emitters:
+        params["hide_emitters"] = True
+    params.update(parse_assignments(args.param, "--param"))
+    return params
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """Usage errors as one line (plus where to look), exit status 2."""
+
+    def error(self, message):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = OneLineParser(
+        prog="mitsuba-lab",
+        description="A Monte Carlo light-transport laboratory on Mitsuba 3 and Dr.Jit.")
+    parser.add_argument("--variant", help="Mitsuba variant (default: $MITSUBA_LAB_VARIANT or "
+                                          "llvm_ad_rgb), e.g. cuda_ad_rgb on an NVIDIA GPU")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    render = sub.add_parser("render", help="render one scene with one integrator",
+                            description="Render SCENE and write an EXR (float32 RGB, settings and "
+                                        "timings in its header) and an sRGB PNG preview.")
+    render.add_argument("scene", help="Mitsuba XML scene file")
+    render.add_argument("--integrator", default="lab_mis",
+                        help="integrator plugin: lab_naive, lab_nee, lab_mis or any of Mitsuba's "
+                             "(path, direct, ...) (default: lab_mis)")
+    for option, name, kind, help_text in INTEGRATOR_OPTIONS:
+        render.add_argument(option, dest=name, type=kind, help=help_text)
+    render.add_argument("--hide-emitters", action="store_true",
+                        help="directly visible emitters are black")
+    render.add_argument("--param", action="append", metavar="KEY=VALUE",
+                        help="any other integrator parameter (repeatable)")
+    render.add_argument("--define", "-D", action="append", metavar="KEY=VALUE",
+                        help="scene <default> value, e.g. -D res=64 (repeatable)")
+    render.add_argument("--spp", type=positive_int, default=64, help="samples per pixel (default: 64)")
+    render.add_argument("--seed", type=int, default=0, help="sampler seed (default: 0)")
+    render.add_argument("-o", "--output", help="output EXR path (default: out/SCENE_INTEGRATOR.exr)")
+    render.add_argument("--no-png", action="store_true", help="do not write the PNG preview")
+
+    demo = sub.add_parser("demo", help="render the Cornell box with every lab integrator",
+                          description="Render scenes/cornell_box.xml with lab_naive, lab_nee and "
+                                      "lab_mis (power and balance) and write EXR + PNG files.")
+    demo.add_argument("-o", "--output", default="out/demo", help="output folder (default: out/demo)")
+    demo.add_argument("--spp", type=positive_int, default=64, help="samples per pixel (default: 64)")
+    demo.add_argument("--res", type=positive_int, default=128, help="image width and height "
+                                                                    "(default: 128)")
+    demo.add_argument("--max-depth", type=int, default=8, help="max_depth of every integrator "
+                                                              "(default: 8)")
+    return parser
+
+
+def default_output(scene: str, integrator: str) -> str:
+    stem = os.path.splitext(os.path.basename(scene))[0]
+    return os.path.join("out", f"{stem}_{integrator}.exr")
+
+
+def cmd_render(args, out) -> int:
+    from . import images, scene as scenes
+    from .render import render
+    from .runtime import versions
+
+    output = args.output or default_output(args.scene, args.integrator)
+    if not output.lower().endswith(".exr"):
+        raise ValueError(f"output must be an .exr path, got '{output}'")
+    if args.output is None:
+        os.makedirs(os.path.dirname(output), exist_ok=True)
+    images.check_writable(output)
+    params = integrator_params(args)
+    scene = scenes.load_scene(args.scene, **parse_assignments(args.define, "--define"))
+    integrator = scenes.make_integrator(args.integrator, params)
+    image, stats = render(scene, integrator, spp=args.spp, seed=args.seed)
+    write_outputs(output, image, stats, args.integrator, params, args.scene, versions(),
+                  png=not args.no_png)
+    print(format_stats(args.integrator, stats), file=out)
+    print(f"wrote {output}" + ("" if args.no_png else f" and {png_path(output)}"), file=out)
+    return 0
+
+
+def png_path(exr_path: str) -> str:
+    return os.path.splitext(exr_path)[0] + ".png"
+
+
+def write_outputs(output, image, stats, integrator, params, scene_path, version_info, png=True):
+    from . import images
+
+    settings = integrator_settings(integrator, params)
+    metadata = {"mitsuba_lab.scene": scene_path, "mitsuba_lab.integrator": integrator,
+                "mitsuba_lab.params": settings, "mitsuba_lab.stats": stats.as_dict(),
+                **{f"mitsuba_lab.{k}": v for k, v in version_info.items()}}
+    images.write_exr(output, image, metadata)
+    if png:
+        images.write_png(png_path(output), image)
+
+
+def integrator_settings(integrator: str, params: dict) -> dict:
+    return dict(params)
+
+
+def format_stats(label: str, stats) -> str:
+    rays = ", ".join(f"{kind} {count:,}" for kind, count in stats.rays.items()) or "not counted"
+    return (f"{label}: {stats.width}x{stats.height} @ {stats.spp} spp, seed {stats.seed}: "
+            f"wall {stats.wall_s:.3f} s (compile {stats.compile_s:.3f} s, kernels "
+            f"{stats.kernel_s:.3f} s), {stats.samples_per_second / 1e6:.2f} M samples/s; rays: {rays}")
+
+
+DEMO_STRATEGIES = (
+    ("lab_naive", {}),
+    ("lab_nee", {}),
+    ("lab_mis", {"heuristic": "balance"}),
+    ("lab_mis", {"heuristic": "power"}),
+)
+
+
+def cmd_demo(args, out) -> int:
+    from . import images, scene as scenes
+    from .render import render
+    from .runtime import versions
+
+    os.makedirs(args.output, exist_ok=True)
+    images.check_writable(os.path.join(args.output, "x.exr"))
+    scene_path = os.path.join(project_root(), "scenes", "cornell_box.xml")
+    scene = scenes.load_scene(scene_path, res=args.res)
+    info = versions()
+    print(f"Cornell box {args.res}x{args.res}, {args.spp} spp, max_depth {args.max_depth}, "
+          f"variant {info['variant']}", file=out)
+    for name, extra in DEMO_STRATEGIES:
+        params = {"max_depth": args.max_depth, **extra}
+        integrator = scenes.make_integrator(name, params)
+        render(scene, integrator, spp=args.spp, seed=0)        # warm-up: compiles the kernel
+        image, stats = render(scene, integrator, spp=args.spp, seed=1)
+        label = name + "".join(f"_{v}" for v in extra.values())
+        output = os.path.join(args.output, f"cornell_box_{label}.exr")
+        write_outputs(output, image, stats, name, params, scene_path, info)
+        print(f"  {format_stats(label, stats)}", file=out)
+    print(f"wrote EXR + PNG files to {args.output}", file=out)
+    return 0
+
+
+def project_root() -> str:
+    """The source checkout holding scenes/ (the package is installed editable from it)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    return os.path.dirname(os.path.dirname(here))
+
+
+COMMANDS = {"render": cmd_render, "demo": cmd_demo}
+
+
+def main(argv: list[str] | None = None, out=None) -> int:
+    out = out or sys.stdout
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        from . import activate
+
+        activate(args.variant)
+        return COMMANDS[args.command](args, out)
+    except KeyboardInterrupt:
+        print("mitsuba-lab: interrupted", file=sys.stderr)
+        return 130
+    except Exception as err:  # noqa: BLE001 - every failure becomes one line (see module doc)
+        if args.debug:
+            traceback.print_exc()
+        from .errors import one_line
+
+        print(f"mitsuba-lab: error: {one_line(err)}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

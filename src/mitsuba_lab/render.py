@@ -1,0 +1,77 @@
+"""One honest, timed render: image + RenderStats.
+
+Dr.Jit records work lazily and launches it asynchronously, so the clock stops
+only after ``dr.eval`` and ``dr.sync_thread``. Dr.Jit's kernel history splits
+the time into compilation (code generation + LLVM/CUDA backend) and kernel
+execution; the rest of the wall time is tracing Python and Mitsuba's set-up.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+
+@dataclass
+class RenderStats:
+    """What one render cost; all times in seconds."""
+    wall_s: float
+    compile_s: float           # codegen + backend compile of kernels that missed the cache
+    kernel_s: float            # execution time of all launched kernels
+    kernels: int               # kernels launched
+    cache_misses: int          # kernels compiled during this render (0 once warm)
+    spp: int
+    seed: int
+    width: int
+    height: int
+    rays: dict[str, int] = field(default_factory=dict)  # by kind, when the integrator counts them
+
+    @property
+    def samples_per_second(self) -> float:
+        return self.width * self.height * self.spp / self.wall_s if self.wall_s > 0 else float("inf")
+
+    def as_dict(self) -> dict:
+        return {**asdict(self), "samples_per_second": self.samples_per_second}
+
+
+def _kernel_times(history: list[dict]) -> tuple[float, float, int, int]:
+    compile_ms = sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in history)
+    exec_ms = sum(k.get("execution_time", 0.0) for k in history)
+    misses = sum(1 for k in history if "cache_hit" in k and not k["cache_hit"])
+    return compile_ms / 1e3, exec_ms / 1e3, len(history), misses
+
+
+def render(scene: mi.Scene, integrator: mi.Integrator | None = None, spp: int = 0, seed: int = 0,
+           sensor: int = 0) -> tuple[np.ndarray, RenderStats]:
+    """Render and wait for the result. Returns (H x W x C float32 image, stats).
+
+    ``spp`` = 0 keeps the scene sampler's own sample count.
+    """
+    if spp < 0:
+        raise ValueError(f"spp must be >= 0, got {spp}")
+    integrator = integrator if integrator is not None else scene.integrator()
+    sampler = scene.sensors()[sensor].sampler()
+    spp_used = spp or sampler.sample_count()
+    dr.sync_thread()                                   # nothing earlier leaks into the clock
+    history_was_on = dr.flag(dr.JitFlag.KernelHistory)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()                                # drop older entries
+    try:
+        start = time.perf_counter()
+        image = mi.render(scene, integrator=integrator, spp=spp, seed=seed, sensor=sensor)
+        dr.eval(image)
+        dr.sync_thread()
+        wall = time.perf_counter() - start
+        history = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, history_was_on)
+    compile_s, kernel_s, kernels, misses = _kernel_times(history)
+    rays = integrator.ray_counts() if hasattr(integrator, "ray_counts") else {}
+    pixels = np.array(image, dtype=np.float32)
+    stats = RenderStats(wall_s=wall, compile_s=compile_s, kernel_s=kernel_s, kernels=kernels,
+                        cache_misses=misses, spp=spp_used, seed=seed,
+                        width=pixels.shape[1], height=pixels.shape[0], rays=rays)
+    return pixels, stats

@@ -1,0 +1,54 @@
+"""Agreement in expectation between two renderers, by z-scores of pixel-block means.
+
+Each estimator is rendered with R independent seeds (disjoint seed ranges, so
+the two are independent of each other). For every BLOCK x BLOCK pixel block and
+channel, and for the whole image per channel, the difference of the two means
+is divided by its standard error estimated from the spread across seeds
+(Welch). Under agreement each z is approximately standard normal.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mitsuba_lab.render import render
+
+BLOCK = 8
+
+
+@dataclass
+class Agreement:
+    block_z: np.ndarray      # (blocks_y, blocks_x, channels)
+    image_z: np.ndarray      # (channels,)
+    rel_diff: np.ndarray     # (channels,) relative difference of the image means
+
+    @property
+    def max_abs_z(self) -> float:
+        return float(max(np.abs(self.block_z).max(), np.abs(self.image_z).max()))
+
+
+def block_means(image: np.ndarray, block: int = BLOCK) -> np.ndarray:
+    h, w, c = image.shape
+    return image[: h - h % block, : w - w % block].reshape(h // block, block, w // block, block, c).mean(axis=(1, 3))
+
+
+def renders(scene, integrator, spp, seeds):
+    return np.stack([render(scene, integrator, spp=spp, seed=s)[0] for s in seeds])
+
+
+def z_scores(stack_a: np.ndarray, stack_b: np.ndarray) -> Agreement:
+    def stats(stack, reducer):
+        values = np.stack([reducer(img) for img in stack])
+        return values.mean(axis=0), values.var(axis=0, ddof=1) / len(values)
+
+    def z(reducer):
+        mean_a, var_a = stats(stack_a, reducer)
+        mean_b, var_b = stats(stack_b, reducer)
+        se = np.sqrt(var_a + var_b)
+        # identical constant blocks (e.g. black background) have no spread: z = 0
+        return np.where(se > 0, (mean_a - mean_b) / np.where(se > 0, se, 1), 0.0), mean_a, mean_b
+
+    block_z, _, _ = z(block_means)
+    image_z, mean_a, mean_b = z(lambda img: img.mean(axis=(0, 1)))
+    return Agreement(block_z, image_z, (mean_a - mean_b) / np.maximum(np.abs(mean_b), 1e-12))

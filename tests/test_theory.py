@@ -1,0 +1,165 @@
+"""The seed's worked problems: analytic numbers, a quick simulated run, MIS weights.
+
+Analytic values are compared to the seed text's printed digits (rounded the
+same way). Simulated rows carry their own tolerances (4 standard errors, see
+``theory.TOL_SE``); the run uses seed 0 and ``quick=True`` (~2 s).
+"""
+import itertools
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from mitsuba_lab import theory
+
+
+@pytest.fixture(scope="module")
+def quick_rows():
+    return theory.run_all(seed=0, quick=True)
+
+
+def _measured(rows):
+    return {row["quantity"]: row["measured"] for row in rows}
+
+
+# ------------------------------------------------------------- simulated run
+def test_quick_run_matches_every_prediction(quick_rows):
+    failures = theory.check(quick_rows)
+    assert failures == [], theory.format_table(failures)
+
+
+def test_rows_are_well_formed(quick_rows):
+    keys = {"problem", "quantity", "predicted", "measured", "tolerance", "note"}
+    assert {row["problem"] for row in quick_rows} == {"P1", "P2", "P3", "P4", "P5"}
+    for row in quick_rows:
+        assert set(row) == keys
+        assert math.isfinite(row["measured"]) and row["tolerance"] > 0
+
+
+def test_mis_beats_both_single_strategies(quick_rows):
+    m = _measured(quick_rows)
+    best_single = min(m["rmse_brdf"], m["rmse_light"])
+    assert m["rmse_balance"] < best_single
+    assert m["rmse_power"] < best_single
+
+
+def test_check_flags_out_of_tolerance_and_nan():
+    good = {"predicted": 1.0, "measured": 1.05, "tolerance": 0.1}
+    bad = {"predicted": 1.0, "measured": 1.2, "tolerance": 0.1}
+    nan = {"predicted": 1.0, "measured": math.nan, "tolerance": 0.1}
+    assert theory.check([good, bad, nan]) == [bad, nan]
+
+
+def test_format_table(quick_rows):
+    table = theory.format_table(quick_rows)
+    assert table.splitlines()[0].split() == ["problem", "quantity", "predicted",
+                                             "measured", "tolerance", "ok"]
+    assert len(table.splitlines()) == len(quick_rows) + 2
+    assert "rmse_N16" in table
+
+
+def test_chunking_does_not_change_results(monkeypatch):
+    # Trials are drawn row by row, so chunk size must not alter the stream.
+    def run():
+        return theory._trial_estimates(theory._p1_estimate, np.random.default_rng(1), 10, 1000)
+
+    whole = run()
+    monkeypatch.setattr(theory, "CHUNK_ELEMENTS", 3000)  # 3 trials per chunk
+    np.testing.assert_array_equal(run(), whole)
+
+
+# -------------------------------------------------- analytic numbers (seed)
+def test_problem1_numbers():
+    sigma2 = theory.p1_sigma2()
+    assert round(sigma2, 5) == 0.24204
+    assert round(math.sqrt(sigma2 / 16), 5) == 0.12299
+    assert round(math.sqrt(sigma2 / 65536), 6) == 0.001922
+
+
+def test_problem2_numbers():
+    var_u, var_is = theory.p2_variances()
+    assert round(var_u, 6) == 0.046885
+    assert round(var_is, 6) == 0.001010
+    assert round(math.sqrt(var_u / var_is), 2) == 6.81
+
+
+def test_problem3_numbers():
+    assert round(theory.p3_uniform_variance(), 4) == 3.2899
+
+
+def test_problem4_numbers():
+    p_a, p_b = theory.p4_densities_at(1.0)
+    assert (round(float(p_a), 5), round(float(p_b), 5)) == (0.16580, 0.04382)
+    w_a, w_b = theory.mis_weights(p_a, p_b, "balance")
+    assert (round(float(w_a), 4), round(float(w_b), 4)) == (0.7909, 0.2091)
+    w_a, w_b = theory.mis_weights(p_a, p_b, "power", beta=2.0)
+    assert (round(float(w_a), 4), round(float(w_b), 4)) == (0.9347, 0.0653)
+    assert round(theory.p4_true_value(), 6) == 0.011818
+
+
+def test_problem4_predicted_rmse_ordering():
+    rmse = {k: math.sqrt(v) for k, v in theory.p4_predicted_variances(8192).items()}
+    assert round(rmse["brdf"], 5) == 0.00073  # seed measured 0.00073
+    assert rmse["balance"] < rmse["power"] < rmse["light"] < rmse["brdf"]
+
+
+def test_problem5_numbers():
+    assert round(theory.rr_added_variance(5.0, 0.6), 2) == 16.67
+    assert theory.rr_expected_extra_bounces(0.6) == pytest.approx(1.5)
+
+
+@pytest.mark.parametrize("sampler", [theory.sample_uniform_hemisphere,
+                                     theory.sample_cosine_hemisphere])
+def test_hemisphere_samplers_give_upper_unit_vectors(sampler):
+    v = sampler(np.random.default_rng(0), 1000)
+    np.testing.assert_allclose(np.linalg.norm(v, axis=1), 1.0, atol=1e-12)
+    assert np.all(v[:, 2] >= 0)
+
+
+# ------------------------------------------------------------ MIS robustness
+EXTREME_PDFS = [0.0, 1e-320, 1e-30, 0.5, 1.0, 1e30, 1e300, math.inf]
+HEURISTICS = ["balance", "power", "max", "average"]
+
+
+@pytest.mark.parametrize("heuristic", HEURISTICS)
+def test_mis_weights_never_nan_and_sum_to_one(heuristic):
+    pairs = np.array(list(itertools.product(EXTREME_PDFS, repeat=2)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any overflow/invalid warning fails
+        w_a, w_b = theory.mis_weights(pairs[:, 0], pairs[:, 1], heuristic, n_a=2, n_b=3)
+    assert not np.any(np.isnan(w_a) | np.isnan(w_b))
+    assert np.all((w_a >= 0) & (w_a <= 1) & (w_b >= 0) & (w_b <= 1))
+    either = (pairs[:, 0] > 0) | (pairs[:, 1] > 0)
+    np.testing.assert_allclose((w_a + w_b)[either], 1.0, rtol=1e-12)
+    assert np.all(w_a[pairs[:, 0] == 0] == 0) and np.all(w_b[pairs[:, 1] == 0] == 0)
+
+
+@pytest.mark.parametrize("heuristic", ["balance", "power", "max"])
+@pytest.mark.parametrize("finite", [0.0, 1e-30, 1.0, 1e300])
+def test_infinite_pdf_takes_all_weight(heuristic, finite):
+    w_a, w_b = theory.mis_weights(math.inf, finite, heuristic)
+    assert (w_a, w_b) == (1.0, 0.0)
+    w_a, w_b = theory.mis_weights(finite, math.inf, heuristic)
+    assert (w_a, w_b) == (0.0, 1.0)
+
+
+def test_mis_weight_formulas():
+    p_a, p_b = np.array([0.2, 3.0]), np.array([0.6, 1.0])
+    w_a, _ = theory.mis_weights(p_a, p_b, "balance", n_a=3, n_b=1)
+    np.testing.assert_allclose(w_a, 3 * p_a / (3 * p_a + p_b))
+    w_a, _ = theory.mis_weights(p_a, p_b, "power", beta=3.0)
+    np.testing.assert_allclose(w_a, p_a**3 / (p_a**3 + p_b**3))
+    np.testing.assert_allclose(theory.mis_weights(p_a, p_b, "power", beta=1.0)[0],
+                               theory.mis_weights(p_a, p_b, "balance")[0])
+    np.testing.assert_array_equal(theory.mis_weights(p_a, p_b, "max")[0], [0.0, 1.0])
+    np.testing.assert_array_equal(theory.mis_weights(1.0, 1.0, "max")[0], 0.5)
+    np.testing.assert_allclose(theory.mis_weights(p_a, p_b, "average", n_a=1, n_b=3)[0], 0.25)
+    assert theory.mis_weights(0.0, 0.0, "balance") == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("args", [(-1.0, 1.0, "balance"), (math.nan, 1.0, "power"),
+                                  (1.0, 1.0, "median"), (1.0, 1.0, "power", 0.0)])
+def test_mis_weights_reject_bad_input(args):
+    with pytest.raises(ValueError):
+        theory.mis_weights(*args)
