@@ -100,3 +100,12 @@ def test_help_documents_every_render_option():
     for option in ("--integrator", "--max-depth", "--rr-depth", "--heuristic", "--beta", "--emitter-samples",
                    "--hide-emitters", "--param", "--define", "--spp", "--seed", "--output", "--no-png"):
         assert option in out
+
+
+def test_theory_json_rows():
+    code, out, err = run(["theory", "--quick", "--json"])
+    assert code == 0, err
+    rows = json.loads(out)
+    assert {"problem", "quantity", "predicted", "measured"} <= set(rows[0])
+    by_quantity = {(r["problem"], r["quantity"]): r for r in rows}
+    assert by_quantity[("P5", "rr_variance")]["predicted"] == pytest.approx(16.6667, abs=1e-4)

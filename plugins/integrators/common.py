@@ -201,18 +201,26 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             # ----------------------- Emitter sampling ----------------------
             if dr.hint(samples_emitters, mode="scalar"):
                 active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-                for _ in range(n_L):
-                    ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
-                    sampled = active_em & (ds_em.pdf != 0)
-                    bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, si.to_local(ds_em.d), sampled)
-                    w_em = self.emitter_sample_weight(ds_em, bsdf_pdf)
-                    contrib = beta * (w_em / n_L) * bsdf_val * em_weight
-                    L += dr.select(sampled, contrib, 0)
-                    n_shadow += dr.select(active_em, 1, 0)
+                ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
+                n_shadow += dr.select(active_em, n_L, 0)
 
             # ------------------------ BSDF sampling ------------------------
-            bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(),
-                                                   active_next)
+            if dr.hint(samples_emitters, mode="scalar"):
+                # One BSDF call both evaluates the emitter direction and samples the next one
+                # (as Mitsuba's path.cpp does): one virtual call per vertex instead of two.
+                bsdf_val, bsdf_pdf, bsdf_sample, bsdf_weight = bsdf.eval_pdf_sample(
+                    bsdf_ctx, si, si.to_local(ds_em.d), sampler.next_1d(), sampler.next_2d(), active_next)
+            else:
+                bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(),
+                                                       active_next)
+
+            # --------------- Emitter sampling contribution -----------------
+            if dr.hint(samples_emitters, mode="scalar"):
+                L += self.emitter_contribution(beta, ds_em, em_weight, bsdf_val, bsdf_pdf, active_em)
+                for _ in range(n_L - 1):   # Veach's multi-sample estimator: n_L shadow rays
+                    ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
+                    bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, si.to_local(ds_em.d), active_em)
+                    L += self.emitter_contribution(beta, ds_em, em_weight, bsdf_val, bsdf_pdf, active_em)
 
             # ------------------- Update loop variables ---------------------
             ray = si.spawn_ray(si.to_world(bsdf_sample.wo))
@@ -244,6 +252,12 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             if dr.hint(samples_emitters, mode="scalar"):
                 self.counters.add("shadow", n_shadow, camera_lanes)
         return dr.select(valid_ray, L, 0), valid_ray, []
+
+    def emitter_contribution(self, beta, ds, em_weight, bsdf_val, bsdf_pdf, active):
+        """beta * w_L * f * L_e G / (n_L p_L) for one emitter sample (em_weight = L_e G / p_L)."""
+        sampled = active & (ds.pdf != 0)
+        w_em = self.emitter_sample_weight(ds, bsdf_pdf) / self.emitter_samples
+        return dr.select(sampled, beta * w_em * bsdf_val * em_weight, 0)
 
     def skip_directly_visible_emitters(self, scene, ray, pi, active):
         """(ray, first intersection) with area emitters hit by camera rays skipped."""

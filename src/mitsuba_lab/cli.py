@@ -112,7 +112,28 @@ def build_parser() -> argparse.ArgumentParser:
                                                                     "(default: 128)")
     demo.add_argument("--max-depth", type=int, default=8, help="max_depth of every integrator "
                                                               "(default: 8)")
+    theory = sub.add_parser("theory", help="reproduce the seed text's Problems 1-5",
+                            description="Run the seed text's toy estimators (uniform MC, importance "
+                                        "sampling, cosine sampling, MIS weights and MIS, Russian "
+                                        "roulette) and print predicted against measured values. "
+                                        "Exit status 1 when a measurement misses its stated "
+                                        "tolerance.")
+    theory.add_argument("--json", action="store_true",
+                        help='print a JSON list of {"problem", "quantity", "predicted", "measured", '
+                             '"tolerance", "note"} rows instead of a table')
+    theory.add_argument("--quick", action="store_true", help="about 10x fewer trials (seconds)")
+    theory.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     return parser
+
+
+def cmd_theory(args, out) -> int:
+    import json
+
+    from . import theory
+
+    rows = theory.run_all(seed=args.seed, quick=args.quick)
+    print(json.dumps(rows, indent=1) if args.json else theory.format_table(rows), file=out)
+    return 1 if theory.check(rows) else 0
 
 
 def default_output(scene: str, integrator: str) -> str:
@@ -208,7 +229,7 @@ def project_root() -> str:
     return os.path.dirname(os.path.dirname(here))
 
 
-COMMANDS = {"render": cmd_render, "demo": cmd_demo}
+COMMANDS = {"render": cmd_render, "demo": cmd_demo, "theory": cmd_theory}
 
 
 def main(argv: list[str] | None = None, out=None) -> int:
@@ -218,7 +239,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
     try:
         from . import activate
 
-        activate(args.variant)
+        if args.command != "theory":          # pure numpy: no renderer needed
+            activate(args.variant)
         return COMMANDS[args.command](args, out)
     except KeyboardInterrupt:
         print("mitsuba-lab: interrupted", file=sys.stderr)
