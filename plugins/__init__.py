@@ -17,11 +17,17 @@ PLUGIN_MODULES = (
     "mitsuba_lab.plugins.integrators.naive",
     "mitsuba_lab.plugins.integrators.nee",
     "mitsuba_lab.plugins.integrators.mis",
+    "mitsuba_lab.plugins.samplers.independent",
+    "mitsuba_lab.plugins.samplers.stratified",
+    "mitsuba_lab.plugins.samplers.halton",
+    "mitsuba_lab.plugins.samplers.sobol",
+    "mitsuba_lab.plugins.samplers.zsobol",
 )
 
 #: Modules that plugin classes derive from; re-run before the plugins on a switch.
 HELPER_MODULES = (
     "mitsuba_lab.plugins.integrators.common",
+    "mitsuba_lab.plugins.samplers.common",
 )
 
 _module_variant: dict[str, str] = {}

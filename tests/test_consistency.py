@@ -18,17 +18,17 @@ from mitsuba_lab.scene import load_scene, make_integrator
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 Z_MAX = 4.5
 RES = 32
-SEEDS = 8
+SEEDS = 16
 REF_SEEDS = range(1000, 1000 + SEEDS)
 LAB_SEEDS = range(SEEDS)
 
 SCENES = {  # scene -> (spp, shared integrator parameters)
-    "cornell_box.xml": (256, {"max_depth": 6}),
-    "glossy_small_light.xml": (256, {"max_depth": 6}),
+    "cornell_box.xml": (128, {"max_depth": 6}),
+    "glossy_small_light.xml": (128, {"max_depth": 6}),
     # The tiny directly visible lights (radiance 901) would dominate the image mean with
     # sub-pixel coverage noise; hiding them (Mitsuba's meaning: camera rays pass through area
     # emitters) leaves the plates' glossy reflections, which are what the scene is about.
-    "veach_mis.xml": (256, {"max_depth": 4, "hide_emitters": True}),
+    "veach_mis.xml": (128, {"max_depth": 4, "hide_emitters": True}),
 }
 STRATEGIES = {
     "nee": ("lab_nee", {}),
@@ -90,8 +90,8 @@ def test_direct_only_agrees_with_mitsuba_direct(case, monkeypatch):
     monkeypatch.chdir(ROOT)
     (kind, params), direct_params = DIRECT_CASES[case]
     scene = scene_for("cornell_box.xml")
-    lab = renders(scene, make_integrator(kind, {"max_depth": 2, **params}), 256, LAB_SEEDS)
-    ref = renders(scene, make_integrator("direct", direct_params), 256, REF_SEEDS)
+    lab = renders(scene, make_integrator(kind, {"max_depth": 2, **params}), 128, LAB_SEEDS)
+    ref = renders(scene, make_integrator("direct", direct_params), 128, REF_SEEDS)
     result = z_scores(lab, ref)
     assert result.max_abs_z <= Z_MAX, f"{case}: max |z| = {result.max_abs_z:.2f}, image z = {result.image_z}"
 

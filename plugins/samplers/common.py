@@ -1,0 +1,289 @@
+"""Pieces shared by the lab's samplers: the base class, seeding, hashing,
+Owen scrambling, the (0,2)-sequence and the wavefront index math.
+
+How a Python sampler lives inside ``mi.render``
+-----------------------------------------------
+Mitsuba renders one wavefront of ``pixels x spp`` lanes; lane ``i`` traces
+sample ``i mod spp`` of pixel ``i div spp`` (``wavefront_layout``). The C++
+trampoline of ``mi.Sampler`` lets Dr.Jit traverse the Python attributes of a
+sampler, so a symbolic loop (C++ ``path`` or a lab integrator) carries every
+Dr.Jit array stored on ``self`` as loop state. Two rules follow:
+
+* all state that changes per sample (the dimension counter ``self.dim``, a
+  PCG32) is a Dr.Jit array, never a Python int: a Python int would be frozen
+  into the traced loop body;
+* everything that depends on the render seed is derived from an *opaque*
+  array, so a new seed reuses the compiled kernel (no recompilation).
+
+Python ints (``spp``, bit counts, the image width) are baked into the kernel:
+changing them compiles a new kernel, as Mitsuba's own samplers do.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+
+import drjit as dr
+import mitsuba as mi
+
+#: 2^-32: maps a uint32 to [0, 1).
+INV_2_32 = 2.0 ** -32
+#: Largest float32 below 1.
+ONE_MINUS_EPS = float.fromhex("0x1.fffffep-1")
+#: Salts that separate the hash streams of one (pixel, dimension) pair.
+SALT_PERMUTE, SALT_X, SALT_Y, SALT_JITTER = 0x9E3779B9, 0x85EBCA6B, 0xC2B2AE35, 0x27D4EB2F
+
+
+# ----------------------------------------------------------------------------
+# Hashing
+# ----------------------------------------------------------------------------
+
+def mix32(x):
+    """MurmurHash3's 32-bit finaliser (Appleby 2008): a bijective avalanche mix."""
+    x = mi.UInt32(x)
+    x ^= x >> 16
+    x *= 0x85EBCA6B
+    x ^= x >> 13
+    x *= 0xC2B2AE35
+    x ^= x >> 16
+    return x
+
+
+def hash2(a, b):
+    """Hash of two uint32 values (order matters)."""
+    return mix32(mi.UInt32(a) ^ mix32(mi.UInt32(b) + 0x9E3779B9))
+
+
+def hash3(a, b, c):
+    """Hash of three uint32 values."""
+    return hash2(hash2(a, b), c)
+
+
+def to_unit_float(x):
+    """uint32 -> float32 in [0, 1): the top 24 bits, so the result is never 1."""
+    return mi.Float(mi.UInt32(x) >> 8) * (2.0 ** -24)
+
+
+# ----------------------------------------------------------------------------
+# Base-2 points and Owen scrambling
+# ----------------------------------------------------------------------------
+
+def sobol_02(index, n_bits: int):
+    """First two dimensions of the Sobol sequence as uint32 (the (0,2)-sequence).
+
+    Dimension 0 is the van der Corput sequence (bit reversal of ``index``);
+    dimension 1 multiplies the index bits by the upper-triangular Pascal matrix
+    mod 2 (direction numbers v_0 = 2^31, v_k = v_{k-1} ^ (v_{k-1} >> 1)).
+    Only the ``n_bits`` low bits of ``index`` are read (the caller guarantees
+    ``index < 2^n_bits``), so the loop is unrolled ``n_bits`` times.
+    """
+    index = mi.UInt32(index)
+    x = dr.brev(index)
+    y = mi.UInt32(0)
+    v = 1 << 31
+    for k in range(n_bits):
+        y ^= dr.select(((index >> k) & 1) != 0, mi.UInt32(v), mi.UInt32(0))
+        v ^= v >> 1
+    return x, y
+
+
+def owen_scramble_2(v, seed):
+    """Nested uniform (Owen) scrambling of a 32-bit base-2 fraction by hashing.
+
+    Burley 2020, "Practical Hash-based Owen Scrambling", after Laine & Karras
+    2011: on the bit-reversed value, adding the seed and xoring with products
+    by even constants only carries changes from low to high bits, so after
+    reversing back each output bit flips as a function of the seed and the
+    *more significant* input bits only: a nested scramble. It keeps the
+    (t,m,s)-net structure and makes each point uniform on [0, 1).
+    """
+    x = dr.brev(mi.UInt32(v))
+    x += mi.UInt32(seed)
+    x ^= x * 0x6C50B47C
+    x ^= x * 0xB82F1E52
+    x ^= x * 0xC7AFE638
+    x ^= x * 0x8D22F6E6
+    return dr.brev(x)
+
+
+def padded_index(sample_index, n_samples: int, seed):
+    """Random permutation of the sample indices 0..n-1, one per ``seed``.
+
+    Kensler 2013 ("Correlated Multi-Jittered Sampling") through Mitsuba's
+    ``mi.permute_kensler``: any n, and independent seeds give independent
+    shuffles, which decorrelates dimension pairs of a padded sampler.
+    """
+    if n_samples == 1:
+        return mi.UInt32(0) * mi.UInt32(sample_index)
+    return mi.permute_kensler(mi.UInt32(sample_index), n_samples, mi.UInt32(seed))
+
+
+def morton_2d(x, y, n_bits: int):
+    """Interleave the low ``n_bits`` bits of x (even bits) and y (odd bits)."""
+    x, y = mi.UInt32(x), mi.UInt32(y)
+    code = mi.UInt32(0)
+    for k in range(n_bits):
+        code |= ((x >> k) & 1) << (2 * k)
+        code |= ((y >> k) & 1) << (2 * k + 1)
+    return code
+
+
+def log2_ceil(n: int) -> int:
+    """Smallest k with 2^k >= n (n >= 1)."""
+    return max(0, (int(n) - 1).bit_length())
+
+
+def is_power_of_two(n: int) -> bool:
+    return n > 0 and (n & (n - 1)) == 0
+
+
+# ----------------------------------------------------------------------------
+# Base class
+# ----------------------------------------------------------------------------
+
+class LabSampler(mi.Sampler):
+    """Base of every lab sampler: parameters, seeding, wavefront layout, clone.
+
+    Subclasses set ``plugin_name`` and implement ``_seed_state`` (per-render
+    arrays, called with the opaque combined seed), ``_sample_1d(dim)`` and
+    ``_sample_2d(dim)``; ``dim`` is the index of the first dimension the call
+    consumes (a 1D request uses one, a 2D request two, as in pbrt). The base
+    keeps the dimension counter as an opaque Dr.Jit array so symbolic loops
+    carry it.
+    """
+
+    plugin_name = "lab_sampler"
+    #: Whether a power-of-two sample count matters (a warning otherwise).
+    prefers_power_of_two = False
+    #: Names of Python-level settings copied by ``clone``/``fork`` (besides props).
+    _settings: tuple[str, ...] = ()
+
+    def __init__(self, props: mi.Properties):
+        super().__init__(props)
+        self._props = props
+        spp = int(props.get("sample_count", 4))
+        if spp < 1:
+            raise ValueError(f"{self.plugin_name}: parameter 'sample_count' must be a positive integer, got {spp}")
+        base_seed = int(props.get("seed", 0))
+        if not 0 <= base_seed < 2 ** 32:
+            raise ValueError(f"{self.plugin_name}: parameter 'seed' must be in [0, 2^32), got {base_seed}")
+        self.base_seed = base_seed
+        self.spp = spp
+        self._warned_spp = None
+        self.dim = dr.opaque(mi.UInt32, 0)
+        self.pass_index = dr.opaque(mi.UInt32, 0)
+
+    # -- layout ----------------------------------------------------------------
+    def wavefront_layout(self, wavefront_size: int, spp: int):
+        """Lane i -> (pixel i div spp, sample i mod spp), as Mitsuba lays out a wavefront."""
+        lane = dr.arange(mi.UInt32, wavefront_size)
+        return lane // spp, lane % spp
+
+    # -- mi.Sampler interface --------------------------------------------------
+    def seed(self, seed, wavefront_size: int = 2 ** 32 - 1):
+        super().seed(seed, wavefront_size)
+        n = self.wavefront_size()
+        spp = int(self.sample_count())
+        self.spp = spp
+        if self.prefers_power_of_two and not is_power_of_two(spp) and self._warned_spp != spp:
+            warnings.warn(f"{self.plugin_name}: sample_count={spp} is not a power of two; "
+                          f"{1 << log2_ceil(spp)} keeps the point set a full (0,m,2)-net", stacklevel=2)
+            self._warned_spp = spp
+        # Opaque: the seed value is a kernel input, not a constant of the kernel
+        # (a literal seed would compile a new kernel for every seed).
+        if isinstance(seed, int):
+            seed_value = dr.opaque(mi.UInt32, (self.base_seed + seed) % 2 ** 32)
+        else:
+            seed_value = mi.UInt32(seed)
+            dr.make_opaque(seed_value)
+            seed_value = seed_value + dr.opaque(mi.UInt32, self.base_seed)
+        self.dim = dr.opaque(mi.UInt32, 0)
+        self.pass_index = dr.opaque(mi.UInt32, 0)
+        self._seed_state(seed_value, n, spp)
+
+    def advance(self):
+        """Next pass of a multi-pass render: fresh scrambles, dimension 0.
+
+        Lab samplers do not know the pass layout (Mitsuba keeps
+        ``samples_per_wavefront`` private), so a new pass is an independent
+        randomisation of the same per-pixel point set: unbiased, but points
+        of different passes are not jointly stratified.
+        """
+        super().advance()
+        self.dim = dr.opaque(mi.UInt32, 0)
+        self.pass_index = self.pass_index + 1
+
+    def next_1d(self, active=True):
+        value = self._sample_1d(self.dim)
+        self.dim = self.dim + 1
+        return value
+
+    def next_2d(self, active=True):
+        value = self._sample_2d(self.dim)
+        self.dim = self.dim + 2
+        return value
+
+    def _state_names(self) -> list[str]:
+        return [k for k, v in self.__dict__.items() if dr.is_array_v(v) or isinstance(v, mi.PCG32)]
+
+    def schedule_state(self):
+        dr.schedule(*[getattr(self, k) for k in self._state_names()])
+
+    def _copy_settings(self, other: "LabSampler", with_state: bool) -> "LabSampler":
+        other.set_sample_count(self.sample_count())
+        other.spp = self.spp
+        other._warned_spp = self._warned_spp
+        for k in self._settings:
+            setattr(other, k, getattr(self, k))
+        if with_state and self.wavefront_size() > 0:
+            # Re-seeding the C++ base records the wavefront size; the arrays are
+            # then copied (Dr.Jit's in-place operators must not touch the original).
+            mi.Sampler.seed(other, mi.UInt32(0), self.wavefront_size())
+            for k in self._state_names():
+                v = getattr(self, k)
+                setattr(other, k, mi.PCG32(v) if isinstance(v, mi.PCG32) else type(v)(v))
+        return other
+
+    def clone(self):
+        return self._copy_settings(type(self)(self._props), with_state=True)
+
+    def fork(self):
+        return self._copy_settings(type(self)(self._props), with_state=False)
+
+    def to_string(self):
+        extra = "".join(f", {k}={getattr(self, k)!r}" for k in self._settings)
+        return f"{type(self).__name__}[sample_count={self.sample_count()}, seed={self.base_seed}{extra}]"
+
+    # -- subclass hooks --------------------------------------------------------
+    def _seed_state(self, seed_value, wavefront_size: int, spp: int):
+        raise NotImplementedError
+
+    def _sample_1d(self, dim):
+        raise NotImplementedError
+
+    def _sample_2d(self, dim):
+        raise NotImplementedError
+
+
+def pixel_seeds(seed_value, pixel_index):
+    """One scramble key per pixel: TEA of (render seed, pixel), as Mitsuba seeds its RNGs."""
+    return mi.sample_tea_32(mi.UInt32(seed_value), mi.UInt32(pixel_index))[0]
+
+
+def check_choice(plugin: str, name: str, value: str, allowed: tuple[str, ...]) -> str:
+    if value not in allowed:
+        raise ValueError(f"{plugin}: parameter '{name}' must be one of {', '.join(allowed)}, got '{value}'")
+    return value
+
+
+def check_int(plugin: str, name: str, value: int, lo: int, hi: int | None = None) -> int:
+    value = int(value)
+    if value < lo or (hi is not None and value > hi):
+        bound = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise ValueError(f"{plugin}: parameter '{name}' must be an integer {bound}, got {value}")
+    return value
+
+
+def isqrt_exact(n: int) -> int | None:
+    r = math.isqrt(n)
+    return r if r * r == n else None

@@ -1,0 +1,57 @@
+"""``lab_independent``: PCG32 uniform samples, the baseline Python sampler."""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from mitsuba_lab.plugins.samplers.common import LabSampler
+
+
+class LabIndependentSampler(LabSampler):
+    r"""Independent sampler (:monosp:`lab_independent`)
+
+    Every lane of the wavefront owns a PCG32 generator (O'Neill 2014); each
+    ``next_1d`` / ``next_2d`` draws fresh uniform variates. This is Mitsuba's
+    ``independent`` written in Python: it measures what a Python sampler costs
+    and must render with the same error.
+
+    =============== ====== =====================================================
+    sample_count    int    Samples per pixel, >= 1 (Default: 4)
+    seed            int    Base seed, added to the render seed (Default: 0)
+    =============== ====== =====================================================
+
+    Seeding: state and stream of lane i are ``sample_tea_32(seed, i)`` (the Tiny
+    Encryption Algorithm, Zafar et al. 2010), exactly as Mitsuba's C++
+    ``PCG32Sampler`` does, so for equal seeds the two produce the same numbers.
+    Feeding the lane index as the PCG32 stream directly would be a mistake:
+    streams with consecutive increments are correlated, and in this lab that
+    rendered the Cornell box with 26% *lower* MSE than Mitsuba's independent
+    (a false win).
+
+    Handles any sample count; no stratification of any kind.
+
+    .. code-block:: python
+
+        {'type': 'lab_independent', 'sample_count': 64, 'seed': 0}
+    """
+    plugin_name = "lab_independent"
+
+    def __init__(self, props: mi.Properties):
+        super().__init__(props)
+        self.rng = mi.PCG32()
+
+    def _seed_state(self, seed_value, wavefront_size, spp):
+        v0, v1 = mi.sample_tea_32(seed_value, dr.arange(mi.UInt32, wavefront_size))
+        self.rng = mi.PCG32(wavefront_size)
+        self.rng.seed(mi.UInt64(v0), mi.UInt64(v1))
+
+    def next_1d(self, active=True):
+        return self.rng.next_float32(active)
+
+    def next_2d(self, active=True):
+        u = self.rng.next_float32(active)
+        v = self.rng.next_float32(active)
+        return mi.Point2f(u, v)
+
+
+mi.register_sampler("lab_independent", lambda props: LabIndependentSampler(props))
