@@ -112,6 +112,42 @@ def build_parser() -> argparse.ArgumentParser:
                                                                     "(default: 128)")
     demo.add_argument("--max-depth", type=int, default=8, help="max_depth of every integrator "
                                                               "(default: 8)")
+    sweep = sub.add_parser("sweep", help="run a strategy sweep and write its report",
+                           description="Run every point of an experiment config (scenes x strategies x "
+                                       "samplers x spp / time budgets, R seeds each) against cached "
+                                       "references, store one row per render, and write the report. "
+                                       "A killed sweep resumes where it stopped. Config schema: "
+                                       "experiments/README.md.")
+    sweep.add_argument("config", help="experiment TOML file")
+    sweep.add_argument("-o", "--output", help="output folder (default: the config's experiment.output)")
+    sweep.add_argument("--dry-run", action="store_true",
+                       help="print the plan, left-out strategies and an estimated cost (from a short "
+                            "pilot render per scene), and render nothing else")
+
+    reference = sub.add_parser("reference", help="build (or find) one cached high-spp reference",
+                               description="Render SCENE's reference in independent chunks, cache it "
+                                           "(content-addressed) and print its key and noise floor.")
+    reference.add_argument("scene", help="Mitsuba XML scene file")
+    reference.add_argument("--integrator", default="path", help="reference integrator (default: path)")
+    reference.add_argument("--max-depth", type=int, help="max_depth of the integrator")
+    reference.add_argument("--param", action="append", metavar="KEY=VALUE",
+                           help="other integrator parameter (repeatable)")
+    reference.add_argument("--spp", type=positive_int, default=4096, help="total samples per pixel "
+                                                                           "(default: 4096)")
+    reference.add_argument("--chunks", type=positive_int, default=8,
+                           help="independent chunks (>= 2, dividing --spp) for the noise floor (default: 8)")
+    reference.add_argument("--res", type=positive_int, help="square film resolution override")
+    reference.add_argument("--define", "-D", action="append", metavar="KEY=VALUE",
+                           help="scene <default> value (repeatable)")
+    reference.add_argument("--cache", help="cache folder (default: $MITSUBA_LAB_CACHE or "
+                                           "~/.cache/mitsuba_lab/references)")
+    reference.add_argument("-o", "--output", help="also write the reference image here (.exr, + .png)")
+
+    report = sub.add_parser("report", help="rebuild a sweep's report from its stored results",
+                            description="Rebuild OUTDIR/results.csv and OUTDIR/report/ from "
+                                        "OUTDIR/results.jsonl and the stored images; renders nothing.")
+    report.add_argument("folder", help="a sweep's output folder")
+
     theory = sub.add_parser("theory", help="reproduce the seed text's Problems 1-5",
                             description="Run the seed text's toy estimators (uniform MC, importance "
                                         "sampling, cosine sampling, MIS weights and MIS, Russian "
@@ -134,6 +170,30 @@ def cmd_theory(args, out) -> int:
     rows = theory.run_all(seed=args.seed, quick=args.quick)
     print(json.dumps(rows, indent=1) if args.json else theory.format_table(rows), file=out)
     return 1 if theory.check(rows) else 0
+
+
+def cmd_sweep(args, out) -> int:
+    from .experiment import sweep
+
+    return sweep.sweep_command(args.config, args.output, args.dry_run, out)
+
+
+def cmd_reference(args, out) -> int:
+    from .experiment import sweep
+
+    params = parse_assignments(args.param, "--param")
+    if args.max_depth is not None:
+        params["max_depth"] = args.max_depth
+    return sweep.reference_command(args.scene, args.integrator, params, args.spp, args.chunks, args.res,
+                                   parse_assignments(args.define, "--define"), args.cache, args.output, out)
+
+
+def cmd_report(args, out) -> int:
+    from .experiment.report import build_report
+
+    paths = build_report(args.folder)
+    print(f"wrote {paths['html']}, {paths['md']} and {paths['csv']}", file=out)
+    return 0
 
 
 def default_output(scene: str, integrator: str) -> str:
@@ -229,7 +289,8 @@ def project_root() -> str:
     return os.path.dirname(os.path.dirname(here))
 
 
-COMMANDS = {"render": cmd_render, "demo": cmd_demo, "theory": cmd_theory}
+COMMANDS = {"render": cmd_render, "demo": cmd_demo, "sweep": cmd_sweep, "reference": cmd_reference,
+            "report": cmd_report, "theory": cmd_theory}
 
 
 def main(argv: list[str] | None = None, out=None) -> int:
@@ -239,7 +300,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
     try:
         from . import activate
 
-        if args.command != "theory":          # pure numpy: no renderer needed
+        if args.command not in ("theory", "report"):      # these never render
             activate(args.variant)
         return COMMANDS[args.command](args, out)
     except KeyboardInterrupt:

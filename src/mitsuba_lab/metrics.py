@@ -20,6 +20,8 @@ __all__ = [
     "variance_of_mean",
     "bias_squared",
     "efficiency",
+    "flip_hdr",
+    "ciede2000_mean",
     "loglog_fit",
     "loglog_slope",
     "interpolate_at_time",
@@ -184,6 +186,37 @@ def interpolate_at_time(times, errors, t: float) -> float:
     if x < log_t[0] or x > log_t[-1]:
         return math.nan
     return float(np.exp(np.interp(x, log_t, log_e)))
+
+
+# --------------------------------------------------------------------------
+# Perceptual error (optional packages, imported when used)
+# --------------------------------------------------------------------------
+def flip_hdr(img, ref) -> float:
+    """Mean HDR-FLIP error (Andersson et al. 2021, the ``flip-evaluator`` package)
+    of linear RGB ``img`` against ``ref``, default viewing conditions (67 ppd)."""
+    import flip_evaluator
+
+    clean = lambda a: np.ascontiguousarray(np.clip(np.nan_to_num(_f64(a)), 0, None), dtype=np.float32)
+    _, mean_error, _ = flip_evaluator.evaluate(clean(ref), clean(img), "HDR", applyMagma=False)
+    return float(mean_error)
+
+
+def ciede2000_mean(img, ref) -> float:
+    """Mean CIEDE2000 colour difference of the sRGB-displayed images.
+
+    Linear RGB is clipped to [0, 1] (what an sRGB display shows without tone
+    mapping), converted to CIE XYZ with the sRGB primaries and to CIE L*a*b*
+    (D65), then compared pixel by pixel with colour-science's CIE 2000 formula.
+    """
+    import colour
+
+    d65 = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
+
+    def lab(a):
+        rgb = np.clip(np.nan_to_num(_f64(a)[..., :3]), 0.0, 1.0)
+        return colour.XYZ_to_Lab(colour.RGB_to_XYZ(rgb, "sRGB"), d65)
+
+    return float(np.mean(colour.delta_E(lab(img), lab(ref), method="CIE 2000")))
 
 
 # --------------------------------------------------------------------------

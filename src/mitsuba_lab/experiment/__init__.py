@@ -1,0 +1,1 @@
+"""Strategy sweeps: config -> plan -> reference -> run -> store -> report."""

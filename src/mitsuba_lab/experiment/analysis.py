@@ -1,0 +1,140 @@
+"""From stored rows and images to per-point statistics and comparisons (no rendering).
+
+Definitions used throughout the report:
+
+* MSE and relMSE of a render are measured against the reference; the
+  reference's own noise (its "floor", the mean per-pixel variance of its
+  mean) is part of every such number. ``mse_corrected = mean MSE - floor``.
+* variance = mean over pixels of the per-pixel sample variance across the R
+  seeds (the part of one render's error that more samples remove);
+* bias^2 = mean_p (mean_r img - ref)^2 - s^2/R - ref variance, with a
+  standard error (``metrics.bias_squared``);
+* efficiency = 1 / (mse_corrected x median wall time) (Veach 1997; higher is
+  better); NaN when the corrected MSE is not positive (below the floor).
+"""
+from __future__ import annotations
+
+import math
+import os
+import statistics
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import images, metrics
+
+#: A measured MSE closer than this factor to the reference floor is flagged.
+FLOOR_WARNING_FACTOR = 10.0
+
+
+@dataclass
+class PointStats:
+    point: str
+    scene: str
+    strategy: str
+    sampler: str
+    spp: int
+    budget_s: float | None
+    seeds: int
+    time_s: float                   # median wall time of one render
+    kernel_s: float
+    mse: float                      # mean over seeds (raw)
+    mse_std: float
+    rel_mse: float
+    rel_mse_std: float
+    mse_corrected: float
+    rel_mse_corrected: float
+    variance: float
+    bias2: float
+    bias2_se: float
+    efficiency: float
+    near_floor: bool
+    flip: float = math.nan
+    ciede2000: float = math.nan
+    rays_per_sample: dict = field(default_factory=dict)
+    regions: dict = field(default_factory=dict)       # name -> {rel_mse, mse, mse_corrected, efficiency}
+    images: list = field(default_factory=list)        # stored image paths (relative to the sweep folder)
+
+
+def _mean(values):
+    values = [v for v in values if v is not None and not (isinstance(v, float) and math.isnan(v))]
+    return float(np.mean(values)) if values else math.nan
+
+
+def _std(values):
+    return float(np.std(values, ddof=1)) if len(values) > 1 else math.nan
+
+
+def _efficiency(mse_corrected: float, time_s: float) -> float:
+    return metrics.efficiency(mse_corrected, time_s) if mse_corrected > 0 else math.nan
+
+
+def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
+    """Aggregate the R run rows of one point (and their stored images)."""
+    first = rows[0]
+    stack = np.stack([images.read_exr(os.path.join(folder, r["image"]))[0] for r in rows])
+    mse = [r["mse"] for r in rows]
+    rel = [r["rel_mse"] for r in rows]
+    time_s = statistics.median(r["wall_s"] for r in rows)
+    floor, rel_floor = reference.mse_floor, reference.rel_mse_floor()
+    bias2, bias2_se = metrics.bias_squared(stack, reference.image, reference.variance)
+    samples = first["spp"] * stack.shape[1] * stack.shape[2]
+    rays = {k: _mean([r["rays"].get(k, 0) for r in rows]) / samples for k in first.get("rays", {})}
+    regions = {}
+    for name in first.get("regions", {}):
+        region_mse = _mean([r["regions"][name]["mse"] for r in rows])
+        regions[name] = {"mse": region_mse, "rel_mse": _mean([r["regions"][name]["rel_mse"] for r in rows])}
+    corrected = _mean(mse) - floor
+    return PointStats(
+        point=first["point"], scene=first["scene"], strategy=first["strategy"], sampler=first["sampler"],
+        spp=first["spp"], budget_s=first.get("budget_s"), seeds=len(rows), time_s=time_s,
+        kernel_s=statistics.median(r["kernel_s"] for r in rows), mse=_mean(mse), mse_std=_std(mse),
+        rel_mse=_mean(rel), rel_mse_std=_std(rel), mse_corrected=corrected,
+        rel_mse_corrected=_mean(rel) - rel_floor, variance=metrics.mean_variance(stack), bias2=bias2,
+        bias2_se=bias2_se, efficiency=_efficiency(corrected, time_s),
+        near_floor=_mean(mse) < FLOOR_WARNING_FACTOR * floor,
+        flip=_mean([r.get("flip") for r in rows]), ciede2000=_mean([r.get("ciede2000") for r in rows]),
+        rays_per_sample=rays, regions=regions, images=[r["image"] for r in rows])
+
+
+def region_stack_stats(stats: PointStats, folder: str, reference, rect) -> dict:
+    """Variance (mean per-pixel, across seeds) and mean reference value inside a region."""
+    stack = np.stack([metrics.region(images.read_exr(os.path.join(folder, p))[0], rect) for p in stats.images])
+    ref = metrics.region(reference.image, rect).astype(np.float64)
+    return {"variance": metrics.mean_variance(stack), "ref_mean_square": float(np.mean(ref ** 2))}
+
+
+def curve(points: list[PointStats], key: str = "rel_mse_corrected"):
+    """(times, errors) of one strategy's points, sorted by time, positive errors only."""
+    pairs = sorted((p.time_s, getattr(p, key)) for p in points if getattr(p, key) > 0 and p.time_s > 0)
+    return [t for t, _ in pairs], [e for _, e in pairs]
+
+
+def equal_time_budgets(curves: dict[str, tuple[list, list]], count: int = 3) -> list[float]:
+    """Time budgets every strategy's curve covers (geometric between the common bounds)."""
+    usable = [c for c in curves.values() if len(c[0]) >= 2]
+    if not usable:
+        return []
+    lo = max(min(t) for t, _ in usable)
+    hi = min(max(t) for t, _ in usable)
+    if not hi > lo:
+        return []
+    return [float(v) for v in np.geomspace(lo, hi, count)]
+
+
+def slope(times, errors) -> float:
+    return metrics.loglog_slope(times, errors) if len(times) >= 2 and len(set(times)) >= 2 else math.nan
+
+
+def veach_bound(balance: dict, other: dict, n_emitter: int, spp: int) -> dict:
+    """Veach's bound on the balance heuristic (seed text, "Veach's variance bound"):
+
+        Var[F_balance] <= Var[F_other] + (1/min n_i - 1/sum n_i) I^2
+
+    for one pixel sample (n_L emitter samples and 1 BSDF sample); the pixel
+    estimate averages ``spp`` such samples, which divides both variances and the
+    slack by spp. Averaged over a region's pixels with I^2 = ref^2 per pixel.
+    """
+    slack = (1.0 / min(n_emitter, 1) - 1.0 / (n_emitter + 1)) * balance["ref_mean_square"] / spp
+    rhs = other["variance"] + slack
+    return {"lhs": balance["variance"], "rhs": rhs, "slack": slack, "holds": balance["variance"] <= rhs}

@@ -1,0 +1,241 @@
+"""Sweep configuration: a TOML file, validated into frozen dataclasses.
+
+Every error names the file, the key path and what was expected, in one line
+(``ConfigError`` is a ``LabError``: the CLI prints it and exits with 2).
+The schema is documented in experiments/README.md.
+"""
+from __future__ import annotations
+
+import os
+import tomllib
+from dataclasses import dataclass, field
+
+from ..errors import LabError
+
+OPTIONAL_METRICS = ("flip", "ciede2000")
+DEFAULT_CACHE = os.path.join("~", ".cache", "mitsuba_lab", "references")
+
+
+class ConfigError(LabError):
+    pass
+
+
+@dataclass(frozen=True)
+class PluginSpec:
+    """A named plugin: Mitsuba type plus its parameters (strategies, samplers, reference)."""
+    name: str
+    type: str
+    params: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {"type": self.type, **self.params}
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    name: str
+    path: str                       # absolute
+    resolution: int | None          # square film override, or None to keep the scene's
+    defaults: dict                  # values for the scene's <default> parameters
+    regions: dict                   # name -> (x0, y0, x1, y1): pixels (ints) or fractions (floats)
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    integrator: PluginSpec
+    spp: int
+    chunks: int
+    cache: str                      # folder, absolute
+
+
+@dataclass(frozen=True)
+class Config:
+    name: str
+    source: str
+    output: str
+    scenes: tuple[SceneSpec, ...]
+    strategies: tuple[PluginSpec, ...]
+    samplers: tuple[PluginSpec, ...]
+    spp: tuple[int, ...]
+    time_budgets: tuple[float, ...]
+    repetitions: int
+    seed: int
+    max_depth: int | None
+    reference: ReferenceSpec
+    metrics: tuple[str, ...]
+
+
+class _Reader:
+    """Typed access to one TOML table, with the key path for messages."""
+
+    def __init__(self, source: str, table: dict, path: str):
+        self.source, self.table, self.path = source, table, path
+        if not isinstance(table, dict):
+            self.fail("", f"a table, got {type(table).__name__}")
+
+    def key(self, name: str) -> str:
+        return f"{self.path}.{name}" if self.path else name
+
+    def fail(self, name: str, expected: str):
+        where = self.key(name) if name else (self.path or "top level")
+        raise ConfigError(f"{self.source}: {where}: expected {expected}")
+
+    def get(self, name, kind, default=..., check=None, expected=None):
+        if name not in self.table:
+            if default is ...:
+                self.fail(name, f"{expected or kind.__name__} (missing)")
+            return default
+        value = self.table[name]
+        if kind is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+            self.fail(name, f"{expected or kind.__name__}, got {value!r}")
+        if check is not None and not check(value):
+            self.fail(name, f"{expected}, got {value!r}")
+        return value
+
+    def sub(self, name, default=...) -> "_Reader":
+        value = self.get(name, dict, default, expected="a table")
+        return _Reader(self.source, value, self.key(name))
+
+    def unknown(self, allowed):
+        extra = sorted(set(self.table) - set(allowed))
+        if extra:
+            self.fail(extra[0], f"one of the keys {', '.join(sorted(allowed))} (unknown key)")
+
+
+def _plugins(reader: _Reader, kind: str) -> tuple[PluginSpec, ...]:
+    specs = []
+    for name, body in reader.table.items():
+        item = _Reader(reader.source, body, reader.key(name))
+        plugin_type = item.get("type", str, expected=f"the {kind} plugin name as a string")
+        params = {k: v for k, v in body.items() if k != "type"}
+        specs.append(PluginSpec(name, plugin_type, params))
+    if not specs:
+        reader.fail("", f"at least one {kind}")
+    return tuple(specs)
+
+
+def _positive_ints(reader: _Reader, name: str, default) -> tuple[int, ...]:
+    values = reader.get(name, list, default, expected="a list of positive integers")
+    if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in values):
+        reader.fail(name, f"a list of positive integers, got {values!r}")
+    return tuple(sorted(set(values)))
+
+
+def _rect(reader: _Reader, name: str, value) -> tuple:
+    ok = (isinstance(value, list) and len(value) == 4
+          and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value))
+    if ok:
+        is_fraction = any(isinstance(v, float) for v in value)
+        ok = value[0] < value[2] and value[1] < value[3] and min(value) >= 0
+        ok = ok and (not is_fraction or max(value) <= 1.0)
+    if not ok:
+        reader.fail(name, "[x0, y0, x1, y1] with x0 < x1, y0 < y1: pixels (integers) or fractions "
+                          f"of the image (floats in [0, 1]), got {value!r}")
+    return tuple(value)
+
+
+def _regions(reader: _Reader, base_dir: str) -> dict:
+    regions = {}
+    regions_file = reader.get("regions_file", str, None)
+    if regions_file is not None:
+        path = os.path.join(base_dir, regions_file)
+        if not os.path.isfile(path):
+            reader.fail("regions_file", f"an existing TOML file, but {path} does not exist")
+        with open(path, "rb") as f:
+            try:
+                data = tomllib.load(f)
+            except tomllib.TOMLDecodeError as err:
+                raise ConfigError(f"{path}: {err}") from err
+        file_reader = _Reader(path, data.get("regions", {}), "regions")
+        for name, rect in file_reader.table.items():
+            regions[name] = _rect(file_reader, name, rect)
+    inline = reader.sub("regions", {})
+    for name, rect in inline.table.items():
+        regions[name] = _rect(inline, name, rect)
+    return regions
+
+
+def _scenes(reader: _Reader, base_dir: str) -> tuple[SceneSpec, ...]:
+    scenes = []
+    for name, _ in reader.table.items():
+        item = reader.sub(name)
+        item.unknown({"path", "resolution", "defaults", "regions", "regions_file"})
+        rel = item.get("path", str, expected="the scene's XML path (relative to the config file)")
+        path = os.path.normpath(os.path.join(base_dir, rel))
+        if not os.path.isfile(path):
+            item.fail("path", f"an existing scene file, but {path} does not exist")
+        resolution = item.get("resolution", int, None, check=lambda v: v > 0, expected="a positive integer")
+        defaults = item.sub("defaults", {}).table
+        scenes.append(SceneSpec(name, path, resolution, dict(defaults), _regions(item, base_dir)))
+    if not scenes:
+        reader.fail("", "at least one scene")
+    return tuple(scenes)
+
+
+def load_config(path: str) -> Config:
+    """Read and validate a sweep configuration (see experiments/README.md)."""
+    if not os.path.isfile(path):
+        raise ConfigError(f"config file not found: {path}")
+    with open(path, "rb") as f:
+        try:
+            data = tomllib.load(f)
+        except tomllib.TOMLDecodeError as err:
+            raise ConfigError(f"{path}: not valid TOML: {err}") from err
+    return parse_config(data, path)
+
+
+def parse_config(data: dict, source: str) -> Config:
+    base_dir = os.path.dirname(os.path.abspath(source))
+    top = _Reader(source, data, "")
+    top.unknown({"experiment", "reference", "scenes", "strategies", "samplers"})
+    exp = top.sub("experiment", {})
+    exp.unknown({"name", "output", "spp", "time_budgets", "repetitions", "seed", "max_depth", "metrics"})
+    name = exp.get("name", str, os.path.splitext(os.path.basename(source))[0])
+    output = exp.get("output", str, os.path.join("out", name))
+    spp = _positive_ints(exp, "spp", [])
+    budgets = exp.get("time_budgets", list, [], expected="a list of positive numbers (seconds)")
+    if not all(isinstance(b, (int, float)) and not isinstance(b, bool) and b > 0 for b in budgets):
+        exp.fail("time_budgets", f"a list of positive numbers (seconds), got {budgets!r}")
+    if not spp and not budgets:
+        exp.fail("spp", "an spp ladder (e.g. spp = [4, 16, 64]) and/or time_budgets (missing both)")
+    repetitions = exp.get("repetitions", int, 4, check=lambda v: v >= 2,
+                          expected="an integer >= 2 (variance across seeds needs two)")
+    seed = exp.get("seed", int, 0, check=lambda v: 0 <= v < 2 ** 20, expected="an integer in [0, 2^20)")
+    max_depth = exp.get("max_depth", int, None, check=lambda v: v == -1 or v >= 1,
+                        expected="-1 (unbounded) or an integer >= 1")
+    metrics = exp.get("metrics", list, list(OPTIONAL_METRICS),
+                      expected=f"a list drawn from {', '.join(OPTIONAL_METRICS)}")
+    if not all(m in OPTIONAL_METRICS for m in metrics):
+        exp.fail("metrics", f"a list drawn from {', '.join(OPTIONAL_METRICS)} (MSE and relMSE are "
+                            f"always computed), got {metrics!r}")
+
+    ref = top.sub("reference", {})
+    ref.unknown({"integrator", "spp", "chunks", "cache"})
+    ref_integrator = ref.get("integrator", dict, {"type": "path"}, expected="a table like "
+                             "{ type = \"path\" }")
+    ref_plugin = _plugins(_Reader(source, {"integrator": ref_integrator}, "reference"), "integrator")[0]
+    ref_spp = ref.get("spp", int, 4096, check=lambda v: v > 0, expected="a positive integer")
+    chunks = ref.get("chunks", int, 8, check=lambda v: v >= 2 and ref_spp % v == 0,
+                     expected=f"an integer >= 2 that divides reference.spp = {ref_spp} (the noise "
+                              "floor needs two equal chunks)")
+    cache = os.path.abspath(os.path.expanduser(os.environ.get("MITSUBA_LAB_CACHE") or
+                                               ref.get("cache", str, DEFAULT_CACHE)))
+
+    scenes = _scenes(top.sub("scenes"), base_dir)
+    strategies = _plugins(top.sub("strategies"), "integrator")
+    samplers = _plugins(top.sub("samplers"), "sampler") if "samplers" in data else \
+        (PluginSpec("independent", "independent", {}),)
+    return Config(name=name, source=os.path.abspath(source), output=output, scenes=scenes,
+                  strategies=strategies, samplers=samplers, spp=spp,
+                  time_budgets=tuple(sorted(set(float(b) for b in budgets))), repetitions=repetitions,
+                  seed=seed, max_depth=max_depth,
+                  reference=ReferenceSpec(ref_plugin, ref_spp, chunks, cache), metrics=tuple(metrics))
+
+
+def with_depth(spec: PluginSpec, max_depth: int | None) -> PluginSpec:
+    """The experiment-wide max_depth applies unless the plugin sets its own."""
+    if max_depth is None or "max_depth" in spec.params:
+        return spec
+    return PluginSpec(spec.name, spec.type, {**spec.params, "max_depth": max_depth})

@@ -1,0 +1,368 @@
+"""The sweep report, built from stored results only (it never renders).
+
+Writes ``OUTDIR/results.csv`` (one row per render), ``OUTDIR/report/index.html``
+(self-contained: plots and images embedded as data URIs, opens offline),
+``OUTDIR/report/summary.md`` and the plot / image PNGs beside them.
+"""
+from __future__ import annotations
+
+import base64
+import csv
+import html
+import io
+import json
+import math
+import os
+from collections import defaultdict
+
+import numpy as np
+
+from .. import images, metrics
+from .analysis import (FLOOR_WARNING_FACTOR, PointStats, curve, equal_time_budgets, point_stats,
+                       region_stack_stats, slope, veach_bound)
+from .reference import Reference
+from .store import ResultStore
+
+CSV_COLUMNS = ("point", "scene", "strategy", "sampler", "spp", "budget_s", "seed", "wall_s", "kernel_s",
+               "compile_s", "mse", "rel_mse", "flip", "ciede2000", "finite", "negative", "host", "image")
+
+
+def fmt(value, digits=3) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "n/a"
+    if isinstance(value, float):
+        if value == math.inf:
+            return "inf"
+        return f"{value:.{digits}g}"
+    return str(value)
+
+
+class Report:
+    def __init__(self, folder: str):
+        self.folder = folder
+        self.store = ResultStore(folder)
+        if not self.store.of_kind("run"):
+            from ..errors import LabError
+
+            raise LabError(f"no results in {self.store.path}: run `mitsuba-lab sweep` first")
+        self.out = os.path.join(folder, "report")
+        os.makedirs(self.out, exist_ok=True)
+        self.meta = self.store.of_kind("meta")[-1]
+        self.references = self._references()
+        self.stats = self._stats()
+
+    # -- loading -------------------------------------------------------------------
+    def _references(self) -> dict[str, Reference]:
+        refs = {}
+        for row in self.store.of_kind("reference"):
+            stem = os.path.join(self.folder, "references", row["key"])
+            refs[row["scene"]] = Reference(row["key"], images.read_exr(stem + ".exr")[0],
+                                           images.read_exr(stem + ".var.exr")[0], row)
+        return refs
+
+    def _stats(self) -> dict[str, list[PointStats]]:
+        by_point = defaultdict(list)
+        for row in self.store.of_kind("run"):
+            by_point[row["point"]].append(row)
+        stats = defaultdict(list)
+        for rows in by_point.values():
+            if len(rows) >= 2:                       # variance needs two seeds
+                scene = rows[0]["scene"]
+                stats[scene].append(point_stats(rows, self.folder, self.references[scene]))
+        return stats
+
+    # -- output --------------------------------------------------------------------
+    def write(self) -> dict[str, str]:
+        self.write_csv()
+        sections = [self.header()] + [self.scene_section(scene) for scene in self.stats]
+        md = "\n\n".join(s["md"] for s in sections)
+        body = "\n".join(s["html"] for s in sections)
+        paths = {"csv": os.path.join(self.folder, "results.csv"),
+                 "html": os.path.join(self.out, "index.html"), "md": os.path.join(self.out, "summary.md")}
+        with images.atomic_path(paths["md"]) as tmp, open(tmp, "w") as f:
+            f.write(md + "\n")
+        with images.atomic_path(paths["html"]) as tmp, open(tmp, "w") as f:
+            f.write(HTML_PAGE.format(title=html.escape(self.meta.get("name", "sweep")), body=body))
+        return paths
+
+    def write_csv(self) -> None:
+        region_names = sorted({n for r in self.store.of_kind("run") for n in r.get("regions", {})})
+        columns = list(CSV_COLUMNS) + [f"rays_{k}" for k in ("camera", "extension", "shadow")] + \
+            [f"region_{n}_{m}" for n in region_names for m in ("mse", "rel_mse")]
+        with images.atomic_path(os.path.join(self.folder, "results.csv")) as tmp, open(tmp, "w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(columns)
+            for row in self.store.of_kind("run"):
+                values = [row.get(c) for c in CSV_COLUMNS]
+                values += [row.get("rays", {}).get(k) for k in ("camera", "extension", "shadow")]
+                values += [row.get("regions", {}).get(n, {}).get(m) for n in region_names
+                           for m in ("mse", "rel_mse")]
+                writer.writerow(values)
+
+    def header(self) -> dict:
+        machine = self.meta.get("machine", {})
+        info = ", ".join(f"{k} {v}" for k, v in machine.items())
+        lines_md = [f"# Sweep report: {self.meta.get('name')}", "", f"Config: `{self.meta.get('config')}`",
+                    "", f"Machine and versions: {info}", "",
+                    "Metrics: relMSE = mean (x - ref)^2 / (ref^2 + 0.01); `corrected` values subtract the "
+                    "reference's noise floor; efficiency = 1 / (corrected MSE x median wall time of one "
+                    "render); variance = mean per-pixel variance across seeds; bias^2 = squared error of "
+                    "the seed mean minus its variance and the reference floor (+- one standard error)."]
+        left = self.meta.get("left_out", []) + [
+            {**a, "reason": f"same estimator as {a['same_as']}: {a['reason']}"} for a in self.meta.get("aliases", [])]
+        if left:
+            lines_md += ["", "## Left out and aliased strategies", "", "| scene | strategy | reason |", "|---|---|---|"]
+            lines_md += [f"| {x['scene']} | {x['strategy']} | {x['reason']} |" for x in left]
+        return {"md": "\n".join(lines_md), "html": md_to_html("\n".join(lines_md))}
+
+    def scene_section(self, scene: str) -> dict:
+        stats = sorted(self.stats[scene], key=lambda s: (s.strategy, s.sampler, s.time_s))
+        ref = self.references[scene]
+        groups = defaultdict(list)
+        for s in stats:
+            groups[(s.strategy, s.sampler)].append(s)
+        label = lambda key: key[0] if len({k[1] for k in groups}) == 1 else f"{key[0]} / {key[1]}"
+        md = [f"## Scene `{scene}`", "",
+              f"Reference: {ref.meta.get('integrator')} {json.dumps(ref.meta.get('params', {}))}, "
+              f"{ref.meta.get('spp')} spp in {ref.meta.get('chunks')} chunks; noise floor: MSE "
+              f"{fmt(ref.mse_floor)}, relMSE {fmt(ref.rel_mse_floor())}."]
+        near = [s.point for s in stats if s.near_floor]
+        if near:
+            md += ["", f"**Warning:** {len(near)} point(s) measured an MSE within {FLOOR_WARNING_FACTOR:g}x of "
+                       f"the reference floor (their errors are mostly the reference's): {', '.join(near)}."]
+        plot = self.plot_curves(scene, groups, label)
+        md += ["", f"![relMSE against time]({os.path.basename(plot)})"]
+        md += self.efficiency_table(groups, label)
+        md += self.equal_time_table(groups, label)
+        md += self.bias_table(stats)
+        md += self.region_tables(scene, groups, label)
+        md += self.veach_table(scene, groups)
+        strip = self.image_strip(scene, groups, label)
+        if strip:
+            md += ["", f"![reference, each strategy at about equal time, error maps]({os.path.basename(strip)})"]
+        text = "\n".join(md)
+        return {"md": text, "html": md_to_html(text, embed_from=self.out)}
+
+    # -- tables ------------------------------------------------------------------------
+    def efficiency_table(self, groups, label) -> list[str]:
+        rows = []
+        for key, points in groups.items():
+            top = max(points, key=lambda p: p.time_s)
+            times, errors = curve(points, "mse_corrected")
+            rows.append((top.efficiency if not math.isnan(top.efficiency) else -1, key, top, slope(times, errors)))
+        rows.sort(key=lambda r: r[0], reverse=True)
+        md = ["", "### Efficiency (largest sample count), ranked", "",
+              "| rank | strategy | spp | time s | MSE | corrected MSE | relMSE (+- seed std) | efficiency | "
+              "slope log MSE / log t | FLIP | CIEDE2000 | rays / sample (ext, shadow) |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for rank, (_, key, p, s) in enumerate(rows, 1):
+            rays = f"{fmt(p.rays_per_sample.get('extension'))}, {fmt(p.rays_per_sample.get('shadow'))}"
+            md.append(f"| {rank} | {label(key)} | {p.spp} | {fmt(p.time_s)} | {fmt(p.mse)} | {fmt(p.mse_corrected)} | "
+                      f"{fmt(p.rel_mse)} +- {fmt(p.rel_mse_std, 2)} | {fmt(p.efficiency)} | {fmt(s)} | "
+                      f"{fmt(p.flip)} | {fmt(p.ciede2000)} | {rays} |")
+        return md
+
+    def equal_time_table(self, groups, label) -> list[str]:
+        curves = {key: curve(points) for key, points in groups.items()}
+        budgets = equal_time_budgets(curves)
+        if not budgets:
+            return ["", "### Equal time", "", "The strategies' time ranges do not overlap: no equal-time "
+                    "comparison (add spp levels or time budgets)."]
+        md = ["", "### Corrected relMSE at equal time (log-log interpolation)", "",
+              "| strategy | " + " | ".join(f"{b:.3g} s" for b in budgets) + " |",
+              "|---|" + "---|" * len(budgets)]
+        for key, (times, errors) in curves.items():
+            values = [metrics.interpolate_at_time(times, errors, b) if len(times) >= 2 else math.nan
+                      for b in budgets]
+            md.append(f"| {label(key)} | " + " | ".join(fmt(v) for v in values) + " |")
+        return md
+
+    def bias_table(self, stats) -> list[str]:
+        md = ["", "### Bias and variance per point", "",
+              "| point | seeds | variance | bias^2 (+- se) | relMSE floor-corrected |", "|---|---|---|---|---|"]
+        md += [f"| {s.point} | {s.seeds} | {fmt(s.variance)} | {fmt(s.bias2)} +- {fmt(s.bias2_se, 2)} | "
+               f"{fmt(s.rel_mse_corrected)} |" for s in stats]
+        return md
+
+    def region_tables(self, scene, groups, label) -> list[str]:
+        names = sorted({n for points in groups.values() for p in points for n in p.regions})
+        if not names:
+            return []
+        md = ["", "### Regions of interest (largest sample count): relMSE and efficiency", "",
+              "| strategy | " + " | ".join(f"{n} relMSE | {n} efficiency" for n in names) + " |",
+              "|---|" + "---|---|" * len(names)]
+        best = {}
+        for key, points in groups.items():
+            top = max(points, key=lambda p: p.time_s)
+            cells = []
+            for n in names:
+                r = top.regions[n]
+                eff = 1.0 / (r["mse"] * top.time_s) if r["mse"] > 0 else math.inf
+                best.setdefault(n, []).append((eff, label(key)))
+                cells += [fmt(r["rel_mse"]), fmt(eff)]
+            md.append(f"| {label(key)} | " + " | ".join(cells) + " |")
+        md += ["", "Most efficient per region: " + "; ".join(
+            f"{n}: {max(v)[1]}" for n, v in best.items()) + " (region MSE includes the reference floor)."]
+        return md
+
+    def veach_table(self, scene, groups) -> list[str]:
+        """Veach's bound, where the sweep has lab_mis balance and other lab_mis weightings."""
+        mis = {key: pts for key, pts in groups.items() if pts and self._integrator(pts[0]) == "lab_mis"}
+        balance = [k for k, pts in mis.items() if self._param(pts[0], "heuristic", "power") == "balance"]
+        if not balance:
+            return []
+        ref = self.references[scene]
+        height, width = ref.image.shape[:2]
+        regions = self._regions(scene, width, height) or {"image": (0, 0, width, height)}
+        md = ["", "### Veach's bound: Var[balance] <= Var[other] + (1/min n_i - 1/sum n_i) I^2", "",
+              "| other weighting | spp | region | Var balance | Var other + slack | holds |", "|---|---|---|---|---|---|"]
+        for bkey in balance:
+            n_l = int(self._param(mis[bkey][0], "emitter_samples", 1))
+            for okey, opts in mis.items():
+                if okey == bkey or int(self._param(opts[0], "emitter_samples", 1)) != n_l:
+                    continue
+                for bp in mis[bkey]:
+                    op = next((p for p in opts if p.spp == bp.spp), None)
+                    if op is None:
+                        continue
+                    for name, rect in regions.items():
+                        b = region_stack_stats(bp, self.folder, ref, rect)
+                        o = region_stack_stats(op, self.folder, ref, rect)
+                        v = veach_bound(b, o, n_l, bp.spp)
+                        md.append(f"| {okey[0]} | {bp.spp} | {name} | {fmt(v['lhs'])} | {fmt(v['rhs'])} | "
+                                  f"{'yes' if v['holds'] else 'NO'} |")
+        md.append("")
+        md.append("Variances are sample variances over the seeds, so the comparison itself is noisy; the "
+                  "bound is exact for direct lighting (max_depth 2).")
+        return md
+
+    def _run_row(self, stats: PointStats) -> dict:
+        return next(r for r in self.store.of_kind("run") if r["point"] == stats.point)
+
+    def _integrator(self, stats: PointStats) -> str:
+        return self._run_row(stats).get("integrator", "")
+
+    def _param(self, stats: PointStats, name: str, default):
+        return self._run_row(stats).get("params", {}).get(name, default)
+
+    def _regions(self, scene, width, height) -> dict:
+        return {n: tuple(r) for n, r in self.references[scene].meta.get("regions", {}).items()}
+
+    # -- figures -------------------------------------------------------------------------
+    def plot_curves(self, scene, groups, label) -> str:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
+        for key, points in groups.items():
+            points = sorted(points, key=lambda p: p.time_s)
+            t = [p.time_s for p in points]
+            e = [max(p.rel_mse_corrected, 1e-12) for p in points]
+            err = [p.rel_mse_std if not math.isnan(p.rel_mse_std) else 0 for p in points]
+            ax.errorbar(t, e, yerr=err, marker="o", capsize=3, label=label(key))
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("wall time of one render (s)")
+        ax.set_ylabel("relMSE, reference floor subtracted")
+        ax.set_title(f"{scene}: error against time (bars: std over seeds)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+        path = os.path.join(self.out, f"{scene}_curves.png")
+        with images.atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", bbox_inches="tight")
+        plt.close(fig)
+        return path
+
+    def image_strip(self, scene, groups, label) -> str | None:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        from matplotlib.patches import Rectangle
+
+        ref = self.references[scene]
+        curves = {key: curve(points) for key, points in groups.items()}
+        budgets = equal_time_budgets(curves)
+        target = budgets[len(budgets) // 2] if budgets else None
+        chosen = []
+        for key, points in groups.items():
+            pick = min(points, key=lambda p: abs(math.log(p.time_s / target)) if target else -p.time_s)
+            chosen.append((key, pick))
+        height, width = ref.image.shape[:2]
+        regions = self._regions(scene, width, height)
+        cols = 1 + len(chosen)
+        fig, axes = plt.subplots(2, cols, figsize=(2.2 * cols, 4.6), dpi=100, squeeze=False)
+        axes[0][0].imshow(images.srgb_preview(ref.image))
+        axes[0][0].set_title("reference", fontsize=8)
+        for name, (x0, y0, x1, y1) in regions.items():
+            axes[0][0].add_patch(Rectangle((x0 - 0.5, y0 - 0.5), x1 - x0, y1 - y0, fill=False, color="cyan", lw=0.8))
+        axes[1][0].imshow(np.log10(np.maximum(ref.variance.mean(-1), 1e-12)), cmap="viridis")
+        axes[1][0].set_title("log10 reference variance", fontsize=7)
+        for col, (key, p) in enumerate(chosen, 1):
+            image = images.read_exr(os.path.join(self.folder, p.images[0]))[0]
+            axes[0][col].imshow(images.srgb_preview(image))
+            axes[0][col].set_title(f"{label(key)}\n{p.spp} spp, {p.time_s:.2g} s", fontsize=7)
+            rel_err = np.abs(image - ref.image).mean(-1) / (np.abs(ref.image).mean(-1) + 1e-2)
+            axes[1][col].imshow(np.log10(np.maximum(rel_err, 1e-4)), cmap="magma", vmin=-3, vmax=0.5)
+            axes[1][col].set_title("log10 relative error", fontsize=7)
+        for ax in axes.flat:
+            ax.set_xticks([])
+            ax.set_yticks([])
+        path = os.path.join(self.out, f"{scene}_images.png")
+        with images.atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", bbox_inches="tight")
+        plt.close(fig)
+        return path
+
+
+def md_to_html(text: str, embed_from: str | None = None) -> str:
+    """The small Markdown subset the report uses (headings, tables, paragraphs, images) as HTML;
+    images are embedded as data URIs so the page is self-contained."""
+    out, table = [], []
+
+    def flush_table():
+        if table:
+            rows = [r.strip().strip("|").split("|") for r in table if not set(r.strip()) <= set("|-")]
+            head, body = rows[0], rows[1:]
+            out.append("<table><tr>" + "".join(f"<th>{html.escape(c.strip())}</th>" for c in head) + "</tr>" +
+                       "".join("<tr>" + "".join(f"<td>{html.escape(c.strip())}</td>" for c in r) + "</tr>"
+                               for r in body) + "</table>")
+            table.clear()
+
+    for line in text.splitlines():
+        if line.startswith("|"):
+            table.append(line)
+            continue
+        flush_table()
+        if line.startswith("#"):
+            level = len(line) - len(line.lstrip("#"))
+            out.append(f"<h{level}>{html.escape(line.lstrip('#').strip())}</h{level}>")
+        elif line.startswith("![") and embed_from:
+            alt, src = line[2:].split("](", 1)
+            with open(os.path.join(embed_from, src.rstrip(")")), "rb") as f:
+                data = base64.b64encode(f.read()).decode()
+            out.append(f'<p><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}"></p>')
+        elif line.strip():
+            out.append(f"<p>{html.escape(line).replace('`', '')}</p>")
+    flush_table()
+    return "\n".join(out)
+
+
+HTML_PAGE = """<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{title}</title>
+<style>
+body {{ font-family: sans-serif; margin: 2em; max-width: 1400px; }}
+table {{ border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.85em; }}
+th, td {{ border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: right; }}
+th {{ background: #eee; }} td:first-child, th:first-child {{ text-align: left; }}
+img {{ max-width: 100%; }}
+</style></head><body>
+{body}
+</body></html>
+"""
+
+
+def build_report(folder: str) -> dict[str, str]:
+    return Report(folder).write()

@@ -1,0 +1,61 @@
+"""Append-only results: one JSON object per line, flushed and fsync'ed per row.
+
+A sweep killed at any moment (Ctrl-C, kill -9) leaves at most one torn last
+line; opening the store cuts it off, so a resumed sweep finds every finished
+row exactly once and redoes only what is missing. Images are written next to
+it under temporary names and renamed (images.atomic_path), and a run's row is
+appended only after its image exists, so a row never points at a missing file.
+"""
+from __future__ import annotations
+
+import json
+import os
+
+SCHEMA_VERSION = 1
+
+
+class ResultStore:
+    def __init__(self, folder: str):
+        self.folder = folder
+        self.path = os.path.join(folder, "results.jsonl")
+        os.makedirs(folder, exist_ok=True)
+        self.rows = self._load()
+
+    def _load(self) -> list[dict]:
+        if not os.path.exists(self.path):
+            return []
+        rows, keep = [], 0
+        with open(self.path, "rb") as f:
+            data = f.read()
+        for line in data.split(b"\n"):
+            if not line.strip():
+                keep += len(line) + 1
+                continue
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError:
+                break                           # a torn line: only the last one can be
+            keep += len(line) + 1
+        keep = min(keep, len(data))
+        if keep < len(data):                    # cut the torn tail before appending again
+            with open(self.path, "r+b") as f:
+                f.truncate(keep)
+        return rows
+
+    def append(self, row: dict) -> None:
+        row = {"schema": SCHEMA_VERSION, **row}
+        line = (json.dumps(row, sort_keys=True, allow_nan=True) + "\n").encode()
+        with open(self.path, "ab") as f:
+            f.write(line)
+            f.flush()
+            os.fsync(f.fileno())
+        self.rows.append(row)
+
+    def of_kind(self, kind: str) -> list[dict]:
+        return [r for r in self.rows if r.get("kind") == kind]
+
+    def done_runs(self) -> set[tuple[str, int]]:
+        return {(r["point"], r["seed"]) for r in self.of_kind("run")}
+
+    def image_path(self, point_id: str, seed: int) -> str:
+        return os.path.join(self.folder, "images", point_id.replace("/", "__") + f"__seed{seed}.exr")

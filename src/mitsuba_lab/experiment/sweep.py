@@ -1,0 +1,144 @@
+"""The `sweep` and `reference` commands: wiring config, plan, runner, report and terminal."""
+from __future__ import annotations
+
+import os
+import time
+
+from ..errors import LabError
+from ..progress import ProgressBar, duration
+from .config import PluginSpec, load_config, with_depth
+from .plan import build_plan, estimated_seconds
+from .reference import get_reference, load_cached, reference_key
+from .store import ResultStore
+
+
+def assess_scene(scene_spec, strategies):
+    """Left-out strategies and aliases for one scene, from its traits (mitsuba_lab.scene)."""
+    from ..scene import SceneTraits, equivalent_strategies, strategy_applicability
+    from ..scene_xml import load_scene_variant
+
+    traits = SceneTraits.from_scene(load_scene_variant(scene_spec.path, scene_spec.resolution, None,
+                                                       scene_spec.defaults))
+    left_out = {}
+    for s in strategies:
+        ok, reason = strategy_applicability(traits, s.type, s.params)
+        if not ok:
+            left_out[s.name] = reason
+    usable = {s.name: (s.type, s.params) for s in strategies if s.name not in left_out}
+    aliases = {}
+    for name, canonical in equivalent_strategies(traits, usable).items():
+        if canonical != name:
+            aliases[name] = (canonical, "provably the same estimator on this scene (see mitsuba_lab.scene.equivalent_strategies)")
+    return left_out, aliases
+
+
+def pilot_rates(config) -> tuple[dict, dict]:
+    """Samples per second and pixels per scene, from a 2-spp render with the reference integrator
+    after an untimed warm-up (the basis of --dry-run's time estimate)."""
+    from ..render import render
+    from ..scene import make_integrator
+    from ..scene_xml import load_scene_variant
+
+    rates, pixels = {}, {}
+    for scene in config.scenes:
+        scene_obj = load_scene_variant(scene.path, scene.resolution, None, scene.defaults)
+        spec = with_depth(config.reference.integrator, config.max_depth)
+        integrator = make_integrator(spec.type, spec.params)
+        render(scene_obj, integrator, spp=2, seed=0)
+        image, stats = render(scene_obj, integrator, spp=2, seed=1)
+        rates[scene.name] = stats.samples_per_second
+        pixels[scene.name] = image.shape[0] * image.shape[1]
+    return rates, pixels
+
+
+def print_plan(config, plan, out) -> None:
+    print(f"sweep '{config.name}' from {config.source}: {len(config.scenes)} scene(s), "
+          f"{len(config.strategies)} strateg(ies), {len(config.samplers)} sampler(s), "
+          f"levels {list(config.spp)} spp + {list(config.time_budgets)} s, {config.repetitions} seeds",
+          file=out)
+    for scene in config.scenes:
+        points = plan.for_scene(scene.name)
+        print(f"  {scene.name}: {len(points)} points x ({config.repetitions} timed + 1 warm-up) renders",
+              file=out)
+        for point in points:
+            level = f"{point.spp} spp" if point.spp else f"{point.budget_s:g} s budget (spp from a pilot)"
+            print(f"    {point.id:60s} {level}", file=out)
+    for item in plan.left_out:
+        print(f"  left out: {item['scene']} / {item['strategy']}: {item['reason']}", file=out)
+    for item in plan.aliases:
+        print(f"  alias: {item['scene']} / {item['strategy']} = {item['same_as']}: {item['reason']}", file=out)
+
+
+def sweep_command(config_path: str, output: str | None, dry_run: bool, out) -> int:
+    config = load_config(config_path)
+    plan = build_plan(config, assess_scene)
+    folder = output or config.output
+    if dry_run:
+        print_plan(config, plan, out)
+        rates, pixels = pilot_rates(config)
+        cached = set()
+        for scene in config.scenes:
+            spec = with_depth(config.reference.integrator, config.max_depth)
+            key = reference_key(scene.path, scene.resolution, scene.defaults, spec, config.reference.spp,
+                                config.reference.chunks)
+            if load_cached(config.reference.cache, key):
+                cached.add(scene.name)
+        seconds = estimated_seconds(plan, config, rates, pixels, cached)
+        for name, s in seconds.items():
+            ref = "cached" if name in cached else "to render"
+            print(f"  estimated {duration(s)} for {name} (reference {ref}; pilot "
+                  f"{rates[name] / 1e6:.2f} M samples/s with the reference integrator)", file=out)
+        print(f"estimated total: {duration(sum(seconds.values()))} (lab integrators run at 0.7-1.1x the "
+              f"speed of path; compile time not included)", file=out)
+        return 0
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise LabError(f"output path is not a folder: {folder}")
+    store = ResultStore(folder)
+    bar = ProgressBar()
+
+    def progress(event, **info):
+        if event == "reference":
+            bar.message(f"reference for {info['scene']} ...")
+        elif event == "reference_done":
+            origin = "from the cache" if info["cached"] else "rendered"
+            bar.message(f"reference for {info['scene']} {origin}; noise floor MSE {info['floor']:.3g}")
+        elif event == "start":
+            bar.begin(info["total"], f"{info['total']} points to run ({info['skipped']} already done)")
+        elif event == "point_done":
+            bar.step(info["point"])
+
+    from .report import build_report
+    from .run import SweepRunner
+
+    start = time.perf_counter()
+    SweepRunner(config, plan, store, progress).run()
+    paths = build_report(folder)
+    print(f"sweep '{config.name}' done in {duration(time.perf_counter() - start)}; results in "
+          f"{paths['csv']}; report: {paths['html']} (and {paths['md']})", file=out)
+    return 0
+
+
+def reference_command(scene_path, integrator, params, spp, chunks, resolution, defaults, cache, output, out):
+    from .. import images
+    from .config import DEFAULT_CACHE
+
+    if spp % chunks or chunks < 2:
+        raise LabError(f"--chunks must be >= 2 and divide --spp ({spp}), got {chunks}")
+    if not os.path.isfile(scene_path):
+        raise LabError(f"scene file not found: {scene_path}")
+    if output:
+        images.check_writable(output)
+    cache = os.path.abspath(os.path.expanduser(cache or os.environ.get("MITSUBA_LAB_CACHE") or DEFAULT_CACHE))
+    bar = ProgressBar()
+    bar.begin(chunks)
+    ref, cached = get_reference(os.path.abspath(scene_path), resolution, defaults,
+                                PluginSpec("reference", integrator, params), spp, chunks, cache,
+                                progress=lambda k, n: bar.step(f"chunk {k}/{n}"))
+    origin = "found in the cache" if cached else f"rendered in {ref.meta.get('seconds', 0):.1f} s"
+    print(f"reference {ref.key} {origin}: {cache}/{ref.key}.exr; noise floor MSE {ref.mse_floor:.4g}, "
+          f"relMSE {ref.rel_mse_floor():.4g}", file=out)
+    if output:
+        images.write_exr(output, ref.image, {"mitsuba_lab.reference": ref.key})
+        images.write_png(os.path.splitext(output)[0] + ".png", ref.image)
+        print(f"wrote {output}", file=out)
+    return 0

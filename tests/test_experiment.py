@@ -1,0 +1,194 @@
+"""The sweep runner: config validation, plan, reference cache, store, resume after kill -9, report."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from mitsuba_lab.experiment.config import ConfigError, PluginSpec, load_config, parse_config
+from mitsuba_lab.experiment.plan import build_plan
+from mitsuba_lab.experiment.reference import get_reference, reference_key
+from mitsuba_lab.experiment.store import ResultStore
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+TINY = """
+[experiment]
+name = "tiny"
+spp = [2, 8]
+repetitions = 2
+max_depth = 4
+metrics = ["flip", "ciede2000"]
+
+[reference]
+integrator = {{ type = "path" }}
+spp = 64
+chunks = 4
+cache = "{cache}"
+
+[scenes.cornell]
+path = "{root}/scenes/cornell_box.xml"
+resolution = 16
+regions = {{ light = [6, 0, 10, 3], left = [0.0, 0.25, 0.25, 0.75] }}
+
+[strategies]
+nee = {{ type = "lab_nee" }}
+mis = {{ type = "lab_mis", heuristic = "balance" }}
+"""
+
+
+@pytest.fixture
+def tiny_config(tmp_path):
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY.format(cache=tmp_path / "cache", root=ROOT))
+    return str(path)
+
+
+def config_error(text, tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        load_config(str(path))
+    message = str(err.value)
+    assert "\n" not in message and "bad.toml" in message
+    return message
+
+
+@pytest.mark.parametrize("mutation, expected", [
+    (lambda t: t.replace("spp = [2, 8]", "spp = [2, -8]"), "experiment.spp: expected a list of positive integers"),
+    (lambda t: t.replace("repetitions = 2", "repetitions = 1"), "experiment.repetitions: expected an integer >= 2"),
+    (lambda t: t.replace("chunks = 4", "chunks = 5"), "reference.chunks: expected an integer >= 2 that divides"),
+    (lambda t: t.replace("cornell_box.xml", "nope.xml"), "scenes.cornell.path: expected an existing scene file"),
+    (lambda t: t.replace('nee = { type = "lab_nee" }', 'nee = { heuristic = "x" }'),
+     "strategies.nee.type: expected the integrator plugin name"),
+    (lambda t: t.replace("[6, 0, 10, 3]", "[6, 0, 3, 3]"), "scenes.cornell.regions.light: expected [x0, y0, x1, y1]"),
+    (lambda t: t.replace('metrics = ["flip", "ciede2000"]', 'metrics = ["psnr"]'), "experiment.metrics"),
+    (lambda t: t.replace("[experiment]", "[experiment]\nbogus = 1"), "experiment.bogus: expected one of the keys"),
+    (lambda t: t.replace("spp = [2, 8]", ""), "experiment.spp: expected an spp ladder"),
+    (lambda t: t + "\n[[oops", "not valid TOML"),
+])
+def test_config_errors_name_the_key(mutation, expected, tmp_path):
+    text = mutation(TINY.format(cache=tmp_path / "cache", root=ROOT))
+    assert expected in config_error(text, tmp_path)
+
+
+def test_config_defaults_and_plan_ids(tiny_config):
+    config = load_config(tiny_config)
+    assert config.samplers[0].type == "independent" and config.spp == (2, 8)
+    assert config.scenes[0].regions["left"] == (0.0, 0.25, 0.25, 0.75)
+    plan = build_plan(config)
+    ids = [p.id for p in plan.points]
+    assert ids == ["cornell/nee/independent/spp2", "cornell/nee/independent/spp8",
+                   "cornell/mis/independent/spp2", "cornell/mis/independent/spp8"]
+    assert build_plan(config).points == plan.points          # stable
+    assert all(p.seeds == (1, 2) and p.warmup_seed == 0 for p in plan.points)
+
+
+def test_plan_leaves_out_and_aliases():
+    config = parse_config({"experiment": {"spp": [4]},
+                           "scenes": {"s": {"path": os.path.join(ROOT, "scenes", "cornell_box.xml")}},
+                           "strategies": {"a": {"type": "lab_naive"}, "b": {"type": "lab_nee"},
+                                          "c": {"type": "lab_mis"}}}, os.path.join(ROOT, "x.toml"))
+    plan = build_plan(config, lambda scene, strategies: ({"a": "cannot reach delta lights"},
+                                                         {"c": ("b", "delta lights only")}))
+    assert [p.strategy for p in plan.points] == ["b"]
+    assert plan.left_out == [{"scene": "s", "strategy": "a", "reason": "cannot reach delta lights"}]
+    assert plan.aliases[0]["same_as"] == "b"
+
+
+def test_reference_cache_hit_miss_and_key(tmp_path):
+    scene = os.path.join(ROOT, "scenes", "cornell_box.xml")
+    spec = PluginSpec("ref", "path", {"max_depth": 3})
+    key = reference_key(scene, 8, {}, spec, 16, 4)
+    assert key == reference_key(scene, 8, {}, spec, 16, 4)                   # stable
+    assert key != reference_key(scene, 8, {}, spec, 32, 4)                   # spp is part of it
+    assert key != reference_key(scene, 16, {}, spec, 16, 4)                  # so is the resolution
+    assert key != reference_key(scene, 8, {}, PluginSpec("ref", "path", {"max_depth": 4}), 16, 4)
+    copy = tmp_path / "scene.xml"
+    copy.write_text(open(scene).read().replace("0.885809, 0.698859, 0.666422", "0.7, 0.7, 0.7"))
+    assert key != reference_key(str(copy), 8, {}, spec, 16, 4)              # content, not name
+    ref, cached = get_reference(scene, 8, {}, spec, 16, 4, str(tmp_path / "cache"))
+    assert not cached and ref.image.shape == (8, 8, 3) and ref.mse_floor > 0
+    again, cached = get_reference(scene, 8, {}, spec, 16, 4, str(tmp_path / "cache"))
+    assert cached and np.array_equal(again.image, ref.image) and again.mse_floor == pytest.approx(ref.mse_floor)
+
+
+def test_store_cuts_a_torn_last_line(tmp_path):
+    store = ResultStore(str(tmp_path))
+    store.append({"kind": "run", "point": "p", "seed": 1})
+    with open(store.path, "ab") as f:
+        f.write(b'{"kind": "run", "point": "p", "se')            # killed mid-write
+    again = ResultStore(str(tmp_path))
+    assert again.done_runs() == {("p", 1)}
+    again.append({"kind": "run", "point": "p", "seed": 2})
+    assert [json.loads(line)["seed"] for line in open(store.path)] == [1, 2]
+
+
+def run_cli(*args, **kwargs):
+    return subprocess.run([sys.executable, "-m", "mitsuba_lab", *args], capture_output=True, text=True,
+                          timeout=600, cwd=ROOT, **kwargs)
+
+
+def test_sweep_end_to_end_and_report_rebuild(tiny_config, tmp_path):
+    out = tmp_path / "out"
+    proc = run_cli("sweep", tiny_config, "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    rows = [json.loads(line) for line in open(out / "results.jsonl")]
+    runs = [r for r in rows if r["kind"] == "run"]
+    assert len(runs) == 4 * 2
+    for r in runs:
+        assert r["finite"] and r["negative"] == 0 and r["mse"] > 0 and r["wall_s"] > 0
+        assert set(r["regions"]) == {"light", "left"} and 0 <= r["flip"] <= 1 and r["ciede2000"] >= 0
+        assert r["rays"]["camera"] == 16 * 16 * r["spp"]
+    # more samples, less error (4x the samples: relMSE falls; a loose, safe check)
+    by_spp = {spp: np.mean([r["rel_mse"] for r in runs if r["spp"] == spp]) for spp in (2, 8)}
+    assert by_spp[8] < by_spp[2]
+    html = (out / "report" / "index.html").read_text()
+    assert "data:image/png;base64," in html and "Efficiency" in html and "Veach" in html
+    assert (out / "report" / "summary.md").exists() and (out / "results.csv").exists()
+    # the report is rebuilt from stored results alone
+    os.remove(out / "report" / "index.html")
+    proc = run_cli("report", str(out), env={**os.environ, "MITSUBA_LAB_VARIANT": "nope_not_needed"})
+    assert proc.returncode == 0, proc.stderr
+    assert (out / "report" / "index.html").exists()
+
+
+def test_sweep_resumes_after_kill_9(tiny_config, tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "mitsuba_lab", "sweep", tiny_config, "-o", str(out)],
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    results = out / "results.jsonl"
+    deadline = time.time() + 300
+    while time.time() < deadline:
+        if results.exists() and sum('"kind": "run"' in line for line in open(results)) >= 3:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    before = [line for line in open(results) if '"kind": "run"' in line]
+    assert 3 <= len(before) < 8, "the sweep finished before it could be killed"
+    done = run_cli("sweep", tiny_config, "-o", str(out))
+    assert done.returncode == 0, done.stderr
+    after = [json.loads(line) for line in open(results) if '"kind": "run"' in line]
+    keys = [(r["point"], r["seed"]) for r in after]
+    assert len(keys) == len(set(keys)) == 8                          # nothing lost, nothing twice
+    assert [json.loads(line) for line in before] == after[:len(before)]   # finished rows untouched
+    assert not [f for f in os.listdir(out / "images") if f.startswith(".")]   # no temp files left
+
+
+def test_dry_run_prints_plan_and_estimate(tiny_config):
+    proc = run_cli("sweep", tiny_config, "--dry-run")
+    assert proc.returncode == 0, proc.stderr
+    assert "cornell/mis/independent/spp8" in proc.stdout and "estimated total" in proc.stdout
+
+
+def test_bad_config_exits_2_with_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[experiment]\nspp = 'many'\n")
+    proc = run_cli("sweep", str(bad))
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
+    assert "experiment.spp" in proc.stderr
