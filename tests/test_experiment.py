@@ -192,3 +192,17 @@ def test_bad_config_exits_2_with_one_line(tmp_path):
     proc = run_cli("sweep", str(bad))
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
     assert "experiment.spp" in proc.stderr
+
+
+def test_veach_bound_verdicts():
+    from mitsuba_lab.experiment.analysis import veach_bound
+
+    balance = {"variance": 1.0, "variance_se": 0.1, "ref_mean_square": 4.0}
+    # slack for n_L = 1 at 1 spp: (1/1 - 1/2) * 4 = 2
+    assert veach_bound(balance, {"variance": 0.0, "variance_se": 0.0}, 1, 1)["verdict"] == "holds"
+    near = veach_bound({**balance, "variance": 3.1}, {"variance": 1.0, "variance_se": 0.1}, 1, 1)
+    assert near["rhs"] == pytest.approx(3.0) and near["verdict"] == "within noise"
+    far = veach_bound({**balance, "variance": 5.0}, {"variance": 1.0, "variance_se": 0.1}, 1, 1)
+    assert far["verdict"] == "violated"
+    # spp divides the slack; n_L = 3: (1 - 1/4) * 4 / 4 = 0.75
+    assert veach_bound(balance, {"variance": 0.0, "variance_se": 0.0}, 3, 4)["slack"] == pytest.approx(0.75)

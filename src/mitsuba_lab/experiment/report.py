@@ -188,7 +188,11 @@ class Report:
         names = sorted({n for points in groups.values() for p in points for n in p.regions})
         if not names:
             return []
-        md = ["", "### Regions of interest (largest sample count): relMSE and efficiency", "",
+        ref = self.references[scene]
+        rects = self._regions(scene, ref.image.shape[1], ref.image.shape[0])
+        floors = {n: float(metrics.region(ref.variance, rects[n]).mean()) if n in rects else 0.0 for n in names}
+        md = ["", "### Regions of interest (largest sample count): relMSE and efficiency "
+                  "(efficiency from the region MSE minus the region's reference floor)", "",
               "| strategy | " + " | ".join(f"{n} relMSE | {n} efficiency" for n in names) + " |",
               "|---|" + "---|---|" * len(names)]
         best = {}
@@ -197,12 +201,14 @@ class Report:
             cells = []
             for n in names:
                 r = top.regions[n]
-                eff = 1.0 / (r["mse"] * top.time_s) if r["mse"] > 0 else math.inf
+                corrected = r["mse"] - floors[n]
+                eff = 1.0 / (corrected * top.time_s) if corrected > 0 else math.nan
                 best.setdefault(n, []).append((eff, label(key)))
                 cells += [fmt(r["rel_mse"]), fmt(eff)]
             md.append(f"| {label(key)} | " + " | ".join(cells) + " |")
         md += ["", "Most efficient per region: " + "; ".join(
-            f"{n}: {max(v)[1]}" for n, v in best.items()) + " (region MSE includes the reference floor)."]
+            f"{n}: {max((e, k) for e, k in v if not math.isnan(e))[1]}" for n, v in best.items()
+            if any(not math.isnan(e) for e, _ in v)) + "."]
         return md
 
     def veach_table(self, scene, groups) -> list[str]:
@@ -215,7 +221,8 @@ class Report:
         height, width = ref.image.shape[:2]
         regions = self._regions(scene, width, height) or {"image": (0, 0, width, height)}
         md = ["", "### Veach's bound: Var[balance] <= Var[other] + (1/min n_i - 1/sum n_i) I^2", "",
-              "| other weighting | spp | region | Var balance | Var other + slack | holds |", "|---|---|---|---|---|---|"]
+              "| other weighting | spp | region | Var balance | Var other + slack | standard error | verdict |",
+              "|---|---|---|---|---|---|---|"]
         for bkey in balance:
             n_l = int(self._param(mis[bkey][0], "emitter_samples", 1))
             for okey, opts in mis.items():
@@ -230,10 +237,11 @@ class Report:
                         o = region_stack_stats(op, self.folder, ref, rect)
                         v = veach_bound(b, o, n_l, bp.spp)
                         md.append(f"| {okey[0]} | {bp.spp} | {name} | {fmt(v['lhs'])} | {fmt(v['rhs'])} | "
-                                  f"{'yes' if v['holds'] else 'NO'} |")
+                                  f"{fmt(v['se'], 2)} | {v['verdict']} |")
         md.append("")
-        md.append("Variances are sample variances over the seeds, so the comparison itself is noisy; the "
-                  "bound is exact for direct lighting (max_depth 2).")
+        md.append("Variances are sample variances over the seeds (jackknife standard errors); "
+                  "'within noise' means the excess is under two standard errors. The bound is exact for "
+                  "direct lighting (max_depth 2); with longer paths it is indicative only.")
         return md
 
     def _run_row(self, stats: PointStats) -> dict:
