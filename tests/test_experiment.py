@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from mitsuba_lab.experiment import browser
 from mitsuba_lab.experiment.config import ConfigError, PluginSpec, load_config, parse_config
 from mitsuba_lab.experiment.plan import build_plan
 from mitsuba_lab.experiment.reference import get_reference, reference_key
@@ -133,10 +134,21 @@ def run_cli(*args, **kwargs):
                           timeout=600, cwd=ROOT, **kwargs)
 
 
-def test_sweep_end_to_end_and_report_rebuild(tiny_config, tmp_path):
-    out = tmp_path / "out"
-    proc = run_cli("sweep", tiny_config, "-o", str(out))
+@pytest.fixture(scope="module")
+def tiny_sweep(tmp_path_factory):
+    """One tiny sweep through the real command, shared by the tests that read its output."""
+    tmp = tmp_path_factory.mktemp("sweep")
+    config = tmp / "tiny.toml"
+    config.write_text(TINY.format(cache=tmp / "cache", root=ROOT))
+    out = tmp / "out"
+    proc = run_cli("sweep", str(config), "-o", str(out))
     assert proc.returncode == 0, proc.stderr
+    assert "report:" in proc.stdout and "index.html" in proc.stdout
+    return out
+
+
+def test_sweep_end_to_end_and_report_rebuild(tiny_sweep):
+    out = tiny_sweep
     rows = [json.loads(line) for line in open(out / "results.jsonl")]
     runs = [r for r in rows if r["kind"] == "run"]
     assert len(runs) == 4 * 2
@@ -155,6 +167,14 @@ def test_sweep_end_to_end_and_report_rebuild(tiny_config, tmp_path):
     proc = run_cli("report", str(out), env={**os.environ, "MITSUBA_LAB_VARIANT": "nope_not_needed"})
     assert proc.returncode == 0, proc.stderr
     assert (out / "report" / "index.html").exists()
+
+
+@pytest.mark.skipif(browser.chromium() is None, reason="Debian's chromium is not installed")
+def test_report_loads_in_headless_chromium(tiny_sweep, tmp_path):
+    shot = tmp_path / "report.png"
+    page = browser.check_page(str(tiny_sweep / "report" / "index.html"), str(shot))
+    assert page.images >= 2 and page.broken == 0 and page.errors == 0
+    assert shot.stat().st_size > 10_000                      # a real screenshot, not a blank page
 
 
 def test_sweep_resumes_after_kill_9(tiny_config, tmp_path):

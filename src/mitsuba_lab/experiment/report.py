@@ -24,7 +24,8 @@ from .reference import Reference
 from .store import ResultStore
 
 CSV_COLUMNS = ("point", "scene", "strategy", "sampler", "spp", "budget_s", "seed", "wall_s", "kernel_s",
-               "compile_s", "mse", "rel_mse", "flip", "ciede2000", "finite", "negative", "host", "image")
+               "compile_s", "mse", "rel_mse", "flip", "ciede2000", "finite", "negative", "peak_rss_mib", "host",
+               "image")
 
 
 def fmt(value, digits=3) -> str:

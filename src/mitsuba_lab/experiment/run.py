@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import platform
+import resource
 import socket
 import time
 
@@ -139,6 +140,8 @@ class SweepRunner:
                         "wall_s": stats.wall_s, "kernel_s": stats.kernel_s, "compile_s": stats.compile_s,
                         "rays": stats.rays, "image": os.path.relpath(image_path, self.store.folder),
                         "integrator": spec.type, "params": spec.params, "host": socket.gethostname(),
+                        # process-wide high-water mark so far (Linux reports KiB): cheap, not per render
+                        "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                         "finished": time.time(), **measure(image, ref, regions, self.config.metrics)})
                 self.progress("point_done", point=point.id)
 
