@@ -120,6 +120,9 @@ def build_parser() -> argparse.ArgumentParser:
                                        "experiments/README.md.")
     sweep.add_argument("config", help="experiment TOML file")
     sweep.add_argument("-o", "--output", help="output folder (default: the config's experiment.output)")
+    sweep.add_argument("--cluster", metavar="ADDRESS",
+                       help="run the points on a Dask distributed cluster, e.g. tcp://host:8786 "
+                            "(needs the 'distributed' extra; overrides the config's [executor] cluster)")
     sweep.add_argument("--dry-run", action="store_true",
                        help="print the plan, left-out strategies and an estimated cost (from a short "
                             "pilot render per scene), and render nothing else")
@@ -175,7 +178,7 @@ def cmd_theory(args, out) -> int:
 def cmd_sweep(args, out) -> int:
     from .experiment import sweep
 
-    return sweep.sweep_command(args.config, args.output, args.dry_run, out)
+    return sweep.sweep_command(args.config, args.output, args.dry_run, out, args.cluster)
 
 
 def cmd_reference(args, out) -> int:

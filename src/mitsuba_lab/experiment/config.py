@@ -63,6 +63,7 @@ class Config:
     max_depth: int | None
     reference: ReferenceSpec
     metrics: tuple[str, ...]
+    cluster: str | None = None      # Dask scheduler address; None = run in this process
 
 
 class _Reader:
@@ -189,7 +190,7 @@ def load_config(path: str) -> Config:
 def parse_config(data: dict, source: str) -> Config:
     base_dir = os.path.dirname(os.path.abspath(source))
     top = _Reader(source, data, "")
-    top.unknown({"experiment", "reference", "scenes", "strategies", "samplers"})
+    top.unknown({"experiment", "reference", "scenes", "strategies", "samplers", "executor"})
     exp = top.sub("experiment", {})
     exp.unknown({"name", "output", "spp", "time_budgets", "repetitions", "seed", "max_depth", "metrics"})
     name = exp.get("name", str, os.path.splitext(os.path.basename(source))[0])
@@ -223,6 +224,11 @@ def parse_config(data: dict, source: str) -> Config:
     cache = os.path.abspath(os.path.expanduser(os.environ.get("MITSUBA_LAB_CACHE") or
                                                ref.get("cache", str, DEFAULT_CACHE)))
 
+    executor = top.sub("executor", {})
+    executor.unknown({"cluster"})
+    cluster = executor.get("cluster", str, None, check=lambda v: "://" in v,
+                           expected='a Dask scheduler address such as "tcp://host:8786"')
+
     scenes = _scenes(top.sub("scenes"), base_dir)
     strategies = _plugins(top.sub("strategies"), "integrator")
     samplers = _plugins(top.sub("samplers"), "sampler") if "samplers" in data else \
@@ -231,7 +237,8 @@ def parse_config(data: dict, source: str) -> Config:
                   strategies=strategies, samplers=samplers, spp=spp,
                   time_budgets=tuple(sorted(set(float(b) for b in budgets))), repetitions=repetitions,
                   seed=seed, max_depth=max_depth,
-                  reference=ReferenceSpec(ref_plugin, ref_spp, chunks, cache), metrics=tuple(metrics))
+                  reference=ReferenceSpec(ref_plugin, ref_spp, chunks, cache), metrics=tuple(metrics),
+                  cluster=cluster)
 
 
 def with_depth(spec: PluginSpec, max_depth: int | None) -> PluginSpec:

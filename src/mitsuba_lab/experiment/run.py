@@ -2,31 +2,29 @@
 
 Each point gets one untimed warm-up render (Dr.Jit compiles on first use; the
 sample count is part of the compiled kernel), then R timed renders with
-distinct seeds, each synchronised before the clock stops (``render.render``).
-Rows already in the store are skipped, so a killed sweep resumes where it was.
+distinct seeds, each synchronised before the clock stops (``worker.execute``).
+Points run in this process or on a Dask cluster (``executors``); either way
+only this process writes the store. Rows already in the store are skipped, so
+a killed sweep resumes where it was.
 """
 from __future__ import annotations
 
 import os
 import platform
-import resource
 import socket
 import time
 
 import numpy as np
 
 from .. import images, metrics
-from ..render import render
+from ..errors import LabError
 from ..runtime import versions
-from ..scene import make_integrator
-from ..scene_xml import load_scene_variant
 from .config import Config, SceneSpec, with_depth
+from .executors import LocalExecutor
 from .plan import Plan, Point
 from .reference import Reference, get_reference
 from .store import ResultStore
-
-#: Pilot sample counts for time budgets: two timed renders fit time = c0 + c1 * spp.
-PILOT_SPP = (2, 8)
+from .worker import PointResult, PointTask
 
 
 def pixel_regions(scene: SceneSpec, width: int, height: int) -> dict[str, tuple[int, int, int, int]]:
@@ -37,23 +35,12 @@ def pixel_regions(scene: SceneSpec, width: int, height: int) -> dict[str, tuple[
             out[name] = metrics.fraction_rect_to_pixels(rect, width, height)
         else:
             out[name] = tuple(int(v) for v in rect)
-        metrics.region(np.zeros((height, width)), out[name])      # raises if outside the image
+        try:
+            metrics.region(np.zeros((height, width)), out[name])
+        except ValueError as err:
+            raise LabError(f"scene {scene.name}: region '{name}' {list(rect)} lies outside the "
+                           f"{width}x{height} image") from err
     return out
-
-
-def measure(image: np.ndarray, ref: Reference, regions: dict, optional: tuple[str, ...]) -> dict:
-    """Error metrics of one render against the reference (raw: the floor is not subtracted)."""
-    row = {"mse": metrics.mse(image, ref.image), "rel_mse": metrics.rel_mse(image, ref.image),
-           "finite": bool(np.isfinite(image).all()), "negative": int((image < 0).sum())}
-    if "flip" in optional:
-        row["flip"] = metrics.flip_hdr(image, ref.image)
-    if "ciede2000" in optional:
-        row["ciede2000"] = metrics.ciede2000_mean(image, ref.image)
-    row["regions"] = {name: {"mse": metrics.mse(metrics.region(image, rect), metrics.region(ref.image, rect)),
-                             "rel_mse": metrics.rel_mse(metrics.region(image, rect),
-                                                        metrics.region(ref.image, rect))}
-                      for name, rect in regions.items()}
-    return row
 
 
 def machine_info() -> dict:
@@ -64,8 +51,9 @@ def machine_info() -> dict:
 class SweepRunner:
     """Executes a plan into a store. ``progress(event: str, **info)`` reports to the CLI."""
 
-    def __init__(self, config: Config, plan: Plan, store: ResultStore, progress=None):
+    def __init__(self, config: Config, plan: Plan, store: ResultStore, progress=None, executor=None):
         self.config, self.plan, self.store = config, plan, store
+        self.executor = executor or LocalExecutor()
         self.progress = progress or (lambda event, **info: None)
         self.references: dict[str, Reference] = {}
 
@@ -78,11 +66,8 @@ class SweepRunner:
         done = self.store.done_runs()
         todo = [p for p in self.plan.points if any((p.id, s) not in done for s in p.seeds)]
         self.progress("start", total=len(todo), skipped=len(self.plan.points) - len(todo))
-        for scene in self.config.scenes:
-            for sampler in self.config.samplers:
-                points = [p for p in todo if p.scene == scene.name and p.sampler == sampler.name]
-                if points:
-                    self._run_group(scene, sampler, points, done)
+        for result in self.executor.map(list(self.tasks(todo, done))):
+            self.record(result)
 
     def reference(self, scene: SceneSpec) -> Reference:
         spec = self.config.reference
@@ -114,49 +99,31 @@ class SweepRunner:
             if not os.path.exists(target):
                 images.write_exr(target, image, {"mitsuba_lab.reference": ref.key})
 
-    def _run_group(self, scene: SceneSpec, sampler, points: list[Point], done: set) -> None:
-        scene_obj = load_scene_variant(scene.path, scene.resolution, sampler.as_dict(), scene.defaults)
-        ref = self.references[scene.name]
-        height, width = ref.image.shape[:2]
-        regions = pixel_regions(scene, width, height)
-        strategies = {s.name: s for s in self.config.strategies}
-        for strategy_name in dict.fromkeys(p.strategy for p in points):
-            spec = with_depth(strategies[strategy_name], self.config.max_depth)
-            integrator = make_integrator(spec.type, spec.params)
-            for point in (p for p in points if p.strategy == strategy_name):
-                spp = point.spp or self.calibrated_spp(point, scene_obj, integrator)
-                render(scene_obj, integrator, spp=spp, seed=point.warmup_seed)      # compile, untimed
-                for seed in point.seeds:
-                    if (point.id, seed) in done:
-                        continue
-                    image, stats = render(scene_obj, integrator, spp=spp, seed=seed)
-                    image_path = self.store.image_path(point.id, seed)
-                    os.makedirs(os.path.dirname(image_path), exist_ok=True)
-                    images.write_exr(image_path, image, {"mitsuba_lab.point": point.id,
-                                                         "mitsuba_lab.seed": str(seed)})
-                    self.store.append({
-                        "kind": "run", "point": point.id, "scene": point.scene, "strategy": point.strategy,
-                        "sampler": point.sampler, "spp": spp, "budget_s": point.budget_s, "seed": seed,
-                        "wall_s": stats.wall_s, "kernel_s": stats.kernel_s, "compile_s": stats.compile_s,
-                        "rays": stats.rays, "image": os.path.relpath(image_path, self.store.folder),
-                        "integrator": spec.type, "params": spec.params, "host": socket.gethostname(),
-                        # process-wide high-water mark so far (Linux reports KiB): cheap, not per render
-                        "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-                        "finished": time.time(), **measure(image, ref, regions, self.config.metrics)})
-                self.progress("point_done", point=point.id)
+    def tasks(self, todo: list[Point], done: set):
+        """One self-contained task per unfinished point, grouped by scene, sampler and strategy."""
+        import mitsuba as mi
 
-    def calibrated_spp(self, point: Point, scene_obj, integrator) -> int:
-        """Sample count that fills the point's time budget, fitted once and stored."""
-        for row in self.store.of_kind("calibration"):
-            if row["point"] == point.id:
-                return row["spp"]
-        times = []
-        for spp in PILOT_SPP:
-            render(scene_obj, integrator, spp=spp, seed=point.warmup_seed)             # compile
-            times.append(render(scene_obj, integrator, spp=spp, seed=point.warmup_seed)[1].wall_s)
-        per_spp = max((times[1] - times[0]) / (PILOT_SPP[1] - PILOT_SPP[0]), 1e-9)
-        fixed = max(times[0] - per_spp * PILOT_SPP[0], 0.0)
-        spp = max(1, int(round((point.budget_s - fixed) / per_spp)))
-        self.store.append({"kind": "calibration", "point": point.id, "spp": spp, "fixed_s": fixed,
-                           "per_spp_s": per_spp, "budget_s": point.budget_s})
-        return spp
+        scenes = {s.name: s for s in self.config.scenes}
+        samplers = {s.name: s for s in self.config.samplers}
+        strategies = {s.name: s for s in self.config.strategies}
+        calibrated = {row["point"]: row["spp"] for row in self.store.of_kind("calibration")}
+        for point in todo:
+            ref = self.references[point.scene]
+            height, width = ref.image.shape[:2]
+            yield PointTask(point=point, scene=scenes[point.scene], sampler=samplers[point.sampler],
+                            strategy=with_depth(strategies[point.strategy], self.config.max_depth),
+                            seeds=tuple(s for s in point.seeds if (point.id, s) not in done),
+                            spp=point.spp or calibrated.get(point.id), reference_image=ref.image,
+                            regions=pixel_regions(scenes[point.scene], width, height),
+                            metrics=self.config.metrics, variant=mi.variant())
+
+    def record(self, result: PointResult) -> None:
+        """Store one finished point: calibration, then each image before the row naming it."""
+        if result.calibration:
+            self.store.append(result.calibration)
+        for row, image in result.runs:
+            path = self.store.image_path(row["point"], row["seed"])
+            os.makedirs(os.path.dirname(path), exist_ok=True)
+            images.write_exr(path, image, {"mitsuba_lab.point": row["point"], "mitsuba_lab.seed": str(row["seed"])})
+            self.store.append({**row, "image": os.path.relpath(path, self.store.folder)})
+        self.progress("point_done", point=result.task.point.id)

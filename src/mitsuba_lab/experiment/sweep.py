@@ -69,7 +69,7 @@ def print_plan(config, plan, out) -> None:
         print(f"  alias: {item['scene']} / {item['strategy']} = {item['same_as']}: {item['reason']}", file=out)
 
 
-def sweep_command(config_path: str, output: str | None, dry_run: bool, out) -> int:
+def sweep_command(config_path: str, output: str | None, dry_run: bool, out, cluster: str | None = None) -> int:
     config = load_config(config_path)
     plan = build_plan(config, assess_scene)
     folder = output or config.output
@@ -110,8 +110,15 @@ def sweep_command(config_path: str, output: str | None, dry_run: bool, out) -> i
     from .report import build_report
     from .run import SweepRunner
 
+    executor = None
+    address = cluster or config.cluster
+    if address:
+        from .executors import DaskExecutor
+
+        executor = DaskExecutor(address)
+        bar.message(f"running points on the Dask cluster at {address}")
     start = time.perf_counter()
-    SweepRunner(config, plan, store, progress).run()
+    SweepRunner(config, plan, store, progress, executor).run()
     paths = build_report(folder)
     print(f"sweep '{config.name}' done in {duration(time.perf_counter() - start)}; results in "
           f"{paths['csv']}; report: {paths['html']} (and {paths['md']})", file=out)
