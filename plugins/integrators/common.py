@@ -15,6 +15,8 @@ and their differences are exactly those two sections (Veach 1997, ch. 9).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import drjit as dr
 import mitsuba as mi
 
@@ -50,7 +52,10 @@ def mis_weight(pdf_self, pdf_other, heuristic: str = "power", beta: float = 2.0)
     * average: 1/2 wherever both densities are positive (the plain average,
       Veach's cautionary example), 1 where only this technique can sample x.
     A zero (or NaN) ``pdf_self`` gets weight 0; inf against a finite pdf gets 1.
+    A NaN or negative ``pdf_other`` counts as 0 (that technique cannot sample x), so a
+    broken density elsewhere never turns this weight into NaN.
     """
+    pdf_other = dr.select(pdf_other > 0, pdf_other, 0.0)
     both_inf = dr.isinf(pdf_self) & dr.isinf(pdf_other)
     if heuristic in ("balance", "power"):
         if heuristic == "balance":
@@ -78,8 +83,77 @@ def russian_roulette_probability(beta, eta):
     Tying q to the throughput kills dim paths early (seed text, "Russian
     roulette"); eta^2 undoes the radiance scaling at refractive boundaries so a
     path inside glass is not culled for a throughput that will come back.
+    Returns a value in [0, 0.95]: NaN (0 * inf throughput) maps to 0, i.e. the path
+    stops; callers divide by q only where q > 0 (``rr_scale``).
     """
-    return dr.minimum(dr.max(mi.unpolarized_spectrum(beta)) * dr.square(eta), RR_MAX_SURVIVAL)
+    q = dr.minimum(dr.max(mi.unpolarized_spectrum(beta)) * dr.square(eta), RR_MAX_SURVIVAL)
+    return dr.select(q > 0, q, 0.0)
+
+
+def finite_or_zero(value):
+    """``value`` where all its channels are finite, else 0 (a guard against 0 * inf)."""
+    return dr.select(dr.isfinite(dr.max(mi.unpolarized_spectrum(value))), value, 0.0)
+
+
+def rr_scale(q):
+    """1 / q for a surviving path; 0 where q = 0 (such a path never survives)."""
+    return dr.select(q > 0, dr.rcp(q), 0.0)
+
+
+# ---------------------------------------------------------------------------
+# What a scene contains, as far as the path loop is concerned
+# ---------------------------------------------------------------------------
+#: Mitsuba class name -> plugin name of the delta emitters (for messages).
+DELTA_EMITTER_PLUGINS = {"PointLight": "point", "SpotLight": "spot",
+                         "DirectionalEmitter": "directional", "Projector": "projector"}
+
+
+def emitter_kind(emitter) -> str:
+    """'delta' (point, spot, directional, projector: no ray can hit it), 'area'
+    (on a shape), 'environment' (at infinity, hit by escaping rays) or 'other'
+    (anything else: treated as both hittable and sampleable)."""
+    flags = int(emitter.flags())
+    if flags & int(mi.EmitterFlags.Delta):
+        return "delta"
+    if flags & int(mi.EmitterFlags.Surface):
+        return "area"
+    if flags & int(mi.EmitterFlags.Infinite):
+        return "environment"
+    return "other"
+
+
+def bsdf_has_smooth_component(shape) -> bool:
+    """Whether the shape's BSDF has a non-delta lobe (a vertex NEE can connect from).
+
+    Conservative: shapes whose BSDF cannot be inspected (instances of shape
+    groups) count as smooth, so no code is ever left out that they might need.
+    """
+    bsdf = shape.bsdf() if shape.class_name() != "Instance" else None
+    if bsdf is None:
+        return True
+    return bool(int(bsdf.flags()) & int(mi.BSDFFlags.Smooth))
+
+
+@dataclass(frozen=True)
+class KernelTraits:
+    """The few facts about a scene that decide which code the path loop compiles.
+
+    * ``hittable_emitters``: an area, environment or other non-delta emitter exists,
+      so a ray can find emission (else the *Direct emission* section is left out);
+    * ``emitters``: any emitter exists to sample;
+    * ``smooth_bsdf``: some BSDF has a smooth component, i.e. some vertex can use an
+      emitter sample (else *Emitter sampling* is left out: no shadow rays).
+    """
+    hittable_emitters: bool
+    emitters: bool
+    smooth_bsdf: bool
+
+    @classmethod
+    def of(cls, scene) -> "KernelTraits":
+        kinds = [emitter_kind(e) for e in scene.emitters()]
+        return cls(hittable_emitters=any(k != "delta" for k in kinds),
+                   emitters=bool(kinds),
+                   smooth_bsdf=any(bsdf_has_smooth_component(s) for s in scene.shapes()))
 
 
 class RayCounters:
@@ -154,13 +228,47 @@ class LabPathIntegrator(mi.SamplingIntegrator):
     #: Shadow rays per vertex (n_L in Veach's multi-sample estimator).
     emitter_samples = 1
 
+    #: Contract that lets the loop leave code out on scenes whose BSDFs are all
+    #: delta: emission reached by a camera ray or right after a delta bounce has
+    #: weight 1 (no other technique can produce that path). True for lab_naive,
+    #: lab_nee and lab_mis; a subclass that weights such hits otherwise sets False.
+    delta_hit_weight_is_one = True
+
+    def kernel_plan(self, scene) -> dict:
+        """Python-level switches of the path loop for this scene (see KernelTraits).
+
+        Each switch only leaves out code whose contribution is provably zero or
+        whose value is provably constant, so the estimator is unchanged:
+
+        * ``hit_emission`` off: no emitter can be hit (delta lights only, or none);
+        * ``sample_emitters`` off: the estimator does not sample emitters, or the
+          scene has no emitter, or no BSDF has a smooth component (NEE is only
+          done at smooth vertices, so it would never fire);
+        * ``unit_hit_weight``: every BSDF is delta, so every emitter hit follows a
+          camera ray or a delta bounce and has weight 1 (``delta_hit_weight_is_one``):
+          no emitter pdf lookup, no previous-vertex state;
+        * ``unit_sample_weight``: no emitter can be hit, so every emitter sample is
+          of a delta emitter, which BSDF sampling cannot produce: its weight is 1.
+        """
+        traits = KernelTraits.of(scene)
+        sample_emitters = self.samples_emitters and traits.emitters and traits.smooth_bsdf
+        return {"hit_emission": traits.hittable_emitters,
+                "sample_emitters": sample_emitters,
+                "unit_hit_weight": self.delta_hit_weight_is_one and not traits.smooth_bsdf,
+                "unit_sample_weight": not traits.hittable_emitters}
+
     # -- The path loop ------------------------------------------------------------
 
     @dr.syntax
     def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,
                medium: mi.Medium = None, active: mi.Bool = True):
         bsdf_ctx = mi.BSDFContext()
-        samples_emitters = self.samples_emitters
+        plan = self.kernel_plan(scene)            # decided once per trace, in Python
+        hit_emission = plan["hit_emission"]
+        samples_emitters = plan["sample_emitters"]
+        unit_hit_weight = plan["unit_hit_weight"]
+        unit_sample_weight = plan["unit_sample_weight"]
+        track_prev = hit_emission and not unit_hit_weight   # MIS needs the previous vertex
         n_L = self.emitter_samples
 
         # --------------------- Configure loop state ----------------------
@@ -180,7 +288,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         n_shadow = mi.UInt32(0)
         camera_lanes = active & dr.full(mi.Bool, True, dr.width(ray))  # `active` may arrive as a scalar
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
-        if dr.hint(self.hide_emitters, mode="scalar"):
+        if dr.hint(self.hide_emitters and hit_emission, mode="scalar"):
             # Mitsuba's meaning: camera rays pass through area emitters to what lies behind
             ray, pi = self.skip_directly_visible_emitters(scene, ray, pi, active)
 
@@ -188,12 +296,16 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
 
             # ----------------------- Direct emission -----------------------
-            ds = mi.DirectionSample3f(scene, si=si, ref=prev_it)
-            w_hit = self.emitter_hit_weight(scene, prev_it, ds, prev_bsdf_pdf, prev_bsdf_delta)
-            emission_on = active & (w_hit > 0)   # (a new array: `&=` on an alias would change `active`)
-            if dr.hint(self.hide_emitters, mode="scalar"):
-                emission_on = emission_on & (depth > 0)
-            L += beta * w_hit * ds.emitter.eval(si, emission_on)
+            if dr.hint(hit_emission, mode="scalar"):
+                ds = mi.DirectionSample3f(scene, si=si, ref=prev_it)
+                if dr.hint(unit_hit_weight, mode="scalar"):
+                    w_hit = mi.Float(1.0)
+                else:
+                    w_hit = self.emitter_hit_weight(scene, prev_it, ds, prev_bsdf_pdf, prev_bsdf_delta)
+                emission_on = active & (w_hit > 0)   # (a new array: `&=` on an alias would change `active`)
+                if dr.hint(self.hide_emitters, mode="scalar"):
+                    emission_on = emission_on & (depth > 0)
+                L += beta * w_hit * ds.emitter.eval(si, emission_on)   # beta is finite (checked below)
 
             active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
             bsdf = si.bsdf(ray)
@@ -216,21 +328,24 @@ class LabPathIntegrator(mi.SamplingIntegrator):
 
             # --------------- Emitter sampling contribution -----------------
             if dr.hint(samples_emitters, mode="scalar"):
-                L += self.emitter_contribution(beta, ds_em, em_weight, bsdf_val, bsdf_pdf, active_em)
+                L += self.emitter_contribution(beta, ds_em, em_weight, bsdf_val, bsdf_pdf, active_em,
+                                               unit_sample_weight)
                 for _ in range(n_L - 1):   # Veach's multi-sample estimator: n_L shadow rays
                     ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
                     bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, si.to_local(ds_em.d), active_em)
-                    L += self.emitter_contribution(beta, ds_em, em_weight, bsdf_val, bsdf_pdf, active_em)
+                    L += self.emitter_contribution(beta, ds_em, em_weight, bsdf_val, bsdf_pdf, active_em,
+                                                   unit_sample_weight)
 
             # ------------------- Update loop variables ---------------------
             ray = si.spawn_ray(si.to_world(bsdf_sample.wo))
             beta *= bsdf_weight
             eta *= bsdf_sample.eta
             valid_ray |= active & si.is_valid() & ~mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Null)
-            prev_it = dr.zeros(mi.Interaction3f)
-            prev_it.p, prev_it.n, prev_it.t, prev_it.time = si.p, si.n, si.t, si.time
-            prev_it.wavelengths = si.wavelengths
-            prev_bsdf_pdf = bsdf_sample.pdf
+            if dr.hint(track_prev, mode="scalar"):
+                prev_it = dr.zeros(mi.Interaction3f)
+                prev_it.p, prev_it.n, prev_it.t, prev_it.time = si.p, si.n, si.t, si.time
+                prev_it.wavelengths = si.wavelengths
+                prev_bsdf_pdf = bsdf_sample.pdf
             prev_bsdf_delta = mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Delta)
 
             # --------------------- Stopping criterion ----------------------
@@ -239,7 +354,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             active_next &= (beta_max != 0) & dr.isfinite(beta_max)
             q = russian_roulette_probability(beta, eta)
             rr_active = depth >= self.rr_depth
-            beta[rr_active] *= dr.rcp(q)
+            beta[rr_active] *= rr_scale(q)
             active_next &= ~rr_active | (sampler.next_1d() < q)
 
             pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
@@ -253,11 +368,20 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                 self.counters.add("shadow", n_shadow, camera_lanes)
         return dr.select(valid_ray, L, 0), valid_ray, []
 
-    def emitter_contribution(self, beta, ds, em_weight, bsdf_val, bsdf_pdf, active):
-        """beta * w_L * f * L_e G / (n_L p_L) for one emitter sample (em_weight = L_e G / p_L)."""
-        sampled = active & (ds.pdf != 0)
-        w_em = self.emitter_sample_weight(ds, bsdf_pdf) / self.emitter_samples
-        return dr.select(sampled, beta * w_em * bsdf_val * em_weight, 0)
+    def emitter_contribution(self, beta, ds, em_weight, bsdf_val, bsdf_pdf, active,
+                             unit_weight: bool = False):
+        """beta * w_L * f * L_e G / (n_L p_L) for one emitter sample (em_weight = L_e G / p_L).
+
+        ``unit_weight``: the scene's emitters are all delta, so w_L = 1 (see kernel_plan).
+        A sample with a zero, negative or NaN pdf, or a non-finite value (a degenerate
+        emitter, e.g. of zero area), contributes 0.
+        """
+        sampled = active & (ds.pdf > 0)
+        if unit_weight:
+            w_em = mi.Float(1.0 / self.emitter_samples)
+        else:
+            w_em = self.emitter_sample_weight(ds, bsdf_pdf) / self.emitter_samples
+        return dr.select(sampled, finite_or_zero(beta * w_em * bsdf_val * em_weight), 0)
 
     def skip_directly_visible_emitters(self, scene, ray, pi, active):
         """(ray, first intersection) with area emitters hit by camera rays skipped."""

@@ -151,6 +151,16 @@ def build_parser() -> argparse.ArgumentParser:
                                         "OUTDIR/results.jsonl and the stored images; renders nothing.")
     report.add_argument("folder", help="a sweep's output folder")
 
+    from . import check
+
+    check.add_arguments(sub.add_parser(
+        "check", help="render the stiff scenes with every applicable lab strategy against path",
+        description="Render every scene (default: scenes/stiff/*.xml) with every lab strategy that "
+                    "applies and with Mitsuba's path as the reference; report NaN/Inf/negative "
+                    "pixels, fireflies and z-scores of the means; write CSV + HTML. Exit status 1 "
+                    "when a strategy produces NaN, Inf or negative values or a mean off the "
+                    "reference where it claims to be unbiased."))
+
     theory = sub.add_parser("theory", help="reproduce the seed text's Problems 1-5",
                             description="Run the seed text's toy estimators (uniform MC, importance "
                                         "sampling, cosine sampling, MIS weights and MIS, Russian "
@@ -292,8 +302,14 @@ def project_root() -> str:
     return os.path.dirname(os.path.dirname(here))
 
 
+def cmd_check(args, out) -> int:
+    from . import check
+
+    return check.run(args, out)
+
+
 COMMANDS = {"render": cmd_render, "demo": cmd_demo, "sweep": cmd_sweep, "reference": cmd_reference,
-            "report": cmd_report, "theory": cmd_theory}
+            "report": cmd_report, "check": cmd_check, "theory": cmd_theory}
 
 
 def main(argv: list[str] | None = None, out=None) -> int:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 import re
+from dataclasses import dataclass
 
 import mitsuba as mi
 
@@ -51,3 +52,295 @@ def plugin_error_reason(text: str) -> str:
 def film_size(scene: mi.Scene, sensor: int = 0) -> tuple[int, int]:
     size = scene.sensors()[sensor].film().crop_size()
     return int(size[0]), int(size[1])
+
+
+# ---------------------------------------------------------------------------
+# SceneTraits: what a scene contains and needs
+# ---------------------------------------------------------------------------
+#: Emission factors in an emitter's parameters (``mi.traverse``): the emitted power is
+#: a product of these, so one that is zero everywhere makes the emitter dark.
+_EMISSION_FACTORS = ("radiance", "intensity", "irradiance", "texture")
+
+
+def _all_zero(value) -> bool:
+    try:
+        import numpy as np
+
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return array.size > 0 and bool(np.all(array == 0))
+
+
+def _emits_nothing(emitter) -> bool:
+    """True only when the emitter provably emits nothing: a zero emission factor
+    (radiance, intensity, irradiance, texture, scale, bitmap data) or, for an area
+    light, a shape of zero area. Unknown parametrisations count as emitting."""
+    shape = emitter.get_shape()
+    if shape is not None:
+        area = float(shape.surface_area()[0])
+        if not area > 0:
+            return True
+    params = mi.traverse(emitter)
+    for key in params.keys():
+        head, _, tail = key.partition(".")
+        factor = (head in _EMISSION_FACTORS and tail in ("value", "data")) or key in ("scale", "data")
+        if factor and _all_zero(params[key]):
+            return True
+    return False
+
+
+def _matrix(transform):
+    import numpy as np
+
+    m = np.array(transform.matrix, dtype=np.float64)
+    return m.reshape(4, 4) if m.size == 16 else m[..., 0].reshape(4, 4)
+
+
+def _far_clip_problems(scene, bbox_min, bbox_max) -> tuple[tuple[str, ...], float | None, float | None]:
+    """Messages for sensors whose clip range misses part of the scene's geometry."""
+    import itertools
+
+    import numpy as np
+
+    problems = []
+    far = near = None
+    if not all(np.isfinite(bbox_min + bbox_max)):
+        return (), None, None
+    corners = np.array(list(itertools.product(*zip(bbox_min, bbox_max))))
+    for index, sensor in enumerate(scene.sensors()):
+        if not hasattr(sensor, "far_clip"):
+            continue
+        far, near = float(sensor.far_clip()), float(sensor.near_clip())
+        origin = _matrix(sensor.world_transform())[:3, 3]
+        farthest = float(np.max(np.linalg.norm(corners - origin, axis=1)))
+        nearest = float(np.linalg.norm(origin - np.clip(origin, bbox_min, bbox_max)))
+        if farthest > far:
+            problems.append(f"sensor {index}: geometry reaches {farthest:.4g} from the camera, beyond "
+                            f"far_clip = {far:.4g}; camera rays silently miss what lies farther "
+                            f"(set the sensor's far_clip above {farthest:.4g})")
+        if nearest > 0 and near >= farthest:
+            problems.append(f"sensor {index}: all geometry is nearer than near_clip = {near:.4g}")
+    return tuple(problems), far, near
+
+
+@dataclass(frozen=True)
+class SceneTraits:
+    """What a scene contains, read from the loaded scene without rendering (cheap:
+    one pass over its shapes, emitters and sensors).
+
+    The integrators use the same facts (``plugins/integrators/common.KernelTraits``)
+    to leave out code the scene cannot use; the planner uses them to leave out
+    strategies that do not apply (``strategy_applicability``) and to run provably
+    identical ones once (``equivalent_strategies``).
+    """
+    area_emitters: int                 # emitters on shapes (rays can hit them)
+    environment_emitters: int          # emitters at infinity hit by escaping rays (constant, envmap)
+    delta_emitters: tuple[str, ...]    # plugin name of each delta emitter (point, spot, directional)
+    other_emitters: int                # emitters of no known kind (treated as hittable)
+    dark_emitters: tuple[str, ...]     # ids of emitters that emit nothing (zero radiance or area)
+    smooth_bsdf: bool                  # some BSDF has a smooth (non-delta) component
+    media: bool                        # a participating medium is attached to a shape or sensor
+    bbox_min: tuple[float, float, float]
+    bbox_max: tuple[float, float, float]
+    far_clip: float | None             # of the last perspective-like sensor (None: no such sensor)
+    near_clip: float | None
+    far_clip_problems: tuple[str, ...]
+
+    @staticmethod
+    def from_scene(scene: mi.Scene) -> "SceneTraits":
+        import numpy as np
+
+        from mitsuba_lab.plugins.integrators.common import (DELTA_EMITTER_PLUGINS,
+                                                            bsdf_has_smooth_component, emitter_kind)
+
+        kinds, delta, dark = [], [], []
+        for index, emitter in enumerate(scene.emitters()):
+            kind = emitter_kind(emitter)
+            kinds.append(kind)
+            if kind == "delta":
+                delta.append(DELTA_EMITTER_PLUGINS.get(emitter.class_name(), emitter.class_name()))
+            if _emits_nothing(emitter):
+                shape = emitter.get_shape()
+                dark.append((shape.id() if shape is not None else "") or emitter.id() or f"emitter {index}")
+        shapes = scene.shapes()
+        media = any(s.interior_medium() is not None or s.exterior_medium() is not None for s in shapes)
+        media = media or any(getattr(s, "get_medium", lambda: None)() is not None for s in scene.sensors())
+        bbox = scene.bbox()
+        lo = tuple(float(v) for v in np.array(bbox.min).ravel()) if shapes else (0.0, 0.0, 0.0)
+        hi = tuple(float(v) for v in np.array(bbox.max).ravel()) if shapes else (0.0, 0.0, 0.0)
+        problems, far, near = _far_clip_problems(scene, np.array(lo), np.array(hi))
+        return SceneTraits(area_emitters=kinds.count("area"),
+                           environment_emitters=kinds.count("environment"),
+                           delta_emitters=tuple(delta), other_emitters=kinds.count("other"),
+                           dark_emitters=tuple(dark),
+                           smooth_bsdf=any(bsdf_has_smooth_component(s) for s in shapes),
+                           media=media, bbox_min=lo, bbox_max=hi, far_clip=far, near_clip=near,
+                           far_clip_problems=problems)
+
+    # -- Derived facts ----------------------------------------------------------------
+    @property
+    def emitters(self) -> int:
+        return self.area_emitters + self.environment_emitters + len(self.delta_emitters) + self.other_emitters
+
+    @property
+    def emitter_kinds(self) -> frozenset[str]:
+        """Subset of {'area', 'delta', 'environment', 'other'}."""
+        present = {"area": self.area_emitters, "environment": self.environment_emitters,
+                   "delta": len(self.delta_emitters), "other": self.other_emitters}
+        return frozenset(kind for kind, count in present.items() if count)
+
+    @property
+    def hittable_emitters(self) -> bool:
+        """A ray can find emission (an area, environment or unknown emitter exists)."""
+        return self.area_emitters + self.environment_emitters + self.other_emitters > 0
+
+    @property
+    def all_bsdfs_delta(self) -> bool:
+        """Every BSDF is delta (mirror, glass, null): no vertex can use an emitter sample."""
+        return not self.smooth_bsdf
+
+    @property
+    def emits_light(self) -> bool:
+        """Some emitter emits (provably dark emitters do not count)."""
+        return self.emitters > len(self.dark_emitters)
+
+    @property
+    def extent(self) -> float:
+        """Length of the bounding box diagonal of the geometry (0 without shapes)."""
+        return float(sum((b - a) ** 2 for a, b in zip(self.bbox_min, self.bbox_max)) ** 0.5)
+
+    def warnings(self) -> list[str]:
+        """Problems a user should know about before trusting a render of this scene."""
+        notes = list(self.far_clip_problems)
+        for name in self.dark_emitters:
+            notes.append(f"emitter '{name}' emits nothing (zero radiance or zero area)")
+        if not self.emits_light:
+            notes.append("no emitter emits light: every image is black")
+        if self.media:
+            notes.append("the scene has participating media, which the lab integrators do not "
+                         "support (they ignore them): render it with Mitsuba's volpath instead")
+        return notes
+
+
+# ---------------------------------------------------------------------------
+# Strategies: which apply to a scene, and which are the same estimator on it
+# ---------------------------------------------------------------------------
+_SHARED_DEFAULTS = {"max_depth": -1, "rr_depth": 5, "hide_emitters": False}
+_MIS_DEFAULTS = {"heuristic": "power", "beta": 2.0, "emitter_samples": 1}
+#: Parameters that do not change the estimator (only what is counted).
+_NO_EFFECT = {"count_rays"}
+
+
+def strategy_applicability(traits: SceneTraits, integrator_type: str, params: dict) -> tuple[bool, str]:
+    """(True, '') when the strategy renders the scene correctly in expectation, else
+    (False, one-line reason). Integrators other than the lab's are always applicable
+    (their own limits are Mitsuba's business)."""
+    if integrator_type not in LAB_INTEGRATORS:
+        return True, ""
+    if traits.media:
+        return False, (f"{integrator_type} does not support participating media (the scene has a "
+                       f"medium): use Mitsuba's volpath")
+    if integrator_type == "lab_naive" and traits.delta_emitters and traits.smooth_bsdf:
+        # With only delta BSDFs no estimator can use a delta light: then naive is not worse.
+        kinds = ", ".join(dict.fromkeys(traits.delta_emitters))
+        if not traits.hittable_emitters:
+            return False, (f"lab_naive cannot reach delta lights ({kinds}): the scene has no other "
+                           f"emitter")
+        return False, f"lab_naive cannot reach delta lights ({kinds}): it would miss their light (biased)"
+    return True, ""
+
+
+def _estimator_key(traits: SceneTraits, integrator_type: str, params: dict):
+    """A key equal for two strategies only when they are provably the same estimator
+    on a scene with these traits (same expectation, same distribution of each pixel).
+
+    The argument, case by case (lab integrators; see plugins/integrators/common.py):
+
+    * max_depth 0, or no emitter emits: every pixel is exactly 0.
+    * max_depth 1: only emitters seen directly; no vertex samples anything, every
+      estimator returns the emission its camera ray hits, with weight 1.
+    * All BSDFs delta: NEE runs only at vertices with a smooth BSDF component, so
+      lab_nee and lab_mis never sample an emitter (any heuristic, any n_L), and every
+      emitter hit follows a camera ray or a delta bounce, where all three weight it 1.
+      So lab_naive, lab_nee and lab_mis are one estimator, *whatever the emitters*:
+      delta lights contribute nothing to any of them (nor to Mitsuba's path).
+    * No hittable emitter (delta lights only): BSDF-sampled rays find no emission, and
+      every emitter sample is of a delta light, whose MIS weight is 1 for every
+      heuristic. So lab_mis with n_L shadow rays is lab_nee when n_L = 1, and all
+      lab_mis heuristics with the same n_L are one estimator.
+    * lab_mis with power heuristic and beta = 1 is the balance heuristic; beta does
+      not enter balance, max or average.
+    Otherwise the parameters must match (count_rays is ignored: it changes nothing
+    but the counters). Integrators other than the lab's merge only when type and
+    parameters are identical.
+    """
+    if integrator_type not in LAB_INTEGRATORS:
+        return ("exact", integrator_type, tuple(sorted((k, repr(v)) for k, v in params.items())))
+    p = {**_SHARED_DEFAULTS, **{k: v for k, v in params.items() if k not in _NO_EFFECT}}
+    if integrator_type == "lab_mis":
+        p = {**_MIS_DEFAULTS, **p}
+    max_depth = int(p.pop("max_depth"))
+    rr_depth = int(p.pop("rr_depth"))
+    hide = bool(p.pop("hide_emitters")) and traits.hittable_emitters   # nothing to hide otherwise
+    heuristic, beta = str(p.pop("heuristic", "")), float(p.pop("beta", 2.0))
+    n_L = int(p.pop("emitter_samples", 1))
+    extras = tuple(sorted((k, repr(v)) for k, v in p.items()))          # unknown: must match
+    if max_depth == 0 or not traits.emits_light:
+        return ("black", extras)
+    if max_depth == 1:
+        return ("emitters seen directly", hide, extras)
+    shared = (max_depth, rr_depth, hide, extras)
+    if not traits.smooth_bsdf:
+        return ("BSDF sampling only (all BSDFs delta)", shared)
+    if integrator_type == "lab_naive":
+        return ("lab_naive", shared)
+    if integrator_type == "lab_nee":
+        n_L = 1
+    if integrator_type == "lab_nee" or not traits.hittable_emitters:
+        return ("NEE", n_L, shared)
+    if heuristic == "power" and beta == 1.0:
+        heuristic = "balance"
+    if heuristic != "power":
+        beta = None
+    return ("MIS", heuristic, beta, n_L, shared)
+
+
+_RANK = {"lab_naive": 0, "lab_nee": 1, "lab_mis": 2}
+
+
+def equivalent_strategies(traits: SceneTraits,
+                          strategies: dict[str, tuple[str, dict]]) -> dict[str, str]:
+    """Map every strategy name to the canonical name of its class of provably identical
+    estimators on this scene (itself when it has no twin).
+
+    The canonical member is the simplest (lab_naive, then lab_nee, then lab_mis;
+    ties by the order of ``strategies``). See ``_estimator_key`` for the argument.
+    """
+    classes: dict = {}
+    for order, (name, (kind, params)) in enumerate(strategies.items()):
+        key = _estimator_key(traits, kind, params or {})
+        classes.setdefault(key, []).append((_RANK.get(kind, 3), order, name))
+    canonical = {}
+    for members in classes.values():
+        best = min(members)[2]
+        for _, _, name in members:
+            canonical[name] = best
+    return {name: canonical[name] for name in strategies}
+
+
+def equivalence_reason(traits: SceneTraits, integrator_type: str, params: dict) -> str:
+    """The class of estimators a strategy falls in on this scene (see ``_estimator_key``),
+    e.g. "BSDF sampling only (all BSDFs delta)": the reason two strategies are merged."""
+    kind = str(_estimator_key(traits, integrator_type, params or {})[0])
+    return _REASONS.get(kind, f"same parameters ({kind})")
+
+
+_REASONS = {
+    "black": "every pixel is 0 (max_depth 0, or no emitter emits)",
+    "emitters seen directly": "max_depth 1: every strategy returns the emission its camera ray hits",
+    "BSDF sampling only (all BSDFs delta)": "all BSDFs are delta: no vertex can sample an emitter, so every "
+                                            "strategy is BSDF sampling with weight 1",
+    "NEE": "only delta emitters: BSDF-sampled rays never hit one and every MIS weight is 1, so MIS is NEE",
+    "MIS": "the power heuristic with beta = 1 is the balance heuristic",
+}

@@ -14,7 +14,7 @@ from .store import ResultStore
 
 def assess_scene(scene_spec, strategies):
     """Left-out strategies and aliases for one scene, from its traits (mitsuba_lab.scene)."""
-    from ..scene import SceneTraits, equivalent_strategies, strategy_applicability
+    from ..scene import SceneTraits, equivalence_reason, equivalent_strategies, strategy_applicability
     from ..scene_xml import load_scene_variant
 
     traits = SceneTraits.from_scene(load_scene_variant(scene_spec.path, scene_spec.resolution, None,
@@ -28,7 +28,7 @@ def assess_scene(scene_spec, strategies):
     aliases = {}
     for name, canonical in equivalent_strategies(traits, usable).items():
         if canonical != name:
-            aliases[name] = (canonical, "provably the same estimator on this scene (see mitsuba_lab.scene.equivalent_strategies)")
+            aliases[name] = (canonical, equivalence_reason(traits, *usable[name]))
     return left_out, aliases
 
 

@@ -1,0 +1,97 @@
+"""`mitsuba-lab check` (src/mitsuba_lab/check.py), driven through add_arguments / run."""
+import argparse
+import csv
+import io
+import os
+
+import numpy as np
+import pytest
+
+from mitsuba_lab import check
+from mitsuba_lab.errors import LabError
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+STIFF = os.path.join(ROOT, "scenes", "stiff")
+SMALL = ["--res", "16", "--spp", "16", "--ref-spp", "64", "--splits", "4", "--max-depth", "6"]
+
+
+def run_check(argv):
+    parser = argparse.ArgumentParser(prog="mitsuba-lab check")
+    check.add_arguments(parser)
+    out = io.StringIO()
+    status = check.run(parser.parse_args(argv), out)
+    return status, out.getvalue()
+
+
+def read_rows(prefix):
+    with open(f"{prefix}.csv", newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def test_passing_scenes_write_csv_and_html(tmp_path):
+    prefix = str(tmp_path / "report")
+    scenes = [os.path.join(STIFF, n) for n in ("delta_lights_only.xml", "all_specular.xml")]
+    status, text = run_check([*scenes, *SMALL, "-o", prefix])
+    assert status == 0, text
+    rows = read_rows(prefix)
+    by = {(r["scene"], r["strategy"]): r for r in rows}
+    naive = by[("delta_lights_only.xml", "lab_naive")]
+    assert naive["status"] == "skipped" and "cannot reach delta lights" in naive["note"]
+    assert by[("delta_lights_only.xml", "lab_mis_power")]["status"] == "same"
+    assert "the same estimator as lab_nee" in by[("delta_lights_only.xml", "lab_mis_power")]["note"]
+    for strategy in ("lab_nee", "lab_mis_power", "lab_mis_balance"):
+        row = by[("all_specular.xml", strategy)]
+        assert row["status"] == "same" and float(row["shadow_rays_per_pixel"]) == 0
+    ran = [r for r in rows if r["status"] == "ok"]
+    assert ran and all(float(r["finite_fraction"]) == 1 and int(r["negative_pixels"]) == 0 for r in ran)
+    assert float(by[("all_specular.xml", "lab_naive")]["camera_rays_per_pixel"]) == 16
+    html = open(f"{prefix}.html").read()
+    assert "<table>" in html and "firefly" in html.lower()
+    assert "lab_naive cannot reach delta lights" in text
+
+
+def test_an_unconverged_strategy_fails(tmp_path):
+    # BSDF sampling never hits a light of radius 5e-4: lab_naive's mean is 0 with no spread.
+    prefix = str(tmp_path / "report")
+    status, text = run_check([os.path.join(STIFF, "tiny_bright_light.xml"), *SMALL, "-o", prefix])
+    assert status == 1
+    rows = {r["strategy"]: r for r in read_rows(prefix)}
+    assert rows["lab_naive"]["status"].startswith("FAIL: mean off")
+    assert "no spread" in rows["lab_naive"]["note"]
+    assert rows["lab_nee"]["status"] == "ok"
+
+
+def test_scene_warnings(tmp_path):
+    prefix = str(tmp_path / "report")
+    status, text = run_check([os.path.join(STIFF, "scaled_1e4.xml"), *SMALL, "-D", "far_clip=1e4",
+                              "-o", prefix])
+    assert "beyond far_clip = 1e+04" in text
+    status, text = run_check([os.path.join(STIFF, "zero_emitters.xml"), *SMALL, "-o", prefix])
+    assert text.count("emits nothing") == 2
+
+
+def test_firefly_rule():
+    image = np.full((9, 9, 3), 0.1, dtype=np.float32)
+    image[4, 4] = 1.5          # 15 x the local median: a firefly at k = 10
+    image[1, 1] = 0.9          # 9 x: not one
+    assert check.firefly_count(image, 10.0, floor=1e-3) == 1
+    black = np.zeros((9, 9, 3), dtype=np.float32)
+    black[2, 2] = 0.005        # below k x floor
+    assert check.firefly_count(black, 10.0, floor=1e-3) == 0
+
+
+def test_z_score_limits():
+    assert check.z_score(np.array([1.0, 1.0]), np.array([1.0, 1.0])) == 0.0
+    assert check.z_score(np.array([0.0, 0.0]), np.array([1.0, 1.0])) == -np.inf
+    assert check.z_score(np.array([1.0, 3.0]), np.array([2.0, 2.0])) == 0.0
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["no/such/scene.xml"], "scene file not found: no/such/scene.xml"),
+    (["--spp", "10", "--splits", "4"], "--spp 10 is not a multiple of --splits 4"),
+    (["--splits", "1", "--spp", "4", "--ref-spp", "4"], "--splits must be >= 2"),
+    (["-o", "/no/such/folder/x"], "output folder does not exist"),
+])
+def test_bad_input_is_one_line_error(argv, message):
+    with pytest.raises(LabError, match=message.replace("(", r"\(")):
+        run_check(argv)
