@@ -258,3 +258,21 @@ def test_sweep_on_a_dask_cluster_survives_a_killed_worker(tmp_path):
     assert killed and len(keys) == len(set(keys)) == 16            # every render once, none lost
     assert all(r["finite"] and r["mse"] > 0 for r in runs)
     assert {r["host"] for r in runs} and all("pid" in r for r in runs)
+
+
+def test_plan_uses_scene_traits():
+    from mitsuba_lab.experiment.sweep import assess_scene
+
+    scenes = {name: {"path": os.path.join(ROOT, "scenes", "stiff", f"{name}.xml"), "resolution": 16}
+              for name in ("delta_lights_only", "all_specular")}
+    config = parse_config({"experiment": {"spp": [4]}, "scenes": scenes,
+                           "strategies": {"naive": {"type": "lab_naive"}, "nee": {"type": "lab_nee"},
+                                          "mis": {"type": "lab_mis"}}}, os.path.join(ROOT, "x.toml"))
+    plan = build_plan(config, assess_scene)
+    assert [(x["scene"], x["strategy"]) for x in plan.left_out] == [("delta_lights_only", "naive")]
+    assert "delta lights" in plan.left_out[0]["reason"]
+    aliases = {(a["scene"], a["strategy"]): a["same_as"] for a in plan.aliases}
+    assert aliases == {("delta_lights_only", "mis"): "nee", ("all_specular", "nee"): "naive",
+                       ("all_specular", "mis"): "naive"}
+    assert sorted(p.id for p in plan.points) == ["all_specular/naive/independent/spp4",
+                                                 "delta_lights_only/nee/independent/spp4"]
