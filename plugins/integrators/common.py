@@ -189,9 +189,10 @@ class LabPathIntegrator(mi.SamplingIntegrator):
     max_depth     int    Longest path, in segments: 1 = only emitters seen
                          directly, 2 = direct lighting, -1 = unbounded (Default: -1)
     rr_depth      int    Depth at which Russian roulette starts (Default: 5)
-    hide_emitters bool   Emitters seen directly by the camera are black; the
-                         environment behind the scene counts as invalid
-                         (alpha 0). (Default: false)
+    hide_emitters bool   Mitsuba's meaning: camera rays pass through area
+                         emitters to what lies behind them, and where they
+                         see only the environment the pixel is invalid
+                         (black, alpha 0). (Default: false)
     count_rays    bool   Count camera, extension and shadow rays; read them with
                          ``ray_counts()``. Costs one atomic add per sample.
                          (Default: true)

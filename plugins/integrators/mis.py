@@ -32,7 +32,8 @@ class LabMISIntegrator(LabPathIntegrator):
                            n_L copies of the emitter-sampling code. (Default: 1)
     max_depth       int    Longest path in segments, -1 = unbounded (Default: -1)
     rr_depth        int    Depth at which Russian roulette starts (Default: 5)
-    hide_emitters   bool   Emitters seen directly are black (Default: false)
+    hide_emitters   bool   Camera rays pass through area emitters; the bare
+                           environment is invalid (Default: false)
     count_rays      bool   Count camera / extension / shadow rays (Default: true)
     =============== ====== =====================================================
 
