@@ -17,6 +17,7 @@ PLUGIN_MODULES = (
     "mitsuba_lab.plugins.integrators.naive",
     "mitsuba_lab.plugins.integrators.nee",
     "mitsuba_lab.plugins.integrators.mis",
+    "mitsuba_lab.plugins.integrators.photon.integrator",
     "mitsuba_lab.plugins.samplers.independent",
     "mitsuba_lab.plugins.samplers.stratified",
     "mitsuba_lab.plugins.samplers.halton",
@@ -27,6 +28,7 @@ PLUGIN_MODULES = (
 #: Modules that plugin classes derive from; re-run before the plugins on a switch.
 HELPER_MODULES = (
     "mitsuba_lab.plugins.integrators.common",
+    "mitsuba_lab.plugins.integrators.photon.gather",
     "mitsuba_lab.plugins.samplers.common",
 )
 

@@ -280,3 +280,51 @@ def test_halton_permute_digits_uniform_and_unbiased():
                                    randomization="permute_digits")).mean() for k in range(24)])
     z = (est.mean() - EXACT) / (est.std(ddof=1) / np.sqrt(len(est)))
     assert abs(z) < 4.0, z
+
+
+# ---------------------------------------------------------------------------
+# The fast paths: float digit extraction, table-free digit permutations
+# ---------------------------------------------------------------------------
+
+def test_halton_float_digits_are_exact():
+    """floor((n + 1/2) / b) in float32 equals n div b for every n < 2^21 (MAX_SPP) and prime."""
+    from mitsuba_lab.plugins.samplers.halton import MAX_SPP, PRIMES
+    n = dr.arange(mi.UInt32, MAX_SPP)
+    ref = np.arange(MAX_SPP)
+    for b in PRIMES:
+        base = mi.Float(dr.opaque(mi.UInt32, b))
+        inv = dr.rcp(base)
+        q = dr.floor(dr.fma(mi.Float(n), inv, 0.5 * inv))
+        assert np.array_equal(np.array(mi.UInt32(q)), ref // b), b
+
+
+def test_halton_is_stratified_per_base():
+    """Per pixel, b^k samples of the base-b dimension fall one per interval of length b^-k."""
+    for spp, dim, base in ((16, 0, 2), (9, 1, 3), (25, 2, 5)):
+        for rnd in ("owen", "permute_digits"):
+            pts = draw("lab_halton", spp, 32, seed=5, pattern="111", randomization=rnd)[..., dim]
+            assert all(len(set(np.floor(p * base ** round(np.log(spp) / np.log(base))))) == spp for p in pts)
+
+
+def test_zsobol_digit_permutations_cover_s4():
+    from mitsuba_lab.plugins.samplers.zsobol import _gf4_permute
+    h = dr.arange(mi.UInt32, 64)
+    perms = {tuple(np.array(_gf4_permute(mi.UInt32(d), h))[i] for d in range(4)) for i in range(64)}
+    assert len(perms) == 24
+
+
+@pytest.mark.parametrize("spp", (1, 2, 4, 8))
+def test_zsobol_index_is_a_block_preserving_bijection(spp):
+    """For every dimension the permuted index of the 8x8 x spp lanes is a permutation of
+    0..64 spp - 1 that maps each aligned Morton block (a block of base-4 digits: the
+    levels are at bit counts of the parity of n_bits) onto an aligned block."""
+    s = make("lab_zsobol", spp, width=8)
+    s.seed(3, 64 * spp)
+    m = np.array(s.morton_index)
+    for dim in (0, 2, 7):
+        idx = np.array(s._sobol_index(mi.UInt32(dim)))
+        assert np.array_equal(np.sort(idx), np.arange(64 * spp))
+        for bits in range(s.n_bits % 2 or 2, s.n_bits, 2):
+            blocks = {}
+            for a, b in zip(m >> bits, idx >> bits):
+                assert blocks.setdefault(a, b) == b

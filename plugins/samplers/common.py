@@ -59,6 +59,18 @@ def hash3(a, b, c):
     return hash2(hash2(a, b), c)
 
 
+def dim_key(seed, dim, pass_index):
+    """One hash per (seed, dimension, pass) in a single mix32 round (hash3 takes four).
+
+    ``w = dim | pass << 24`` is injective for dimensions < 2^24 and passes < 2^8,
+    and ``seed + w * odd`` followed by the bijective mix32 keeps distinct
+    (dimension, pass) of one seed distinct; ``seed`` must already be a hash
+    (``pixel_seeds``, or mix32 of the render seed).
+    """
+    word = mi.UInt32(dim) | (mi.UInt32(pass_index) << 24)
+    return mix32(mi.UInt32(seed) + word * 0x9E3779B1)
+
+
 def to_unit_float(x):
     """uint32 -> float32 in [0, 1): the top 24 bits, so the result is never 1."""
     return mi.Float(mi.UInt32(x) >> 8) * (2.0 ** -24)
@@ -74,17 +86,27 @@ def sobol_02(index, n_bits: int):
     Dimension 0 is the van der Corput sequence (bit reversal of ``index``);
     dimension 1 multiplies the index bits by the upper-triangular Pascal matrix
     mod 2 (direction numbers v_0 = 2^31, v_k = v_{k-1} ^ (v_{k-1} >> 1)).
+    By Lucas' theorem C(k, j) is odd iff the bits of j are a subset of those of
+    k, so bit j of the product is the xor of the index bits k that are
+    supersets of j: a subset-sum (zeta) transform over the bit positions, done
+    in ceil(log2 n_bits) shift-mask-xor steps instead of one step per bit.
     Only the ``n_bits`` low bits of ``index`` are read (the caller guarantees
-    ``index < 2^n_bits``), so the loop is unrolled ``n_bits`` times.
+    ``index < 2^n_bits``).
     """
     index = mi.UInt32(index)
     x = dr.brev(index)
-    y = mi.UInt32(0)
-    v = 1 << 31
-    for k in range(n_bits):
-        y ^= dr.select(((index >> k) & 1) != 0, mi.UInt32(v), mi.UInt32(0))
-        v ^= v >> 1
-    return x, y
+    if n_bits <= 0:
+        return x, mi.UInt32(0)
+    z = index
+    for b, mask in enumerate(_ZETA_MASKS):
+        if (1 << b) >= n_bits:
+            break
+        z ^= (z >> (1 << b)) & mask
+    return x, dr.brev(z)
+
+
+#: Bit positions j whose bit b is 0, for b = 0..4 (the zeta transform's steps).
+_ZETA_MASKS = (0x55555555, 0x33333333, 0x0F0F0F0F, 0x00FF00FF, 0x0000FFFF)
 
 
 def owen_scramble_2(v, seed):
@@ -97,13 +119,34 @@ def owen_scramble_2(v, seed):
     *more significant* input bits only: a nested scramble. It keeps the
     (t,m,s)-net structure and makes each point uniform on [0, 1).
     """
-    x = dr.brev(mi.UInt32(v))
-    x += mi.UInt32(seed)
+    return _owen_reversed(dr.brev(mi.UInt32(v)), seed)
+
+
+def _owen_reversed(r, seed):
+    """``owen_scramble_2`` of ``brev(r)``, given ``r`` itself (one bit reversal fewer)."""
+    x = mi.UInt32(r) + mi.UInt32(seed)
     x ^= x * 0x6C50B47C
     x ^= x * 0xB82F1E52
     x ^= x * 0xC7AFE638
     x ^= x * 0x8D22F6E6
     return dr.brev(x)
+
+
+def sobol_02_owen(index, n_bits: int, seed_x, seed_y=None):
+    """Owen-scrambled (0,2)-sequence point(s) at ``index``: equal to
+    ``owen_scramble_2`` of each ``sobol_02`` coordinate, with two bit reversals
+    instead of six (the x coordinate is brev(index), and both coordinates are
+    reversed again inside the scramble). ``seed_y=None``: x only (a 1D request)."""
+    index = mi.UInt32(index)
+    x = _owen_reversed(index, seed_x)
+    if seed_y is None:
+        return x, None
+    z = index
+    for b, mask in enumerate(_ZETA_MASKS):
+        if (1 << b) >= n_bits:
+            break
+        z ^= (z >> (1 << b)) & mask
+    return x, _owen_reversed(z, seed_y)
 
 
 def padded_index(sample_index, n_samples: int, seed):
@@ -160,7 +203,9 @@ class LabSampler(mi.Sampler):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        self._props = props
+        # A copy: the Properties passed to the constructor die with mi.load_dict, and
+        # clone() builds a twin from them later (a stored reference dangles).
+        self._props = mi.Properties(props)
         spp = int(props.get("sample_count", 4))
         if spp < 1:
             raise ValueError(f"{self.plugin_name}: parameter 'sample_count' must be a positive integer, got {spp}")

@@ -5,8 +5,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.samplers.common import (
-    ONE_MINUS_EPS, SALT_JITTER, LabSampler, check_choice, hash2, hash3, log2_ceil,
-    mix32, pixel_seeds, to_unit_float)
+    ONE_MINUS_EPS, LabSampler, check_choice, dim_key, mix32, pixel_seeds, to_unit_float)
 
 RANDOMIZATIONS = ("permute_digits", "owen")
 
@@ -22,6 +21,18 @@ def first_primes(n: int) -> list[int]:
 
 #: Bases of the supported dimensions; dimension d uses PRIMES[d mod 64].
 PRIMES = first_primes(64)
+#: Largest sample count: digits are extracted in float32 as floor((n + 1/2) / b),
+#: exact for every n < 2^21 and b <= 311 (checked exhaustively in the tests).
+MAX_SPP = 1 << 21
+
+
+def n_digits(spp: int, base: int) -> int:
+    """Base-``base`` digits of the largest sample index spp - 1 (0 when spp == 1)."""
+    k, reach = 0, 1
+    while reach < spp:
+        reach *= base
+        k += 1
+    return k
 
 
 class LabHaltonSampler(LabSampler):
@@ -39,21 +50,31 @@ class LabHaltonSampler(LabSampler):
       all b! permutations in which each digit's image is uniform;
     * ``owen``: the same maps, but (a_k, c_k) also hash the less significant
       digits of i (the prefix of the radical inverse), a nested (Owen 1995)
-      scramble in base b.
+      scramble in base b: the hash of digit k is chained, h_{k+1} =
+      mix(h_k xor d_k), h_0 = hash(pixel, dimension).
 
     =============== ====== =====================================================
-    sample_count    int    Samples per pixel, >= 1 (Default: 4)
+    sample_count    int    Samples per pixel, 1 <= spp <= 2^21 (Default: 4)
     randomization   string ``permute_digits`` | ``owen`` (Default: ``owen``)
     seed            int    Base seed, added to the render seed (Default: 0)
     =============== ====== =====================================================
 
-    Digits past the ceil(log2 spp) that the sample index can fill are
-    replaced by a uniform offset below the last digit (per pixel and
-    dimension for ``permute_digits``, per sample for ``owen``), which is what
-    permuting infinitely many zero digits amounts to. Each pixel uses the
-    first spp points of the sequence, so any sample count is fine. The base
-    of a dimension is looked up at run time (the dimension index is a loop
-    variable), so the kernel does integer divisions by a variable base.
+    Only the K_b = ceil(log_b spp) digits the sample indices 0..spp-1 can
+    fill are permuted (one for every base >= spp); the digits past them are
+    replaced by a uniform offset below digit K_b (per pixel and dimension for
+    ``permute_digits``, per sample for ``owen``), which is what permuting
+    infinitely many zero digits amounts to. Each pixel uses the first spp
+    points of the sequence, so any sample count is fine.
+
+    Cost: the dimension index is a loop variable of the integrator, so the
+    base and K_b come from one gather in a 64-entry table; the first digit is
+    unrolled and the rest run in one symbolic loop shared by both coordinates
+    of a 2D request. There is no integer division in the kernel: digits and
+    ``(a d + c) mod b`` are float32 ``floor((n + 1/2) / b)`` on integers below
+    2^21 (exact); ``c = floor(b (h >> 8) / 2^24)`` (uniform up to 2^-24, the
+    float resolution), ``a`` from the top 16 bits of ``h`` times an odd constant. A uniformly random affine map over GF(b) is sharply 2-transitive
+    (a pair of distinct digits goes to a uniform pair of distinct digits), which
+    is all that Owen's variance analysis asks of the nested permutations.
 
     .. code-block:: python
 
@@ -66,52 +87,91 @@ class LabHaltonSampler(LabSampler):
         super().__init__(props)
         self.randomization = check_choice(self.plugin_name, "randomization",
                                           str(props.get("randomization", "owen")), RANDOMIZATIONS)
+        self._check_spp(self.spp)
         self.pixel_seed = mi.UInt32(0)
         self.sample_index = mi.UInt32(0)
-        self.primes = mi.UInt32(PRIMES)
-        self.n_digits = 1
+        self.base_table = mi.UInt32(0)
+
+    def _check_spp(self, spp: int):
+        if spp > MAX_SPP:
+            raise ValueError(f"{self.plugin_name}: parameter 'sample_count' must be <= {MAX_SPP}, got {spp}")
 
     def _seed_state(self, seed_value, wavefront_size, spp):
+        self._check_spp(spp)
         pixel, sample = self.wavefront_layout(wavefront_size, spp)
         self.pixel_seed = pixel_seeds(seed_value, pixel)
         self.sample_index = sample
-        self.primes = mi.UInt32(PRIMES)
-        self.n_digits = max(1, log2_ceil(spp))
+        # base | K_b << 16: one gather gives both (K_b <= 32, base <= 311).
+        self.base_table = mi.UInt32([b | n_digits(spp, b) << 16 for b in PRIMES])
 
-    def _radical_inverse(self, dim):
-        """Randomised radical inverse of the sample index for dimension ``dim``."""
+    def _radical_inverses(self, dims):
+        """Randomised radical inverses of the sample index for the dimensions ``dims``.
+
+        The coordinates of one request share one digit loop of max K_b trips.
+        Permuting zero digits past a coordinate's own K_b is harmless: it is
+        the same nested scramble carried one digit further before the
+        uniform tail, so no coordinate needs a mask.
+        """
         owen = self.randomization == "owen"
-        key = hash3(self.pixel_seed, dim, self.pass_index)
-        # max(., 2): lanes past the end of a packet gather 0, and an integer
-        # division by 0 in such a lane raises SIGFPE on the LLVM backend.
-        base = dr.maximum(dr.gather(mi.UInt32, self.primes, dim % len(PRIMES)), 2)
-        inv_base = dr.rcp(mi.Float(base))
-        rest = mi.UInt32(self.sample_index)
-        prefix = mi.UInt32(0)   # i mod b^k: the digits already placed (owen only)
-        scale = mi.UInt32(1)
-        value = mi.Float(0)
-        weight = mi.Float(inv_base)
-        for k in range(self.n_digits):
-            digit = rest % base
-            rest = rest // base
-            digit_key = key ^ ((0x9E3779B9 * (k + 1)) & 0xFFFFFFFF)
-            h = hash2(digit_key, prefix) if owen else mix32(digit_key)
-            a = 1 + (h & 0xFFFF) % (base - 1)
-            c = (h >> 16) % base
-            value = dr.fma(mi.Float((a * digit + c) % base), weight, value)
-            weight *= inv_base
-            if owen:
-                prefix += digit * scale
-                scale *= base
-        tail_key = hash3(key, SALT_JITTER, self.sample_index) if owen else hash2(key, SALT_JITTER)
-        value = dr.fma(to_unit_float(tail_key), weight * mi.Float(base), value)
-        return dr.minimum(value, ONE_MINUS_EPS)
+        coords = []
+        for dim in dims:
+            slot = mi.UInt32(dim) & (len(PRIMES) - 1)
+            packed = dr.gather(mi.UInt32, self.base_table, slot)
+            # max(., 2): lanes past the end of a packet gather 0.
+            base = mi.Float(dr.maximum(packed & 0xFFFF, 2))
+            coords.append((base, dr.rcp(base), packed >> 16))
+
+        def digit_step(c, rest, h, value, scale):
+            """Digit k of ``rest`` permuted by d -> (a d + c) mod b; (a, c) from the hash h
+            of the prefix (owen) or of the level (permute_digits). Float arithmetic on
+            integers < 2^24 (exact); floor((n + 1/2) / b) cannot round across an
+            integer for n < 2^21, b <= 311 (the margin 1/(2b) beats the rounding)."""
+            base, inv_base, _ = coords[c]
+            q = dr.floor(dr.fma(rest, inv_base, 0.5 * inv_base))
+            digit = dr.fma(-q, base, rest)
+            a = 1.0 + dr.floor(mi.Float((h * 0x9E3779B1) >> 16) * ((base - 1.0) * 2.0 ** -16))
+            c_shift = dr.minimum(dr.floor(mi.Float(h >> 8) * (base * 2.0 ** -24)), base - 1.0)
+            t = dr.fma(a, digit, c_shift)
+            permuted = dr.fma(-dr.floor(dr.fma(t, inv_base, 0.5 * inv_base)), base, t)
+            scale = scale * inv_base
+            value = dr.fma(permuted, scale, value)
+            h = mix32(h ^ mi.UInt32(digit)) if owen else mix32(h + 0x9E3779B9)
+            return q, h, value, scale
+
+        state = []
+        for c, dim in enumerate(dims):
+            st = (mi.Float(self.sample_index), dim_key(self.pixel_seed, dim, self.pass_index),
+                  mi.Float(0), mi.Float(1))
+            state.append(digit_step(c, *st) if self.spp > 1 else st)   # K_b >= 1 once spp >= 2
+
+        if self.spp > 2:   # K_b > 1 happens for base 2 at spp >= 3 only
+            trips = coords[0][2]
+            for co in coords[1:]:
+                trips = dr.maximum(trips, co[2])
+
+            def body(k, *flat):
+                out = []
+                for c in range(len(dims)):
+                    out += digit_step(c, *flat[4 * c: 4 * c + 4])
+                return (k + 1, *out)
+
+            flat = [v for st in state for v in st]
+            out = dr.while_loop((mi.UInt32(1), *flat), lambda k, *_: k < trips, body,
+                                label="lab_halton_digits")
+            state = [out[1 + 4 * c: 5 + 4 * c] for c in range(len(dims))]
+
+        values = []
+        for _, h, value, scale in state:
+            # h has been mixed after the last digit and not used since: a fresh
+            # hash of (pixel, dimension[, index]) for the uniform tail.
+            values.append(dr.minimum(dr.fma(to_unit_float(h), scale, value), ONE_MINUS_EPS))
+        return values
 
     def _sample_1d(self, dim):
-        return self._radical_inverse(dim)
+        return self._radical_inverses([dim])[0]
 
     def _sample_2d(self, dim):
-        return mi.Point2f(self._radical_inverse(dim), self._radical_inverse(dim + 1))
+        return mi.Point2f(*self._radical_inverses([dim, dim + 1]))
 
 
 mi.register_sampler("lab_halton", lambda props: LabHaltonSampler(props))

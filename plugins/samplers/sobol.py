@@ -4,8 +4,8 @@ from __future__ import annotations
 import mitsuba as mi
 
 from mitsuba_lab.plugins.samplers.common import (
-    SALT_PERMUTE, SALT_X, SALT_Y, LabSampler, hash3, hash2, log2_ceil, owen_scramble_2,
-    padded_index, pixel_seeds, sobol_02, to_unit_float)
+    SALT_PERMUTE, SALT_X, SALT_Y, LabSampler, hash3, hash2, log2_ceil,
+    padded_index, pixel_seeds, sobol_02_owen, to_unit_float)
 
 
 class LabSobolSampler(LabSampler):
@@ -59,11 +59,8 @@ class LabSobolSampler(LabSampler):
     def _scrambled(self, dim, two_d: bool):
         key = hash3(self.pixel_seed, dim, self.pass_index)
         index = padded_index(self.sample_index, self.spp, hash2(key, SALT_PERMUTE))
-        x, y = sobol_02(index, self.n_bits if two_d else 0)
-        x = owen_scramble_2(x, hash2(key, SALT_X))
-        if not two_d:
-            return x, None
-        return x, owen_scramble_2(y, hash2(key, SALT_Y))
+        return sobol_02_owen(index, self.n_bits, hash2(key, SALT_X),
+                             hash2(key, SALT_Y) if two_d else None)
 
     def _sample_1d(self, dim):
         return to_unit_float(self._scrambled(dim, False)[0])

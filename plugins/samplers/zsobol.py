@@ -1,17 +1,28 @@
 """``lab_zsobol``: one global Sobol sequence in Morton order (blue-noise error)."""
 from __future__ import annotations
 
-import itertools
-
 import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.samplers.common import (
-    SALT_X, SALT_Y, LabSampler, check_int, hash2, hash3, isqrt_exact, log2_ceil, mix32,
-    morton_2d, owen_scramble_2, sobol_02, to_unit_float)
+    SALT_X, SALT_Y, LabSampler, check_int, dim_key, isqrt_exact, log2_ceil, mix32,
+    morton_2d, sobol_02_owen, to_unit_float)
 
-#: The 24 permutations of the base-4 digits {0,1,2,3}, each packed as 4 x 2 bits.
-DIGIT_PERMUTATIONS = [sum(p[d] << (2 * d) for d in range(4)) for p in itertools.permutations(range(4))]
+#: Multiplication in GF(4) = {0, 1, a, a^2 = a + 1} coded 0..3: entry (x, y) at bits 2 (4x + y).
+GF4_MUL = [[0, 0, 0, 0], [0, 1, 2, 3], [0, 2, 3, 1], [0, 3, 1, 2]]
+GF4_MUL_BITS = sum(GF4_MUL[x][y] << (2 * (4 * x + y)) for x in range(4) for y in range(4))
+
+
+def _gf4_permute(digit, h):
+    """Apply the permutation coded by the 6 low bits of ``h`` to a base-4 digit.
+
+    Bits 0-1: r, bit 2: f (Frobenius x -> x^2, which swaps 2 and 3), bits 3-5:
+    a = 1 + (3 v) >> 3 in {1, 2, 3} (weights 3:3:2). Result a * digit^(2^f) xor r.
+    """
+    d = digit ^ ((digit >> 1) & (h >> 2) & 1)
+    a = 1 + ((((h >> 3) & 7) * 3) >> 3)
+    prod = (mi.UInt32(GF4_MUL_BITS) >> (2 * (4 * a + d))) & 3
+    return prod ^ (h & 3)
 
 
 class LabZSobolSampler(LabSampler):
@@ -22,10 +33,11 @@ class LabZSobolSampler(LabSampler):
     default ``ZSobolSampler``). The whole image shares one Sobol sequence:
     sample s of pixel (x, y) takes index ``morton(x, y) * 2^m + s`` with
     2^m >= spp. The base-4 digits of that index are then randomly permuted,
-    digit by digit, with a permutation picked from the 24 by a hash of the
-    more significant digits, the dimension and the seed; the point is the
-    (0,2)-sequence at the permuted index with Owen scrambling by hashing
-    (Burley 2020) seeded by (seed, dimension, axis). Each pixel thus gets a
+    digit by digit, with one of the 24 permutations of {0,1,2,3} chosen by a
+    hash of the more significant digits, the level, the dimension and the
+    seed (one mix32 per two digits, no table: see ``_sobol_index``); the
+    point is the (0,2)-sequence at the permuted index with Owen scrambling by
+    hashing (Burley 2020) seeded by (seed, dimension, axis). Each pixel thus gets a
     (0,m,2)-net, and every aligned 2^j x 2^j block of pixels a larger net:
     neighbouring pixels' errors are negatively correlated, so the error image
     is blue noise at unchanged per-pixel variance.
@@ -58,7 +70,6 @@ class LabZSobolSampler(LabSampler):
         self.width = check_int(self.plugin_name, "width", props.get("width", 0), 0)
         self.morton_index = mi.UInt32(0)
         self.seed_key = mi.UInt32(0)
-        self.digit_perms = mi.UInt32(DIGIT_PERMUTATIONS)
         self.n_bits = 0
 
     def _seed_state(self, seed_value, wavefront_size, spp):
@@ -78,30 +89,46 @@ class LabZSobolSampler(LabSampler):
         pixel, sample = lane // spp, lane % spp
         self.morton_index = (morton_2d(pixel % width, pixel // width, res_bits) << log2_spp) | sample
         self.seed_key = mix32(seed_value)
-        self.digit_perms = mi.UInt32(DIGIT_PERMUTATIONS)
 
     def _sobol_index(self, dim):
-        """Random base-4 digit permutations of the Morton index (pbrt-v4's scheme)."""
+        """Nested random permutations of the base-4 digits of the Morton index.
+
+        pbrt-v4's scheme (digit j is permuted by a permutation of {0,1,2,3}
+        chosen by a hash of the digits above it, the dimension and the seed),
+        with two savings: one mix32 serves two digits (6 bits for the upper
+        digit, and for the lower one 6 bits picked by the upper digit's
+        value, so it still depends on every digit above it), and the
+        permutation is the affine map d -> a * d^(2^f) + r over GF(4),
+        a in {1,2,3}, f in {0,1}, r in {0..3} (AGammaL(1,4), all 24
+        permutations), evaluated with a 32-bit multiplication table instead
+        of a gather. The hash input includes the level, so equal higher
+        digits at different levels draw different permutations.
+        """
         m = self.morton_index
         salt = self.seed_key ^ (mi.UInt32(dim) * 0x55555555) ^ (self.pass_index * 0x2545F491)
-        index = mi.UInt32(0)
         odd = self.n_bits % 2 == 1
-        for j in range(self.n_bits // 2):
-            shift = 2 * j + (1 if odd else 0)
-            digit = (m >> shift) & 3
-            higher = m >> (shift + 2)
-            p = (mix32(higher ^ salt) >> 24) % 24
-            digit = (dr.gather(mi.UInt32, self.digit_perms, p) >> (2 * digit)) & 3
-            index |= digit << shift
-        if odd:
-            index |= (m & 1) ^ (mix32((m >> 1) ^ salt) & 1)
+        shifts = [2 * j + (1 if odd else 0) for j in reversed(range(self.n_bits // 2))]   # top digit first
+        index = mi.UInt32(0)
+        for g in range(0, len(shifts), 2):
+            top = shifts[g]
+            h = mix32((m >> (top + 2)) ^ (salt + ((0x9E3779B9 * (g + 1)) & 0xFFFFFFFF)))
+            d_top = (m >> top) & 3
+            index |= _gf4_permute(d_top, h) << top
+            if g + 1 < len(shifts):
+                low = shifts[g + 1]
+                index |= _gf4_permute((m >> low) & 3, h >> (6 + 6 * d_top)) << low
+            elif odd:
+                # the odd lowest bit: flipped by a bit chosen by the digit above it
+                index |= (m & 1) ^ ((h >> (6 + d_top)) & 1)
+        if odd and len(shifts) % 2 == 0:
+            h = mix32((m >> 1) ^ (salt + 0x7F4A7C15))
+            index |= (m & 1) ^ (h & 1)
         return index
 
     def _scrambled(self, dim, two_d: bool):
-        x, y = sobol_02(self._sobol_index(dim), self.n_bits if two_d else 0)
-        key = hash3(self.seed_key, dim, self.pass_index)
-        x = owen_scramble_2(x, hash2(key, SALT_X))
-        return x, (owen_scramble_2(y, hash2(key, SALT_Y)) if two_d else None)
+        key = dim_key(self.seed_key, dim, self.pass_index)
+        return sobol_02_owen(self._sobol_index(dim), self.n_bits, mix32(key ^ SALT_X),
+                             mix32(key ^ SALT_Y) if two_d else None)
 
     def _sample_1d(self, dim):
         return to_unit_float(self._scrambled(dim, False)[0])

@@ -161,6 +161,15 @@ def build_parser() -> argparse.ArgumentParser:
                     "when a strategy produces NaN, Inf or negative values or a mean off the "
                     "reference where it claims to be unbiased."))
 
+    from . import inverse
+
+    inverse.add_arguments(sub.add_parser(
+        "invert", help="prb inverse-rendering demos and gradient variance against time",
+        description="Run an inverse-rendering config (experiments/inverse_*.toml): optimise the chosen "
+                    "scene parameters with Mitsuba's prb and Adam from a target rendered with known "
+                    "values, and measure the gradient's variance against time per sampler and spp. "
+                    "Writes CSV files, plots, images and a report to OUTDIR."))
+
     theory = sub.add_parser("theory", help="reproduce the seed text's Problems 1-5",
                             description="Run the seed text's toy estimators (uniform MC, importance "
                                         "sampling, cosine sampling, MIS weights and MIS, Russian "
@@ -232,6 +241,9 @@ def cmd_render(args, out) -> int:
     write_outputs(output, image, stats, args.integrator, params, args.scene, versions(),
                   png=not args.no_png)
     print(format_stats(args.integrator, stats), file=out)
+    if hasattr(integrator, "photon_stats"):
+        print("photons: " + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+                                      for k, v in integrator.photon_stats().items()), file=out)
     print(f"wrote {output}" + ("" if args.no_png else f" and {png_path(output)}"), file=out)
     return 0
 
@@ -302,6 +314,12 @@ def project_root() -> str:
     return os.path.dirname(os.path.dirname(here))
 
 
+def cmd_invert(args, out) -> int:
+    from . import inverse
+
+    return inverse.run(args, out)
+
+
 def cmd_check(args, out) -> int:
     from . import check
 
@@ -309,7 +327,7 @@ def cmd_check(args, out) -> int:
 
 
 COMMANDS = {"render": cmd_render, "demo": cmd_demo, "sweep": cmd_sweep, "reference": cmd_reference,
-            "report": cmd_report, "check": cmd_check, "theory": cmd_theory}
+            "report": cmd_report, "check": cmd_check, "invert": cmd_invert, "theory": cmd_theory}
 
 
 def main(argv: list[str] | None = None, out=None) -> int:

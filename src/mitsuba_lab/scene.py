@@ -9,7 +9,8 @@ import mitsuba as mi
 
 from .errors import LabError, one_line
 
-LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis")
+LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis")   # the path tracers the traits reason about
+ALL_LAB_INTEGRATORS = LAB_INTEGRATORS + ("lab_photon",)
 #: Mitsuba's own integrators (those present in this build are listed in messages).
 MITSUBA_INTEGRATORS = ("path", "direct", "volpath", "volpathmis", "ptracer", "aov", "depth",
                        "moment", "stokes", "prb", "prb_basic", "prbvolpath", "direct_projective",
@@ -34,7 +35,7 @@ def make_integrator(type_name: str, params: dict | None = None) -> mi.Integrator
         text = one_line(err)
         if "not found" in text and f'"{type_name}"' in text:
             raise LabError(f"unknown integrator '{type_name}'; lab integrators: "
-                           f"{', '.join(LAB_INTEGRATORS)}; Mitsuba's: "
+                           f"{', '.join(ALL_LAB_INTEGRATORS)}; Mitsuba's: "
                            f"{', '.join(MITSUBA_INTEGRATORS)}") from err
         reason = plugin_error_reason(text)
         reason = reason[len(type_name) + 2:] if reason.startswith(f"{type_name}: ") else reason

@@ -66,7 +66,7 @@ class Config:
     cluster: str | None = None      # Dask scheduler address; None = run in this process
 
 
-class _Reader:
+class TableReader:
     """Typed access to one TOML table, with the key path for messages."""
 
     def __init__(self, source: str, table: dict, path: str):
@@ -95,9 +95,9 @@ class _Reader:
             self.fail(name, f"{expected}, got {value!r}")
         return value
 
-    def sub(self, name, default=...) -> "_Reader":
+    def sub(self, name, default=...) -> "TableReader":
         value = self.get(name, dict, default, expected="a table")
-        return _Reader(self.source, value, self.key(name))
+        return TableReader(self.source, value, self.key(name))
 
     def unknown(self, allowed):
         extra = sorted(set(self.table) - set(allowed))
@@ -105,10 +105,10 @@ class _Reader:
             self.fail(extra[0], f"one of the keys {', '.join(sorted(allowed))} (unknown key)")
 
 
-def _plugins(reader: _Reader, kind: str) -> tuple[PluginSpec, ...]:
+def _plugins(reader: TableReader, kind: str) -> tuple[PluginSpec, ...]:
     specs = []
     for name, body in reader.table.items():
-        item = _Reader(reader.source, body, reader.key(name))
+        item = TableReader(reader.source, body, reader.key(name))
         plugin_type = item.get("type", str, expected=f"the {kind} plugin name as a string")
         params = {k: v for k, v in body.items() if k != "type"}
         specs.append(PluginSpec(name, plugin_type, params))
@@ -117,14 +117,14 @@ def _plugins(reader: _Reader, kind: str) -> tuple[PluginSpec, ...]:
     return tuple(specs)
 
 
-def _positive_ints(reader: _Reader, name: str, default) -> tuple[int, ...]:
+def _positive_ints(reader: TableReader, name: str, default) -> tuple[int, ...]:
     values = reader.get(name, list, default, expected="a list of positive integers")
     if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in values):
         reader.fail(name, f"a list of positive integers, got {values!r}")
     return tuple(sorted(set(values)))
 
 
-def _rect(reader: _Reader, name: str, value) -> tuple:
+def _rect(reader: TableReader, name: str, value) -> tuple:
     ok = (isinstance(value, list) and len(value) == 4
           and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value))
     if ok:
@@ -137,7 +137,7 @@ def _rect(reader: _Reader, name: str, value) -> tuple:
     return tuple(value)
 
 
-def _regions(reader: _Reader, base_dir: str) -> dict:
+def _regions(reader: TableReader, base_dir: str) -> dict:
     regions = {}
     regions_file = reader.get("regions_file", str, None)
     if regions_file is not None:
@@ -149,7 +149,7 @@ def _regions(reader: _Reader, base_dir: str) -> dict:
                 data = tomllib.load(f)
             except tomllib.TOMLDecodeError as err:
                 raise ConfigError(f"{path}: {err}") from err
-        file_reader = _Reader(path, data.get("regions", {}), "regions")
+        file_reader = TableReader(path, data.get("regions", {}), "regions")
         for name, rect in file_reader.table.items():
             regions[name] = _rect(file_reader, name, rect)
     inline = reader.sub("regions", {})
@@ -158,7 +158,7 @@ def _regions(reader: _Reader, base_dir: str) -> dict:
     return regions
 
 
-def _scenes(reader: _Reader, base_dir: str) -> tuple[SceneSpec, ...]:
+def _scenes(reader: TableReader, base_dir: str) -> tuple[SceneSpec, ...]:
     scenes = []
     for name, _ in reader.table.items():
         item = reader.sub(name)
@@ -189,7 +189,7 @@ def load_config(path: str) -> Config:
 
 def parse_config(data: dict, source: str) -> Config:
     base_dir = os.path.dirname(os.path.abspath(source))
-    top = _Reader(source, data, "")
+    top = TableReader(source, data, "")
     top.unknown({"experiment", "reference", "scenes", "strategies", "samplers", "executor"})
     exp = top.sub("experiment", {})
     exp.unknown({"name", "output", "spp", "time_budgets", "repetitions", "seed", "max_depth", "metrics"})
@@ -216,7 +216,7 @@ def parse_config(data: dict, source: str) -> Config:
     ref.unknown({"integrator", "spp", "chunks", "cache"})
     ref_integrator = ref.get("integrator", dict, {"type": "path"}, expected="a table like "
                              "{ type = \"path\" }")
-    ref_plugin = _plugins(_Reader(source, {"integrator": ref_integrator}, "reference"), "integrator")[0]
+    ref_plugin = _plugins(TableReader(source, {"integrator": ref_integrator}, "reference"), "integrator")[0]
     ref_spp = ref.get("spp", int, 4096, check=lambda v: v > 0, expected="a positive integer")
     chunks = ref.get("chunks", int, 8, check=lambda v: v >= 2 and ref_spp % v == 0,
                      expected=f"an integer >= 2 that divides reference.spp = {ref_spp} (the noise "

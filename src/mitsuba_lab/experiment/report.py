@@ -21,6 +21,7 @@ from .. import images, metrics
 from .analysis import (FLOOR_WARNING_FACTOR, PointStats, curve, equal_time_budgets, point_stats,
                        region_stack_stats, slope, veach_bound)
 from .reference import Reference
+from .spectrum import plot_error_spectra, slope_table
 from .store import ResultStore
 
 CSV_COLUMNS = ("point", "scene", "strategy", "sampler", "spp", "budget_s", "seed", "wall_s", "kernel_s",
@@ -136,6 +137,11 @@ class Report:
         md += self.efficiency_table(groups, label)
         md += self.equal_time_table(groups, label)
         md += self.bias_table(stats)
+        md += slope_table(groups, label)
+        spectra = plot_error_spectra(groups, label, ref.image, self.folder,
+                                     os.path.join(self.out, f"{scene}_spectra.png"))
+        if spectra:
+            md += ["", f"![radially averaged power spectrum of the error]({os.path.basename(spectra)})"]
         md += self.region_tables(scene, groups, label)
         md += self.veach_table(scene, groups)
         strip = self.image_strip(scene, groups, label)

@@ -20,6 +20,16 @@ class ResultStore:
         self.path = os.path.join(folder, "results.jsonl")
         os.makedirs(folder, exist_ok=True)
         self.rows = self._load()
+        self._remove_stale_temporaries()
+
+    def _remove_stale_temporaries(self) -> None:
+        """A kill -9 between creating an image's temporary file and renaming it leaves the
+        temporary behind (no row names it); a resumed sweep removes it."""
+        folder = os.path.join(self.folder, "images")
+        if os.path.isdir(folder):
+            for name in os.listdir(folder):
+                if name.startswith(".") and ".tmp" in name:
+                    os.unlink(os.path.join(folder, name))
 
     def _load(self) -> list[dict]:
         if not os.path.exists(self.path):

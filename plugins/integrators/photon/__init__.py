@@ -1,0 +1,9 @@
+"""``lab_photon``: progressive photon mapping in Dr.Jit, split by role.
+
+* ``records``: the photon records (structure of arrays) and their memory cost;
+* ``grid``: the hashed uniform grid, built by a counting sort;
+* ``tracer``: the photon pass (emitters chosen by power, BSDF-sampled light paths);
+* ``gather``: the camera-side kernel density estimate;
+* ``integrator``: the driver (passes, radius schedule, batching) and its settings;
+  it registers the plugin on its last line.
+"""

@@ -1,0 +1,340 @@
+"""``lab_photon``: the driver (passes, radius schedule, batches) and its settings."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import drjit as dr
+import mitsuba as mi
+
+from mitsuba_lab.plugins.integrators.common import UNBOUNDED
+
+from .gather import CameraPass
+from .grid import PhotonGrid
+from .records import RECORD_BYTES
+from .tracer import PhotonTracer
+
+DIRECT_MODES = ("photons", "nee")
+#: max_depth = -1 (unbounded) is stored as this many segments (sums of depths stay in uint32).
+DEPTH_CAP = 1 << 30
+#: Automatic radius: r_1 = RADIUS_SCALE x (bounding-box diagonal) / max(film width, height).
+RADIUS_SCALE = 1.0
+#: Smallest record buffer; also the smallest allowed ``max_records``.
+MIN_RECORDS = 1024
+
+
+@dataclass
+class PhotonSettings:
+    """The parameters of ``lab_photon``, read and checked in one place."""
+    photons_per_pass: int = 100_000
+    passes: int = 16
+    alpha: float = 2.0 / 3.0
+    radius: float = 0.0
+    max_depth: int = UNBOUNDED
+    rr_depth: int = 5
+    direct: str = "nee"
+    max_records: int = 1 << 21
+
+    @classmethod
+    def from_properties(cls, props: mi.Properties) -> "PhotonSettings":
+        d = cls()
+        s = cls(photons_per_pass=int(props.get("photons_per_pass", d.photons_per_pass)),
+                passes=int(props.get("passes", d.passes)),
+                alpha=float(props.get("alpha", d.alpha)),
+                radius=float(props.get("radius", d.radius)),
+                max_depth=int(props.get("max_depth", d.max_depth)),
+                rr_depth=int(props.get("rr_depth", d.rr_depth)),
+                direct=str(props.get("direct", d.direct)),
+                max_records=int(props.get("max_records", d.max_records)))
+        s.check()
+        return s
+
+    def check(self):
+        def fail(name, allowed, value):
+            raise ValueError(f"lab_photon: parameter '{name}' must be {allowed}, got {value!r}")
+        if self.photons_per_pass < 1:
+            fail("photons_per_pass", "an integer >= 1", self.photons_per_pass)
+        if self.passes < 1:
+            fail("passes", "an integer >= 1", self.passes)
+        if not 0.0 < self.alpha < 1.0:
+            fail("alpha", "a number in (0, 1)", self.alpha)
+        if not (self.radius >= 0.0 and math.isfinite(self.radius)):
+            fail("radius", "0 (automatic) or a finite number > 0", self.radius)
+        if self.max_depth != UNBOUNDED and self.max_depth < 1:
+            fail("max_depth", "-1 (unbounded) or an integer >= 1", self.max_depth)
+        if self.rr_depth < 1:
+            fail("rr_depth", "an integer >= 1", self.rr_depth)
+        if self.direct not in DIRECT_MODES:
+            fail("direct", f"one of {', '.join(DIRECT_MODES)}", self.direct)
+        if self.max_records < MIN_RECORDS:
+            fail("max_records", f"an integer >= {MIN_RECORDS}", self.max_records)
+
+    @property
+    def depth_limit(self) -> int:
+        """max_depth in segments, with -1 (unbounded) mapped to DEPTH_CAP (parsed here only)."""
+        return DEPTH_CAP if self.max_depth == UNBOUNDED else self.max_depth
+
+
+def radius_schedule(r1: float, passes: int, alpha: float) -> list[float]:
+    """r_{i+1}^2 = r_i^2 (i + alpha) / (i + 1), i = 1..P-1 (Knaus & Zwicker 2011, eq. 20)."""
+    r2 = [r1 * r1]
+    for i in range(1, passes):
+        r2.append(r2[-1] * (i + alpha) / (i + 1))
+    return [math.sqrt(v) for v in r2]
+
+
+def automatic_radius(scene: mi.Scene, sensor: mi.Sensor) -> float:
+    bbox = scene.bbox()
+    diag = float(dr.norm(bbox.max - bbox.min)) if bbox.valid() else 1.0
+    size = sensor.film().crop_size()
+    return RADIUS_SCALE * max(diag, 1e-6) / max(int(size[0]), int(size[1]), 1)
+
+
+@dataclass
+class PhotonStats:
+    """What the last render did; times in seconds, measured after dr.eval + dr.sync_thread.
+
+    trace_s: photon tracing (incl. storing records, reading their count, compaction);
+    grid_s: grid builds; gather_s: camera passes (camera paths, NEE, density estimate);
+    stored_flux: sum of the stored photons' flux per channel, over all passes.
+    """
+    passes: int = 0
+    batches: int = 0
+    splits: int = 0
+    photons_traced: int = 0
+    photons_stored: int = 0
+    photon_segments: int = 0
+    trace_s: float = 0.0
+    grid_s: float = 0.0
+    gather_s: float = 0.0
+    radius_first: float = 0.0
+    radius_last: float = 0.0
+    peak_record_bytes: int = 0
+    stored_flux: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d["photons_per_s"] = self.photons_traced / self.trace_s if self.trace_s > 0 else 0.0
+        d["gather_s_per_pass"] = self.gather_s / self.passes if self.passes else 0.0
+        d["grid_s_per_pass"] = self.grid_s / self.passes if self.passes else 0.0
+        return d
+
+
+class LabPhotonIntegrator(mi.SamplingIntegrator):
+    r"""Progressive photon mapping (:monosp:`lab_photon`)
+
+    Probabilistic progressive photon mapping (Knaus & Zwicker 2011, "Progressive
+    photon mapping: a probabilistic approach", ACM TOG 30(3)) on Jensen's photon
+    map (Jensen 2001, "Realistic Image Synthesis Using Photon Mapping"). Each pass
+    i = 1..P traces an independent photon map and renders the image once with the
+    gather radius r_i, where r_{i+1}^2 = r_i^2 (i + alpha) / (i + 1); the result
+    is the average of the P pass images.
+
+    **Bias.** Every pass is a kernel density estimate, biased by the blur of radius
+    r_i. The average is biased for any finite P; the bias shrinks as r_i -> 0 and
+    the variance as 1 / (P r^2)-ish, so the estimator is consistent (error -> 0
+    as P grows), never unbiased. Compare it with unbiased estimators by MSE =
+    bias^2 + variance, not by z-scores of the mean. The bias is largest where the
+    radiance changes within r: the edges of surfaces (the kernel's disk sticks out),
+    sharp caustics (blurred peaks: a caustic wants r_1 below the automatic value).
+
+    **Density estimate** (``gather.py``): at the first camera vertex with a smooth
+    BSDF, L = sum_p f(wo, wi_p) Phi_p K(|x - x_p| / r) / r^2 with the 2D Epanechnikov
+    kernel K(t) = (2 / pi)(1 - t^2), t < 1 (integral over the plane = 1); a photon
+    whose geometric normal is more than ~37 degrees off x's (n . n_p <= 0.8) is
+    rejected, and so is one whose path plus the camera's exceeds ``max_depth``.
+    Photons are found in a hashed grid of cell size r (``grid.py``: counting sort).
+
+    ================ ====== ======================================================
+    photons_per_pass int    Photons emitted per pass, N >= 1 (Default: 100000)
+    passes           int    Passes P >= 1 (Default: 16). Each pass renders ``spp``
+                            camera samples per pixel, so an image costs
+                            P x spp camera samples per pixel.
+    alpha            float  Radius reduction, 0 < alpha < 1 (Default: 2/3)
+    radius           float  First-pass radius r_1 in scene units; 0 = automatic:
+                            r_1 = diag / max(W, H), the scene bounding box's
+                            diagonal over the film's larger side, i.e. about the
+                            footprint of one pixel if the scene fills the view.
+                            (Default: 0)
+    max_depth        int    Longest path in segments (camera + light subpath),
+                            -1 = unbounded (Default: -1)
+    rr_depth         int    Depth at which Russian roulette starts, on both
+                            subpaths (Default: 5)
+    direct           string ``photons``: all light at the camera vertex from the
+                            density estimate (photons stored from the first hit
+                            on). ``nee``: direct light by next-event estimation
+                            + BSDF sampling with the power heuristic; photons only
+                            for light that has bounced at least once (indirect
+                            light and caustics). (Default: ``nee``)
+    max_records      int    Most photon records held at once (>= 1024). A pass
+                            whose photons would need more is traced and gathered
+                            in batches with the same camera samples, which gives
+                            the same estimate. (Default: 2^21: 52 bytes each,
+                            ~110 MB, held up to three times during a batch:
+                            trace buffer, compacted and sorted copies)
+    ================ ====== ======================================================
+
+    Pass seeds come from the render's ``seed``: different seeds give independent
+    photon maps and camera samples.
+
+    Handles: any emitter with ``sample_ray`` (area, point, spot, directional,
+    environment), chosen with probability proportional to its power; BSDFs that
+    are either smooth (the path stops there and gathers) or purely delta (mirror,
+    glass: camera paths continue through them by BSDF sampling).
+    Does not handle: the delta lobes of a BSDF that mixes delta and smooth lobes
+    (e.g. ``plastic``): the camera path gathers there and the delta lobe's light
+    through further bounces is missed in ``photons`` mode (``nee`` keeps its
+    direct part). No participating media, no AOVs, no ``develop=False``, no
+    shading-normal (adjoint) correction for photons, no spectral variants (RGB and
+    mono only). Emitters are not hidden (no ``hide_emitters``).
+
+    Statistics of the last render: ``photon_stats()`` (passes, photons traced and
+    stored, photon tracing / grid / gather times, photons per second) and
+    ``ray_counts()`` (camera, camera-side extension, shadow and photon rays).
+
+    .. code-block:: python
+
+        {'type': 'lab_photon', 'photons_per_pass': 200000, 'passes': 32,
+         'alpha': 0.66, 'radius': 0.0, 'max_depth': -1, 'direct': 'nee'}
+    """
+    plugin_name = "lab_photon"
+
+    def __init__(self, props: mi.Properties):
+        super().__init__(props)
+        self.settings_ = PhotonSettings.from_properties(props)
+        self.stats = PhotonStats()
+        self._camera = CameraPass(self.settings_)
+        self._camera_rays = 0
+
+    # -- Driver -------------------------------------------------------------------
+
+    def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
+               evaluate: bool = True):
+        if not develop:
+            raise ValueError("lab_photon: render(develop=False) is not supported (passes are averaged "
+                             "as developed images)")
+        if mi.is_spectral:
+            raise ValueError("lab_photon: spectral variants are not supported (a photon's wavelengths "
+                             "would have to match the camera path's); use an RGB or mono variant")
+        if isinstance(sensor, int):
+            sensor = scene.sensors()[sensor]
+        seed = int(seed[0]) if hasattr(seed, "__len__") and not isinstance(seed, int) else int(seed)
+        cfg = self.settings_
+        spp = spp or sensor.sampler().sample_count()
+        depth = cfg.depth_limit
+        min_segments = 2 if cfg.direct == "nee" else 1
+        stats = PhotonStats(stored_flux=[0.0] * (1 if mi.is_monochromatic else 3))
+        self._camera.reset_counts()
+        size = sensor.film().crop_size()
+        self._camera_rays = int(size[0]) * int(size[1]) * spp * cfg.passes
+
+        # Photons travel at most depth - 1 segments: the camera needs one to reach them.
+        tracer = PhotonTracer(scene, max_segments=min(depth - 1, DEPTH_CAP), min_segments=min_segments,
+                              rr_depth=cfg.rr_depth)
+        r1 = cfg.radius if cfg.radius > 0 else automatic_radius(scene, sensor)
+        radii = radius_schedule(r1, cfg.passes, cfg.alpha)
+        stats.radius_first, stats.radius_last = radii[0], radii[-1]
+        stores_per_photon = 4.0                          # first guess; learnt from each batch
+
+        image = None
+        for i, radius in enumerate(radii):
+            pass_seed = int(mi.sample_tea_32(seed & 0xFFFFFFFF, i)[0])
+            camera_seed = int(mi.sample_tea_32(i, seed & 0xFFFFFFFF)[0])
+            first, remaining, batch_index = 0, cfg.photons_per_pass, 0
+            while remaining > 0:
+                count = min(remaining, max(1, int(cfg.max_records / (1.25 * stores_per_photon))))
+                for records, n_traced in self._trace_fitting(tracer, first, count, pass_seed, stats,
+                                                             stores_per_photon):
+                    stores_per_photon = max(0.25, (records.count + 1) / n_traced)
+                    flux = records.total_power()
+                    stats.stored_flux = [a + b for a, b in zip(stats.stored_flux, flux)]   # per channel
+                    t0 = time.perf_counter()
+                    grid = PhotonGrid(records, radius)
+                    dr.sync_thread()
+                    stats.grid_s += time.perf_counter() - t0
+                    stats.peak_record_bytes = max(stats.peak_record_bytes, 2 * records.count * RECORD_BYTES)
+                    del records
+                    self._camera.grid, self._camera.with_direct = grid, batch_index == 0
+                    t0 = time.perf_counter()
+                    # Mitsuba's own SamplingIntegrator.render on the camera-pass object: its
+                    # film, filter, sampler and spp handling, with our sample().
+                    img = self._camera.render(scene, sensor, dr.opaque(mi.UInt32, camera_seed), spp,
+                                              True, True)
+                    dr.eval(img)
+                    dr.sync_thread()
+                    stats.gather_s += time.perf_counter() - t0
+                    image = img if image is None else image + img
+                    dr.eval(image)
+                    self._camera.grid = None
+                    batch_index += 1
+                    stats.batches += 1
+                first += count
+                remaining -= count
+            stats.passes += 1
+        stats.photons_traced = cfg.photons_per_pass * cfg.passes
+        self.stats = stats
+        image = image * (1.0 / cfg.passes)
+        dr.eval(image)
+        return image
+
+    def _trace_fitting(self, tracer, first, count, pass_seed, stats, stores_per_photon):
+        """Yield (records, photons) for photons [first, first + count), splitting the range in
+        halves while its records do not fit in ``max_records`` (same photons either way)."""
+        cfg = self.settings_
+        capacity = int(min(cfg.max_records, max(MIN_RECORDS, math.ceil(1.5 * stores_per_photon * count))))
+        while True:
+            t0 = time.perf_counter()
+            buffer, stores, segments = tracer.trace(first, count, pass_seed, cfg.photons_per_pass, capacity)
+            dr.eval(*buffer.arrays(), stores, segments)
+            dr.sync_thread()
+            stats.trace_s += time.perf_counter() - t0
+            n_stores = int(stores[0])
+            if n_stores <= capacity:
+                break
+            if n_stores <= cfg.max_records:              # fits: trace again with a larger buffer
+                capacity = n_stores
+                continue
+            if count == 1:                               # one photon beyond the budget: keep what fits
+                n_stores = capacity
+                break
+            stats.splits += 1
+            half = count // 2
+            yield from self._trace_fitting(tracer, first, half, pass_seed, stats, n_stores / count)
+            yield from self._trace_fitting(tracer, first + half, count - half, pass_seed, stats,
+                                           n_stores / count)
+            return
+        stats.photons_stored += n_stores
+        stats.photon_segments += int(segments[0])
+        yield buffer.take(n_stores).eval(), count
+
+    # -- Camera pass ---------------------------------------------------------------
+
+    def sample(self, scene, sampler, ray, medium=None, active=True):
+        """The camera-side estimate with the current photon map (used inside ``render``)."""
+        return self._camera.sample(scene, sampler, ray, medium, active)
+
+    # -- Reporting --------------------------------------------------------------------
+
+    def photon_stats(self) -> dict:
+        """Statistics of the last render (see ``PhotonStats``), as plain values."""
+        return self.stats.as_dict()
+
+    def ray_counts(self, reset: bool = True) -> dict[str, int]:
+        """Rays of the last render: camera, camera-side extension, shadow and photon segments."""
+        ext, shadow = self._camera.read_counts(reset)
+        return {"camera": self._camera_rays, "extension": ext, "shadow": shadow,
+                "photon": self.stats.photon_segments}
+
+    def settings(self) -> dict:
+        return asdict(self.settings_)
+
+    def to_string(self):
+        fields = ", ".join(f"{k}={v}" for k, v in self.settings().items())
+        return f"LabPhotonIntegrator[{fields}]"
+
+    def aov_names(self):
+        return []
+
+
+mi.register_integrator("lab_photon", lambda props: LabPhotonIntegrator(props))

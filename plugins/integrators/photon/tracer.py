@@ -1,0 +1,151 @@
+"""The photon pass: light paths from emitters chosen by power, stored at smooth vertices.
+
+A photon starts at an emitter chosen with probability P_e proportional to the
+emitter's power Phi_e, with an emission ray from ``Emitter.sample_ray``, whose weight
+is Phi_e per sample for that emitter. Its flux is
+
+    Phi_p = weight / (P_e N)
+
+for N photons emitted in the pass, so that E[sum of first-hit flux] = total emitted
+power (minus what escapes). It is then traced with BSDF sampling in importance
+(adjoint) transport mode and Russian roulette, and stored at every interaction whose
+BSDF has a smooth (non-delta) component. Every photon has its own PCG32 stream,
+seeded from (pass seed, global photon index), so a batch split in two reproduces
+exactly the photons of the unsplit batch.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from mitsuba_lab.plugins.integrators.common import RR_MAX_SURVIVAL
+
+from .records import PhotonRecords
+
+#: Emission samples per emitter for the power estimate that drives emitter selection.
+POWER_SAMPLES = 1 << 14
+#: Every emitter keeps at least this share of the mean selection probability, so an
+#: emitter whose power estimate came out (near) zero can still be chosen: unbiased.
+MIN_SHARE = 1e-3
+
+
+def emitter_powers(scene: mi.Scene, seed: int = 0) -> list[float]:
+    """Power of each emitter (mean of the RGB channels), estimated from emission samples.
+
+    ``Emitter.sample_ray`` returns Phi_e as its weight for a uniform emitter, so the
+    estimate is exact for point lights and uniform area lights and unbiased otherwise.
+    Only the selection probabilities depend on it: any estimate keeps the photon
+    map unbiased.
+    """
+    powers = []
+    n = POWER_SAMPLES
+    for index, emitter in enumerate(scene.emitters()):
+        rng = mi.PCG32(n)
+        rng.seed(mi.sample_tea_64(mi.UInt32(seed), dr.arange(mi.UInt32, n) + index * n),
+                 mi.UInt64(index * 2 + 1))
+        _, weight = emitter.sample_ray(mi.Float(0), rng.next_float32(),
+                                       mi.Point2f(rng.next_float32(), rng.next_float32()),
+                                       mi.Point2f(rng.next_float32(), rng.next_float32()))
+        value = mi.unpolarized_spectrum(weight)
+        mean = dr.mean(dr.select(dr.isfinite(value[0] + value[1] + value[2]),
+                                 (value[0] + value[1] + value[2]) / 3, 0.0))
+        powers.append(max(float(mean[0]), 0.0))
+    return powers
+
+
+def selection_pmf(powers: list[float]) -> list[float]:
+    """Probabilities proportional to power, with the MIN_SHARE floor; sums to 1."""
+    k = len(powers)
+    total = sum(powers)
+    if total <= 0:
+        return [1.0 / k] * k
+    floor = MIN_SHARE * total / k
+    raw = [max(p, floor) for p in powers]
+    s = sum(raw)
+    return [r / s for r in raw]
+
+
+class PhotonTracer:
+    """Traces batches of photons for one scene.
+
+    ``max_segments``: the longest light subpath stored (segments from the emitter);
+    ``min_segments``: photons are stored from this depth on (1 = at the first hit,
+    2 = only after at least one bounce); ``rr_depth``: Russian roulette from this depth.
+    """
+
+    def __init__(self, scene: mi.Scene, max_segments: int, min_segments: int, rr_depth: int):
+        if not scene.emitters():
+            raise ValueError("lab_photon: the scene has no emitter")
+        self.scene = scene
+        self.max_segments = max_segments
+        self.min_segments = min_segments
+        self.rr_depth = rr_depth
+        self.powers = emitter_powers(scene)
+        self.pmf = selection_pmf(self.powers)
+        self.distribution = mi.DiscreteDistribution(mi.Float(self.pmf))
+        self.emitters = scene.emitters_dr()
+
+    @dr.syntax
+    def trace(self, first: int, count: int, pass_seed: int, emitted_in_pass: int, capacity: int):
+        """Trace photons [first, first + count) of a pass into a buffer of ``capacity`` records.
+
+        Returns (records buffer, stores attempted (UInt32[1]), segments traced (UInt32[1])).
+        When stores attempted > capacity, the records past the capacity were dropped and
+        the caller must split the batch.
+        """
+        scene = self.scene
+        index = dr.arange(mi.UInt32, count) + dr.opaque(mi.UInt32, first)
+        seed = dr.opaque(mi.UInt32, pass_seed & 0xFFFFFFFF)
+        rng = mi.PCG32(count)
+        rng.seed(mi.sample_tea_64(seed, index), mi.sample_tea_64(index, seed ^ 0x9E3779B9))
+
+        # --------------------- Emission ----------------------
+        emitter_index, p_emitter = self.distribution.sample_pmf(rng.next_float32())
+        emitter = dr.gather(mi.EmitterPtr, self.emitters, emitter_index)
+        ray, weight = emitter.sample_ray(mi.Float(0), rng.next_float32(),
+                                         mi.Point2f(rng.next_float32(), rng.next_float32()),
+                                         mi.Point2f(rng.next_float32(), rng.next_float32()))
+        n_emitted = dr.opaque(mi.Float, float(emitted_in_pass))
+        beta = mi.Spectrum(weight) * dr.select(p_emitter > 0, dr.rcp(p_emitter * n_emitted), 0.0)
+        beta_max0 = dr.max(mi.unpolarized_spectrum(beta))
+        records = PhotonRecords.allocate(capacity)
+        stores = dr.zeros(mi.UInt32, 1)
+        segments = dr.zeros(mi.UInt32, 1)
+        cap = dr.opaque(mi.UInt32, capacity)
+        max_segments = dr.opaque(mi.UInt32, self.max_segments)
+        min_segments = dr.opaque(mi.UInt32, self.min_segments)
+        rr_depth = dr.opaque(mi.UInt32, self.rr_depth)
+        ctx = mi.BSDFContext(mi.TransportMode.Importance)
+
+        depth = mi.UInt32(0)
+        n_seg = mi.UInt32(0)
+        active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_segments > 0)
+        while dr.hint(active, max_iterations=-1, label="lab_photon photon loop"):
+            si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
+            n_seg += dr.select(active, 1, 0)
+            active &= si.is_valid()
+            depth += 1
+            bsdf = si.bsdf()
+
+            # ------------------- Store the photon -------------------
+            store = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth) & (depth >= min_segments)
+            slot = dr.scatter_inc(stores, mi.UInt32(0), store)
+            records.store(slot, si.p, -ray.d, si.n, beta, depth, store & (slot < cap))
+
+            # ------------------- BSDF sampling ----------------------
+            active &= depth < max_segments
+            bs, bsdf_weight = bsdf.sample(ctx, si, rng.next_float32(),
+                                          mi.Point2f(rng.next_float32(), rng.next_float32()), active)
+            beta *= bsdf_weight
+            ray = si.spawn_ray(si.to_world(bs.wo))
+
+            # ------------------- Stopping criterion -----------------
+            beta_max = dr.max(mi.unpolarized_spectrum(beta))
+            active &= (beta_max > 0) & dr.isfinite(beta_max)
+            q = dr.minimum(beta_max / beta_max0, RR_MAX_SURVIVAL)
+            rr_active = depth >= rr_depth
+            beta[rr_active] *= dr.rcp(q)
+            active &= ~rr_active | (rng.next_float32() < q)
+
+        dr.scatter_reduce(dr.ReduceOp.Add, segments, n_seg, 0, mode=dr.ReduceMode.Local)
+        return records, stores, segments

@@ -1,0 +1,159 @@
+"""Error spectra and convergence slopes for the sampler report.
+
+Small pure functions (the first three) and two report helpers built on them:
+
+* ``radial_power_spectrum``: radially averaged power spectrum of an error image
+  (Ulichney 1987's tool for judging dither and blue noise; Heitz & Belcour 2019
+  and Ahmed & Wonka 2020 use it for Monte Carlo error images);
+* ``low_frequency_fraction``: the share of the error's power at radial
+  frequencies below ``cutoff`` x Nyquist (blue-noise error has less there than
+  white-noise error of the same MSE);
+* ``mse_slope``: least-squares slope of log MSE against log spp (-1 for plain
+  Monte Carlo, steeper for stratified / QMC samplers on smooth integrands);
+* ``slope_table``, ``plot_error_spectra``: Markdown table and PNG for the report,
+  given the report's groups {(strategy, sampler): [PointStats]}.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+
+def _luminance_error(err: np.ndarray) -> np.ndarray:
+    err = np.asarray(err, dtype=np.float64)
+    if err.ndim == 3:
+        err = err.mean(axis=-1)
+    if err.ndim != 2:
+        raise ValueError(f"expected an error image of shape (H, W) or (H, W, C), got {err.shape}")
+    return err
+
+
+def _radius(shape) -> np.ndarray:
+    """Radial frequency of each bin of an unshifted 2D FFT, in cycles per pixel."""
+    fy = np.fft.fftfreq(shape[0])[:, None]
+    fx = np.fft.fftfreq(shape[1])[None, :]
+    return np.hypot(fy, fx)
+
+
+def radial_power_spectrum(err: np.ndarray, n_bins: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Radially averaged power spectrum of an error image (channels averaged first).
+
+    Returns (frequency, power): bin centres in cycles per pixel on (0, 0.5] and
+    the mean of |FFT|^2 / (H W) over the frequencies in each annulus. The mean
+    is removed first (the DC bin is excluded), so for white noise of variance
+    s^2 every bin is about s^2 (Parseval). ``n_bins`` defaults to min(H, W) // 2.
+    """
+    e = _luminance_error(err)
+    e = e - e.mean()
+    power = np.abs(np.fft.fft2(e)) ** 2 / e.size
+    radius = _radius(e.shape)
+    n_bins = n_bins or max(1, min(e.shape) // 2)
+    edges = np.linspace(0.0, 0.5, n_bins + 1)
+    which = np.digitize(radius.ravel(), edges[1:-1], right=True)
+    keep = (radius.ravel() > 0) & (radius.ravel() <= 0.5)
+    sums = np.bincount(which[keep], weights=power.ravel()[keep], minlength=n_bins)
+    counts = np.bincount(which[keep], minlength=n_bins)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+    return 0.5 * (edges[:-1] + edges[1:]), mean
+
+
+def low_frequency_fraction(err: np.ndarray, cutoff: float = 0.25) -> float:
+    """Share of the error power at radial frequency < cutoff x Nyquist, among all
+    frequencies within the Nyquist circle (DC excluded). White noise gives about
+    the area share, pi (cutoff/2)^2 / (pi/4) = cutoff^2; blue noise gives less."""
+    if not 0 < cutoff <= 1:
+        raise ValueError(f"cutoff must be in (0, 1], got {cutoff}")
+    e = _luminance_error(err)
+    power = np.abs(np.fft.fft2(e - e.mean())) ** 2
+    radius = _radius(e.shape)
+    inside = (radius > 0) & (radius <= 0.5)
+    total = power[inside].sum()
+    if total == 0:
+        return math.nan
+    return float(power[inside & (radius < 0.5 * cutoff)].sum() / total)
+
+
+def mse_slope(spp, mse) -> float:
+    """Least-squares slope of log(MSE) against log(spp); needs >= 2 distinct spp and MSE > 0."""
+    spp = np.asarray(spp, dtype=np.float64)
+    mse = np.asarray(mse, dtype=np.float64)
+    if spp.shape != mse.shape or len(np.unique(spp)) < 2:
+        raise ValueError("mse_slope needs matching spp and MSE arrays with at least two distinct spp")
+    if np.any(spp <= 0) or np.any(~np.isfinite(mse)) or np.any(mse <= 0):
+        raise ValueError("mse_slope needs positive spp and positive, finite MSE values")
+    return float(np.polyfit(np.log(spp), np.log(mse), 1)[0])
+
+
+# ----------------------------------------------------------------------------
+# Report helpers: groups = {(strategy, sampler): [PointStats, ...]}
+# ----------------------------------------------------------------------------
+
+def _ladder(points):
+    """The spp-ladder points (not time-budget ones) of a group, by spp."""
+    return sorted((p for p in points if getattr(p, "budget_s", None) is None), key=lambda p: p.spp)
+
+
+def slope_table(groups, label) -> list[str]:
+    """Markdown lines: slope of log MSE (reference floor subtracted) against log spp per group."""
+    rows = []
+    for key, points in groups.items():
+        pts = [p for p in _ladder(points) if p.mse_corrected > 0]
+        if len({p.spp for p in pts}) < 2:
+            continue
+        slope = mse_slope([p.spp for p in pts], [p.mse_corrected for p in pts])
+        rows.append((slope, label(key), f"{pts[0].spp}-{pts[-1].spp}", len(pts)))
+    if not rows:
+        return []
+    lines = ["", "### MSE against spp", "",
+             "Slope of log MSE (reference floor subtracted) against log spp: -1 for independent "
+             "samples; steeper where stratification or QMC helps.", "",
+             "| strategy / sampler | slope | spp range | points |", "|---|---|---|---|"]
+    lines += [f"| {name} | {slope:.2f} | {rng} | {n} |" for slope, name, rng, n in sorted(rows)]
+    return lines
+
+
+def plot_error_spectra(groups, label, reference: np.ndarray, folder: str, path: str,
+                       read_image=None) -> str | None:
+    """PNG of the radially averaged error spectrum of each group at its lowest spp
+    (blue noise shows at low spp), averaged over the stored seeds; the legend gives
+    the low-frequency fraction. Returns the path, or None when there is nothing."""
+    if read_image is None:
+        from .. import images
+        read_image = lambda p: images.read_exr(p)[0]   # noqa: E731
+    curves = []
+    for key, points in groups.items():
+        ladder = _ladder(points)
+        if not ladder or not ladder[0].images:
+            continue
+        p = ladder[0]
+        errors = [read_image(os.path.join(folder, rel)) - reference for rel in p.images]
+        spectra = [radial_power_spectrum(e) for e in errors]
+        freq = spectra[0][0]
+        power = np.nanmean([s[1] for s in spectra], axis=0)
+        low = float(np.mean([low_frequency_fraction(e) for e in errors]))
+        curves.append((label(key), p.spp, freq, power, low))
+    if not curves:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..images import atomic_path
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
+    for name, spp, freq, power, low in curves:
+        ax.plot(freq, power, label=f"{name} ({spp} spp, low-freq. share {low:.3f})")
+    ax.set_yscale("log")
+    ax.set_xlabel("radial frequency (cycles / pixel)")
+    ax.set_ylabel("error power")
+    ax.set_title("radially averaged power spectrum of the error (mean over seeds)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", bbox_inches="tight")
+    plt.close(fig)
+    return path
