@@ -47,13 +47,12 @@ import math
 import os
 import statistics
 import time
-import tomllib
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .errors import LabError, one_line
-from .experiment.config import ConfigError, TableReader
+from .experiment.config import ConfigError, TableReader, read_toml
 
 LOSSES = ("l2", "relative_l2")
 BUILTIN_SCENES = ("cornell_texture",)
@@ -134,14 +133,7 @@ def _positive(v) -> bool:
 def load_config(path: str) -> InverseConfig:
     """Read and validate an inverse-rendering config (schema: this module's docstring
     and ``add_arguments``' epilog)."""
-    if not os.path.isfile(path):
-        raise ConfigError(f"config file not found: {path}")
-    with open(path, "rb") as f:
-        try:
-            data = tomllib.load(f)
-        except tomllib.TOMLDecodeError as err:
-            raise ConfigError(f"{path}: not valid TOML: {err}") from err
-    return parse_config(data, path)
+    return parse_config(read_toml(path), path)
 
 
 def parse_config(data: dict, source: str) -> InverseConfig:

@@ -175,16 +175,20 @@ def _scenes(reader: TableReader, base_dir: str) -> tuple[SceneSpec, ...]:
     return tuple(scenes)
 
 
-def load_config(path: str) -> Config:
-    """Read and validate a sweep configuration (see experiments/README.md)."""
+def read_toml(path: str) -> dict:
+    """A TOML file's tables, or ConfigError naming the file and what is wrong."""
     if not os.path.isfile(path):
         raise ConfigError(f"config file not found: {path}")
     with open(path, "rb") as f:
         try:
-            data = tomllib.load(f)
+            return tomllib.load(f)
         except tomllib.TOMLDecodeError as err:
             raise ConfigError(f"{path}: not valid TOML: {err}") from err
-    return parse_config(data, path)
+
+
+def load_config(path: str) -> Config:
+    """Read and validate a sweep configuration (see experiments/README.md)."""
+    return parse_config(read_toml(path), path)
 
 
 def parse_config(data: dict, source: str) -> Config:
