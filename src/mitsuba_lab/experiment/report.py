@@ -199,9 +199,10 @@ class Report:
         rects = self._regions(scene, ref.image.shape[1], ref.image.shape[0])
         floors = {n: float(metrics.region(ref.variance, rects[n]).mean()) if n in rects else 0.0 for n in names}
         md = ["", "### Regions of interest (largest sample count): relMSE and efficiency "
-                  "(efficiency from the region MSE minus the region's reference floor)", "",
-              "| strategy | " + " | ".join(f"{n} relMSE | {n} efficiency" for n in names) + " |",
-              "|---|" + "---|---|" * len(names)]
+                  "(efficiency from the region MSE minus the region's reference floor; the relative "
+                  "version weighs dim and bright pixels alike)", "",
+              "| strategy | " + " | ".join(f"{n} relMSE | {n} efficiency | {n} 1/(relMSE x t)" for n in names) + " |",
+              "|---|" + "---|---|---|" * len(names)]
         best = {}
         for key, points in groups.items():
             top = max(points, key=lambda p: p.time_s)
@@ -211,7 +212,8 @@ class Report:
                 corrected = r["mse"] - floors[n]
                 eff = 1.0 / (corrected * top.time_s) if corrected > 0 else math.nan
                 best.setdefault(n, []).append((eff, label(key)))
-                cells += [fmt(r["rel_mse"]), fmt(eff)]
+                rel_eff = 1.0 / (r["rel_mse"] * top.time_s) if r["rel_mse"] > 0 else math.inf
+                cells += [fmt(r["rel_mse"]), fmt(eff), fmt(rel_eff)]
             md.append(f"| {label(key)} | " + " | ".join(cells) + " |")
         md += ["", "Most efficient per region: " + "; ".join(
             f"{n}: {max((e, k) for e, k in v if not math.isnan(e))[1]}" for n, v in best.items()
