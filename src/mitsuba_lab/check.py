@@ -39,6 +39,8 @@ import time
 
 import numpy as np
 
+from .cli import positive_int
+
 from .errors import LabError
 
 #: name -> (integrator type, parameters); max_depth comes from --max-depth.
@@ -57,13 +59,6 @@ COLUMNS = ("scene", "strategy", "status", "finite_fraction", "negative_pixels", 
            "extension_rays_per_pixel", "shadow_rays_per_pixel", "time_s", "note")
 
 
-def _positive(text: str) -> int:
-    value = int(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
-    return value
-
-
 def _positive_float(text: str) -> float:
     value = float(text)
     if not value > 0:
@@ -80,13 +75,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "negative values or a mean beyond --z-max standard errors of the reference.")
     parser.add_argument("scenes", nargs="*", metavar="SCENE",
                         help="Mitsuba XML scene files (default: every scenes/stiff/*.xml)")
-    parser.add_argument("--res", type=_positive, default=32,
+    parser.add_argument("--res", type=positive_int, default=32,
                         help="image width and height, passed as the scene's 'res' default (default: 32)")
-    parser.add_argument("--spp", type=_positive, default=64,
+    parser.add_argument("--spp", type=positive_int, default=64,
                         help="samples per pixel of each lab strategy, over all splits (default: 64)")
-    parser.add_argument("--ref-spp", type=_positive, default=256,
+    parser.add_argument("--ref-spp", type=positive_int, default=256,
                         help="samples per pixel of the path reference, over all splits (default: 256)")
-    parser.add_argument("--splits", type=_positive, default=8,
+    parser.add_argument("--splits", type=positive_int, default=8,
                         help="independent renders per strategy (seeds 0..) and reference (seeds 1000..), "
                              ">= 2; their spread gives the standard error of the mean; --spp and "
                              "--ref-spp must be multiples of it (default: 8)")

@@ -14,6 +14,7 @@ Definitions used throughout the report:
 """
 from __future__ import annotations
 
+import functools
 import math
 import os
 import statistics
@@ -56,6 +57,15 @@ class PointStats:
     images: list = field(default_factory=list)        # stored image paths (relative to the sweep folder)
 
 
+@functools.lru_cache(maxsize=512)
+def run_image(folder: str, relative_path: str) -> np.ndarray:
+    """A stored run image, read once: the bias table, Veach's bound per region and the
+    image strip all come back to the same files."""
+    image = images.read_exr(os.path.join(folder, relative_path))[0]
+    image.setflags(write=False)
+    return image
+
+
 def _mean(values):
     values = [v for v in values if v is not None and not (isinstance(v, float) and math.isnan(v))]
     return float(np.mean(values)) if values else math.nan
@@ -72,7 +82,7 @@ def _efficiency(mse_corrected: float, time_s: float) -> float:
 def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
     """Aggregate the R run rows of one point (and their stored images)."""
     first = rows[0]
-    stack = np.stack([images.read_exr(os.path.join(folder, r["image"]))[0] for r in rows])
+    stack = np.stack([run_image(folder, r["image"]) for r in rows])
     mse = [r["mse"] for r in rows]
     rel = [r["rel_mse"] for r in rows]
     time_s = statistics.median(r["wall_s"] for r in rows)
@@ -100,7 +110,7 @@ def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
 def region_stack_stats(stats: PointStats, folder: str, reference, rect) -> dict:
     """Inside a region: variance (mean per-pixel, across seeds) with its jackknife standard
     error over the seeds, and the mean square of the reference."""
-    stack = np.stack([metrics.region(images.read_exr(os.path.join(folder, p))[0], rect) for p in stats.images])
+    stack = np.stack([metrics.region(run_image(folder, p), rect) for p in stats.images])
     ref = metrics.region(reference.image, rect).astype(np.float64)
     r = stack.shape[0]
     leave_one_out = np.array([metrics.mean_variance(np.delete(stack, k, axis=0)) for k in range(r)]) \

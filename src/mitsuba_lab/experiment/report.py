@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import images, metrics
 from .analysis import (FLOOR_WARNING_FACTOR, PointStats, curve, equal_time_budgets, point_stats,
-                       region_stack_stats, slope, veach_bound)
+                       region_stack_stats, run_image, slope, veach_bound)
 from .reference import Reference
 from .spectrum import plot_error_spectra, slope_table
 from .store import ResultStore
@@ -139,7 +139,8 @@ class Report:
         md += self.bias_table(stats)
         md += slope_table(groups, label)
         spectra = plot_error_spectra(groups, label, ref.image, self.folder,
-                                     os.path.join(self.out, f"{scene}_spectra.png"))
+                                     os.path.join(self.out, f"{scene}_spectra.png"),
+                                     read_image=lambda p: run_image(self.folder, os.path.relpath(p, self.folder)))
         if spectra:
             md += ["", f"![radially averaged power spectrum of the error]({os.path.basename(spectra)})"]
         md += self.region_tables(scene, groups, label)
@@ -318,7 +319,7 @@ class Report:
         axes[1][0].imshow(np.log10(np.maximum(ref.variance.mean(-1), 1e-12)), cmap="viridis")
         axes[1][0].set_title("log10 reference variance", fontsize=7)
         for col, (key, p) in enumerate(chosen, 1):
-            image = images.read_exr(os.path.join(self.folder, p.images[0]))[0]
+            image = run_image(self.folder, p.images[0])
             axes[0][col].imshow(images.srgb_preview(image))
             axes[0][col].set_title(f"{label(key)}\n{p.spp} spp, {p.time_s:.2g} s", fontsize=7)
             rel_err = np.abs(image - ref.image).mean(-1) / (np.abs(ref.image).mean(-1) + 1e-2)
