@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from mitsuba_lab.experiment.spectrum import (
-    low_frequency_fraction, mse_slope, plot_error_spectra, radial_power_spectrum, slope_table)
+    bright_mask, low_frequency_fraction, mse_slope, plot_error_spectra, radial_power_spectrum,
+    rows_below_bright, slope_table, spectrum_rows)
 
 N = 256
 
@@ -102,3 +103,25 @@ def test_slope_table_and_spectrum_plot(tmp_path):
     assert path and (tmp_path / "spectra.png").stat().st_size > 1000
     assert slope_table({}, label) == []
     assert plot_error_spectra({}, label, ref, str(tmp_path), str(tmp_path / "none.png")) is None
+
+
+def test_bright_mask_and_rows_below_bright():
+    """A 2x2 'emitter' at rows 3-4: the mask grows it by one pixel each way, and the
+    emitter-free rectangle starts `margin` rows below its last row."""
+    ref = np.full((16, 12, 3), 0.5)
+    ref[3:5, 6:8] = 17.0
+    mask = bright_mask(ref, threshold=5.0)
+    assert mask.sum() == 16 and mask[2:6, 5:9].all()
+    assert bright_mask(ref, threshold=5.0, grow=0).sum() == 4
+    assert rows_below_bright(ref, threshold=5.0, margin=2) == 7
+    assert rows_below_bright(ref, threshold=50.0) == 0
+    assert rows_below_bright(np.full((4, 4), 9.0), threshold=5.0) == 4
+
+
+def test_spectrum_rows_skip_a_visible_emitter_only_when_half_the_image_remains():
+    ref = np.full((16, 16, 3), 0.5)
+    assert spectrum_rows(ref) == 0                       # nothing bright: whole image
+    ref[1:3, 6:10] = 17.0                                # an emitter near the top
+    assert spectrum_rows(ref) == 5                       # last bright row 2, + 1 + margin 2
+    ref[12, 3] = 40.0                                    # a bright pixel low down: too few rows left
+    assert spectrum_rows(ref) == 0

