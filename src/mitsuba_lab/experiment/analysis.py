@@ -11,6 +11,9 @@ Definitions used throughout the report:
   standard error (``metrics.bias_squared``);
 * efficiency = 1 / (mse_corrected x median wall time) (Veach 1997; higher is
   better); NaN when the corrected MSE is not positive (below the floor).
+* rel_variance, rel_bias2: the same two on images weighted by 1 / sqrt(ref^2 + 0.01),
+  i.e. in relMSE's units (relMSE = rel_bias2 + rel_variance + relative floor), where a bright
+  light's pixels do not swamp the rest of the image.
 """
 from __future__ import annotations
 
@@ -50,6 +53,9 @@ class PointStats:
     bias2_se: float
     efficiency: float
     near_floor: bool
+    rel_variance: float = math.nan
+    rel_bias2: float = math.nan
+    rel_bias2_se: float = math.nan
     flip: float = math.nan
     ciede2000: float = math.nan
     rays_per_sample: dict = field(default_factory=dict)
@@ -79,6 +85,15 @@ def _efficiency(mse_corrected: float, time_s: float) -> float:
     return metrics.efficiency(mse_corrected, time_s) if mse_corrected > 0 else math.nan
 
 
+def relative_bias_variance(stack: np.ndarray, reference) -> tuple[float, float, float]:
+    """(variance, bias^2, its standard error) in relMSE's units: every image and the reference
+    multiplied by 1 / sqrt(ref^2 + 0.01), the reference's variance by its square."""
+    weight = 1.0 / np.sqrt(reference.image.astype(np.float64) ** 2 + 1e-2)
+    weighted = stack * weight
+    bias2, se = metrics.bias_squared(weighted, reference.image * weight, reference.variance * weight ** 2)
+    return metrics.mean_variance(weighted), bias2, se
+
+
 def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
     """Aggregate the R run rows of one point (and their stored images)."""
     first = rows[0]
@@ -95,6 +110,7 @@ def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
         region_mse = _mean([r["regions"][name]["mse"] for r in rows])
         regions[name] = {"mse": region_mse, "rel_mse": _mean([r["regions"][name]["rel_mse"] for r in rows])}
     corrected = _mean(mse) - floor
+    rel_variance, rel_bias2, rel_bias2_se = relative_bias_variance(stack, reference)
     return PointStats(
         point=first["point"], scene=first["scene"], strategy=first["strategy"], sampler=first["sampler"],
         spp=first["spp"], budget_s=first.get("budget_s"), seeds=len(rows), time_s=time_s,
@@ -102,7 +118,8 @@ def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
         rel_mse=_mean(rel), rel_mse_std=_std(rel), mse_corrected=corrected,
         rel_mse_corrected=_mean(rel) - rel_floor, variance=metrics.mean_variance(stack), bias2=bias2,
         bias2_se=bias2_se, efficiency=_efficiency(corrected, time_s),
-        near_floor=_mean(mse) < FLOOR_WARNING_FACTOR * floor,
+        near_floor=_mean(mse) < FLOOR_WARNING_FACTOR * floor, rel_variance=rel_variance,
+        rel_bias2=rel_bias2, rel_bias2_se=rel_bias2_se,
         flip=_mean([r.get("flip") for r in rows]), ciede2000=_mean([r.get("ciede2000") for r in rows]),
         rays_per_sample=rays, regions=regions, images=[r["image"] for r in rows])
 
@@ -161,3 +178,56 @@ def veach_bound(balance: dict, other: dict, n_emitter: int, spp: int) -> dict:
     se = math.hypot(balance["variance_se"], other["variance_se"])
     verdict = "holds" if excess <= 0 else ("within noise" if excess <= 2 * se else "violated")
     return {"lhs": balance["variance"], "rhs": rhs, "slack": slack, "se": se, "verdict": verdict}
+
+
+def region_floor(reference, rect) -> dict:
+    """The reference's own noise inside a region: the MSE and relMSE floors (what a perfect
+    render would measure there) and the relative standard error of the region's mean."""
+    ref = metrics.region(reference.image, rect).astype(np.float64)
+    var = metrics.region(reference.variance, rect).astype(np.float64)
+    mean = float(ref.mean())
+    return {"mse": float(var.mean()), "rel_mse": float(np.mean(var / (ref ** 2 + 1e-2))),
+            "mean": mean, "mean_rel_se": math.sqrt(var.mean() / ref[..., 0].size) / mean if mean > 0 else math.nan}
+
+
+def region_at_budgets(points: list[PointStats], label, region: str, rel_floor: float) -> dict:
+    """Per time budget, each strategy's region relMSE (raw and minus the region's floor), median
+    time, and its cost ratio to the best: (corrected relMSE x time) / the smallest such product
+    at that budget. The product, not the relMSE alone, because calibrated renders miss their
+    budget by a little; for an estimator whose error falls as 1/time it is the equal-time ratio.
+
+    Returns {budget: {label: {rel_mse, rel_mse_corrected, time_s, cost, x_best}}}."""
+    table = {}
+    for p in points:
+        if p.budget_s is None or region not in p.regions:
+            continue
+        raw = p.regions[region]["rel_mse"]
+        cell = {"rel_mse": raw, "rel_mse_corrected": raw - rel_floor, "time_s": p.time_s}
+        cell["cost"] = cell["rel_mse_corrected"] * p.time_s if cell["rel_mse_corrected"] > 0 else math.nan
+        table.setdefault(p.budget_s, {})[label(p)] = cell
+    for cells in table.values():
+        costs = [c["cost"] for c in cells.values() if not math.isnan(c["cost"])]
+        best = min(costs) if costs else math.nan
+        for c in cells.values():
+            c["x_best"] = c["cost"] / best if costs else math.nan
+    return dict(sorted(table.items()))
+
+
+def bias_by_passes(points: list[PointStats], passes_of) -> dict:
+    """Relative bias^2 and variance (relMSE's units) of one progressive strategy against its
+    pass count.
+
+    ``passes_of(point)`` gives a point's passes. Rows sorted by passes, each with relMSE, the
+    relative variance, the relative bias^2 estimate, its standard error and whether it is
+    resolved (more than two standard errors above zero); ``slope`` is the log-log slope of
+    bias^2 against passes over the resolved rows (NaN with fewer than two): negative when the
+    bias shrinks as passes grow.
+    """
+    rows = []
+    for p in sorted(points, key=passes_of):
+        rows.append({"passes": passes_of(p), "time_s": p.time_s, "rel_mse": p.rel_mse,
+                     "variance": p.rel_variance, "bias2": p.rel_bias2, "bias2_se": p.rel_bias2_se,
+                     "resolved": p.rel_bias2 > 2 * p.rel_bias2_se, "seeds": p.seeds})
+    resolved = [r for r in rows if r["resolved"]]
+    fit = slope([r["passes"] for r in resolved], [r["bias2"] for r in resolved]) if len(resolved) >= 2 else math.nan
+    return {"rows": rows, "slope": fit}

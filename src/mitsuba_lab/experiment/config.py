@@ -13,6 +13,13 @@ from dataclasses import dataclass, field
 from ..errors import LabError
 
 OPTIONAL_METRICS = ("flip", "ciede2000")
+#: Integrators that a sweep scales by passes instead of samples per pixel: a point's sample
+#: count N renders N passes of one camera sample per pixel each (so N camera samples per pixel
+#: in all, as for every other strategy), each pass with its own photon map, like SPPM's one eye
+#: ray per pixel per pass (Hachisuka & Jensen 2009). More time then buys more photon maps and a
+#: smaller final radius, which is what makes the estimator converge; more camera samples over
+#: one fixed set of passes would only average the same maps' bias and noise.
+PASS_PARAMETER = {"lab_photon": "passes"}
 DEFAULT_CACHE = os.path.join("~", ".cache", "mitsuba_lab", "references")
 
 
@@ -115,6 +122,25 @@ def _plugins(reader: TableReader, kind: str) -> tuple[PluginSpec, ...]:
     if not specs:
         reader.fail("", f"at least one {kind}")
     return tuple(specs)
+
+
+def _check_pass_parameters(reader: TableReader, specs: tuple[PluginSpec, ...]) -> None:
+    """A pass-scaled strategy must leave its pass count to the sweep (PASS_PARAMETER)."""
+    for spec in specs:
+        name = PASS_PARAMETER.get(spec.type)
+        if name in spec.params:
+            reader.sub(spec.name).fail(name, f"no '{name}' key: the sweep sets {spec.type}'s {name} from "
+                                             "the spp ladder or the time budget (one camera sample per "
+                                             "pixel per pass)")
+
+
+def sample_count_plugin(spec: PluginSpec, count: int) -> tuple[PluginSpec, int]:
+    """(plugin, render spp) that give ``count`` camera samples per pixel: ``count`` spp, or for
+    a pass-scaled integrator ``count`` passes of 1 spp (PASS_PARAMETER)."""
+    name = PASS_PARAMETER.get(spec.type)
+    if name is None:
+        return spec, count
+    return PluginSpec(spec.name, spec.type, {**spec.params, name: count}), 1
 
 
 def _positive_ints(reader: TableReader, name: str, default) -> tuple[int, ...]:
@@ -235,6 +261,7 @@ def parse_config(data: dict, source: str) -> Config:
 
     scenes = _scenes(top.sub("scenes"), base_dir)
     strategies = _plugins(top.sub("strategies"), "integrator")
+    _check_pass_parameters(top.sub("strategies"), strategies)
     samplers = _plugins(top.sub("samplers"), "sampler") if "samplers" in data else \
         (PluginSpec("independent", "independent", {}),)
     return Config(name=name, source=os.path.abspath(source), output=output, scenes=scenes,

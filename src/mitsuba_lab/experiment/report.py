@@ -18,8 +18,10 @@ from collections import defaultdict
 import numpy as np
 
 from .. import images, metrics
-from .analysis import (FLOOR_WARNING_FACTOR, PointStats, curve, equal_time_budgets, point_stats,
-                       region_stack_stats, run_image, slope, veach_bound)
+from .analysis import (FLOOR_WARNING_FACTOR, PointStats, bias_by_passes, curve, equal_time_budgets,
+                       point_stats, region_at_budgets, region_floor, region_stack_stats, run_image, slope,
+                       veach_bound)
+from .config import PASS_PARAMETER
 from .reference import Reference
 from .spectrum import plot_error_spectra, slope_table
 from .store import ResultStore
@@ -137,6 +139,7 @@ class Report:
         md += self.efficiency_table(groups, label)
         md += self.equal_time_table(groups, label)
         md += self.bias_table(stats)
+        md += self.passes_section(scene, groups, label)
         md += slope_table(groups, label)
         spectra = plot_error_spectra(groups, label, ref.image, self.folder,
                                      os.path.join(self.out, f"{scene}_spectra.png"),
@@ -144,6 +147,7 @@ class Report:
         if spectra:
             md += ["", f"![radially averaged power spectrum of the error]({os.path.basename(spectra)})"]
         md += self.region_tables(scene, groups, label)
+        md += self.region_budget_tables(scene, stats, label)
         md += self.veach_table(scene, groups)
         strip = self.image_strip(scene, groups, label)
         if strip:
@@ -187,8 +191,11 @@ class Report:
 
     def bias_table(self, stats) -> list[str]:
         md = ["", "### Bias and variance per point", "",
-              "| point | seeds | variance | bias^2 (+- se) | relMSE floor-corrected |", "|---|---|---|---|---|"]
+              "Relative: the same in relMSE's units (pixels weighted by 1 / (ref^2 + 0.01)).", "",
+              "| point | seeds | variance | bias^2 (+- se) | relative variance | relative bias^2 (+- se) | "
+              "relMSE floor-corrected |", "|---|---|---|---|---|---|---|"]
         md += [f"| {s.point} | {s.seeds} | {fmt(s.variance)} | {fmt(s.bias2)} +- {fmt(s.bias2_se, 2)} | "
+               f"{fmt(s.rel_variance)} | {fmt(s.rel_bias2)} +- {fmt(s.rel_bias2_se, 2)} | "
                f"{fmt(s.rel_mse_corrected)} |" for s in stats]
         return md
 
@@ -216,9 +223,63 @@ class Report:
                 rel_eff = 1.0 / (r["rel_mse"] * top.time_s) if r["rel_mse"] > 0 else math.inf
                 cells += [fmt(r["rel_mse"]), fmt(eff), fmt(rel_eff)]
             md.append(f"| {label(key)} | " + " | ".join(cells) + " |")
+        md += ["", "Reference noise floor per region (what a perfect render would measure there): " + "; ".join(
+            f"{n}: relMSE {fmt(f['rel_mse'])}, MSE {fmt(f['mse'])}, relative standard error of the region "
+            f"mean {fmt(100 * f['mean_rel_se'], 2)}%" for n, f in
+            ((n, region_floor(ref, rects[n])) for n in names if n in rects)) + "."]
         md += ["", "Most efficient per region: " + "; ".join(
             f"{n}: {max((e, k) for e, k in v if not math.isnan(e))[1]}" for n, v in best.items()
             if any(not math.isnan(e) for e, _ in v)) + "."]
+        return md
+
+    def region_budget_tables(self, scene, stats, label) -> list[str]:
+        """Per region, every strategy at each time budget: the equal-time comparison where it
+        matters (a caustic, a light), with the region's own reference floor subtracted."""
+        ref = self.references[scene]
+        rects = self._regions(scene, ref.image.shape[1], ref.image.shape[0])
+        md = []
+        for name, rect in rects.items():
+            floor = region_floor(ref, rect)
+            table = region_at_budgets(stats, lambda p: label((p.strategy, p.sampler)), name, floor["rel_mse"])
+            if not table:
+                continue
+            names = sorted({n for cells in table.values() for n in cells})
+            md += ["", f"### Region `{name}` at each time budget", "",
+                   f"Cells: relMSE minus the region's reference floor ({fmt(floor['rel_mse'])}), median time "
+                   f"of one render, and (corrected relMSE x time) / the best strategy's at that budget: "
+                   f"the equal-time relMSE ratio to the best.", "",
+                   "| budget | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+            for budget, cells in table.items():
+                md.append(f"| {budget:g} s | " + " | ".join(
+                    f"{fmt(c['rel_mse_corrected'])} ({fmt(c['time_s'], 2)} s, {fmt(c['x_best'], 3)}x)"
+                    if (c := cells.get(n)) else "n/a" for n in names) + " |")
+        return md
+
+    def passes_section(self, scene, groups, label) -> list[str]:
+        """Bias^2 and variance against passes for pass-scaled strategies (lab_photon): a biased,
+        consistent estimator should show bias^2 falling as passes grow."""
+        md, curves = [], {}
+        rel_floor = self.references[scene].rel_mse_floor()
+        for key, points in groups.items():
+            unit = PASS_PARAMETER.get(self._integrator(points[0]))
+            if unit is None or len(points) < 2:
+                continue
+            result = bias_by_passes(points, lambda p: int(self._param(p, unit, p.spp)))
+            curves[label(key)] = result
+            md += ["", f"### {label(key)}: bias^2 and variance against {unit}", "",
+                   f"In relMSE's units (pixels weighted by 1 / (ref^2 + 0.01), so the light's edge pixels do "
+                   f"not swamp the rest): relMSE = bias^2 + variance + reference floor ({fmt(rel_floor)}); "
+                   f"bias^2 +- one standard error, resolved when more than two above zero. Log-log slope "
+                   f"of the resolved bias^2 against {unit}: {fmt(result['slope'])}.", "",
+                   f"| {unit} | seeds | time s | relMSE | variance | bias^2 (+- se) | resolved | bias^2 / relMSE |",
+                   "|---|---|---|---|---|---|---|---|"]
+            md += [f"| {r['passes']} | {r['seeds']} | {fmt(r['time_s'])} | {fmt(r['rel_mse'])} | "
+                   f"{fmt(r['variance'])} | {fmt(r['bias2'])} +- {fmt(r['bias2_se'], 2)} | "
+                   f"{'yes' if r['resolved'] else 'no'} | "
+                   f"{fmt(r['bias2'] / r['rel_mse'] if r['rel_mse'] > 0 else math.nan, 2)} |"
+                   for r in result["rows"]]
+        if curves:
+            md += ["", f"![bias^2 and variance against passes]({os.path.basename(self.plot_passes(scene, curves))})"]
         return md
 
     def veach_table(self, scene, groups) -> list[str]:
@@ -280,14 +341,41 @@ class Report:
             e = [max(p.rel_mse_corrected, 1e-12) for p in points]
             err = [p.rel_mse_std if not math.isnan(p.rel_mse_std) else 0 for p in points]
             ax.errorbar(t, e, yerr=err, marker="o", capsize=3, label=label(key))
+        return self._save_loglog(fig, ax, os.path.join(self.out, f"{scene}_curves.png"),
+                                 "wall time of one render (s)", "relMSE, reference floor subtracted",
+                                 f"{scene}: error against time (bars: std over seeds)", legend_size=8)
+
+    def plot_passes(self, scene, curves: dict) -> str:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
+        for i, (name, result) in enumerate(curves.items()):
+            rows, colour = result["rows"], f"C{i}"
+            ax.plot([r["passes"] for r in rows], [r["variance"] for r in rows], "s--", color=colour,
+                    label=f"{name}: variance")
+            shown = [r for r in rows if r["bias2"] > 0]        # a log axis has no room for <= 0
+            ax.errorbar([r["passes"] for r in shown], [r["bias2"] for r in shown],
+                        yerr=[min(r["bias2_se"], 0.999 * r["bias2"]) for r in shown], fmt="o-", color=colour,
+                        capsize=3, label=f"{name}: bias^2 (+- se)")
+        return self._save_loglog(fig, ax, os.path.join(self.out, f"{scene}_passes.png"),
+                                 "passes (one photon map and one camera sample per pixel each)",
+                                 "part of relMSE", f"{scene}: bias^2 and variance against passes", legend_size=7)
+
+    @staticmethod
+    def _save_loglog(fig, ax, path, xlabel, ylabel, title, legend_size) -> str:
+        """Log-log axes, labels, grid and legend; the PNG written atomically; the figure closed."""
+        import matplotlib.pyplot as plt
+
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.set_xlabel("wall time of one render (s)")
-        ax.set_ylabel("relMSE, reference floor subtracted")
-        ax.set_title(f"{scene}: error against time (bars: std over seeds)")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        ax.set_title(title)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
-        path = os.path.join(self.out, f"{scene}_curves.png")
+        ax.legend(fontsize=legend_size)
         with images.atomic_path(path) as tmp:
             fig.savefig(tmp, format="png", bbox_inches="tight")
         plt.close(fig)

@@ -6,7 +6,7 @@ import time
 
 from ..errors import LabError
 from ..progress import ProgressBar, duration
-from .config import PluginSpec, load_config, with_depth
+from .config import PASS_PARAMETER, PluginSpec, load_config, with_depth
 from .plan import build_plan, estimated_seconds
 from .reference import get_reference, load_cached, reference_key
 from .store import ResultStore
@@ -56,12 +56,15 @@ def print_plan(config, plan, out) -> None:
           f"{len(config.strategies)} strateg(ies), {len(config.samplers)} sampler(s), "
           f"levels {list(config.spp)} spp + {list(config.time_budgets)} s, {config.repetitions} seeds",
           file=out)
+    strategies = {s.name: s for s in config.strategies}
     for scene in config.scenes:
         points = plan.for_scene(scene.name)
         print(f"  {scene.name}: {len(points)} points x ({config.repetitions} timed + 1 warm-up) renders",
               file=out)
         for point in points:
-            level = f"{point.spp} spp" if point.spp else f"{point.budget_s:g} s budget (spp from a pilot)"
+            unit = PASS_PARAMETER.get(strategies[point.strategy].type)
+            count = f"{point.spp} {unit} of 1 spp" if unit else f"{point.spp} spp"
+            level = count if point.spp else f"{point.budget_s:g} s budget ({unit or 'spp'} from a pilot)"
             print(f"    {point.id:60s} {level}", file=out)
     for item in plan.left_out:
         print(f"  left out: {item['scene']} / {item['strategy']}: {item['reason']}", file=out)

@@ -17,11 +17,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import metrics
-from .config import PluginSpec, SceneSpec
+from .config import PluginSpec, SceneSpec, sample_count_plugin
 from .plan import Point
 
-#: Pilot sample counts for time budgets: two timed renders fit time = c0 + c1 * spp.
+#: Pilot sample counts for time budgets (spp, or passes: config.PASS_PARAMETER): timed renders
+#: fit time = fixed + per_sample x count. The first pilots are PILOT_SPP; while their times differ
+#: by less than PILOT_BUDGET_FRACTION of the budget, both grow PILOT_GROWTH-fold, so that the
+#: per-sample cost is measured above the timing noise (at 2 and 8 spp a small image renders in
+#: milliseconds, and a noisy difference extrapolated to seconds gave absurd sample counts).
 PILOT_SPP = (2, 8)
+PILOT_GROWTH = 4
+PILOT_BUDGET_FRACTION = 0.05
+#: At most this many growth steps (each compiles a kernel for a new spp).
+PILOT_MAX_GROWTH = 6
 
 
 @dataclass(frozen=True)
@@ -84,19 +92,26 @@ def execute(task: PointTask) -> PointResult:
                             task.sampler.as_dict()], sort_keys=True, default=str)
     scene = _cached("scene", scene_key, lambda: load_scene_variant(
         task.scene.path, task.scene.resolution, task.sampler.as_dict(), task.scene.defaults))
-    integrator = _cached("integrator", scene_key + json.dumps(task.strategy.as_dict(), sort_keys=True),
-                         lambda: make_integrator(task.strategy.type, task.strategy.params))
+
+    def render_at(count: int, seed: int):
+        """Render with ``count`` camera samples per pixel (spp, or passes: sample_count_plugin)."""
+        spec, spp = sample_count_plugin(task.strategy, count)
+        integrator = _cached("integrator", scene_key + json.dumps(spec.as_dict(), sort_keys=True),
+                             lambda: make_integrator(spec.type, spec.params))
+        return render(scene, integrator, spp=spp, seed=seed)
+
     result = PointResult(task, task.spp or 0)
     if not task.spp:
-        result.spp, result.calibration = calibrate(task.point, scene, integrator, render)
-    render(scene, integrator, spp=result.spp, seed=task.point.warmup_seed)    # compile, untimed
+        result.spp, result.calibration = calibrate(task.point, render_at)
+    params = sample_count_plugin(task.strategy, result.spp)[0].params
+    render_at(result.spp, task.point.warmup_seed)                            # compile, untimed
     for seed in task.seeds:
-        image, stats = render(scene, integrator, spp=result.spp, seed=seed)
+        image, stats = render_at(result.spp, seed)
         row = {"kind": "run", "point": task.point.id, "scene": task.point.scene,
                "strategy": task.point.strategy, "sampler": task.point.sampler, "spp": result.spp,
                "budget_s": task.point.budget_s, "seed": seed, "wall_s": stats.wall_s,
                "kernel_s": stats.kernel_s, "compile_s": stats.compile_s, "rays": stats.rays,
-               "integrator": task.strategy.type, "params": task.strategy.params,
+               "integrator": task.strategy.type, "params": params,
                "host": socket.gethostname(), "pid": os.getpid(),
                # process-wide high-water mark so far (Linux reports KiB): cheap, not per render
                "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
@@ -105,14 +120,27 @@ def execute(task: PointTask) -> PointResult:
     return result
 
 
-def calibrate(point: Point, scene, integrator, render) -> tuple[int, dict]:
-    """Sample count that fills the point's time budget, from two pilot renders."""
-    times = []
-    for spp in PILOT_SPP:
-        render(scene, integrator, spp=spp, seed=point.warmup_seed)              # compile
-        times.append(render(scene, integrator, spp=spp, seed=point.warmup_seed)[1].wall_s)
-    per_spp = max((times[1] - times[0]) / (PILOT_SPP[1] - PILOT_SPP[0]), 1e-9)
-    fixed = max(times[0] - per_spp * PILOT_SPP[0], 0.0)
+def calibrate(point: Point, render_at) -> tuple[int, dict]:
+    """Sample count (spp, or passes for a pass-scaled integrator) that fills the point's time
+    budget, from pilot renders (after a warm-up each, for compilation) that grow until the
+    sample-dependent part of their time is a measurable part of the budget (PILOT_*)."""
+    def timed(count):
+        render_at(count, point.warmup_seed)                                 # compile
+        return render_at(count, point.warmup_seed)[1].wall_s
+
+    counts = list(PILOT_SPP)
+    times = [timed(c) for c in counts]
+    for _ in range(PILOT_MAX_GROWTH):
+        if times[1] - times[0] >= PILOT_BUDGET_FRACTION * point.budget_s:
+            break
+        counts = [counts[1], counts[1] * PILOT_GROWTH]
+        times = [times[1], timed(counts[1])]
+    # Where the two times are not in order (noise), all of the larger one's time is taken as
+    # per-sample cost: an upper bound, so the render stays within its budget.
+    per_spp = (times[1] - times[0]) / (counts[1] - counts[0])
+    if per_spp <= 0:
+        per_spp = times[1] / counts[1]
+    fixed = max(times[1] - per_spp * counts[1], 0.0)
     spp = max(1, int(round((point.budget_s - fixed) / per_spp)))
     return spp, {"kind": "calibration", "point": point.id, "spp": spp, "fixed_s": fixed,
-                 "per_spp_s": per_spp, "budget_s": point.budget_s}
+                 "per_spp_s": per_spp, "budget_s": point.budget_s, "pilots": counts}

@@ -1,0 +1,177 @@
+"""lab_photon in the sweep runner: the shipped photon experiments plan, a sample count means
+passes for lab_photon, time budgets are fitted in passes, and the report splits bias^2 from
+variance against passes and compares strategies per region at each time budget."""
+import io
+import math
+import os
+
+import pytest
+
+from mitsuba_lab.experiment.analysis import PointStats, bias_by_passes, region_at_budgets
+from mitsuba_lab.experiment.config import ConfigError, PluginSpec, parse_config, sample_count_plugin
+from mitsuba_lab.experiment.plan import Point
+from mitsuba_lab.experiment.worker import calibrate
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CORNELL = os.path.join(ROOT, "scenes", "cornell_box.xml")
+
+
+@pytest.mark.parametrize("name", ["caustics.toml", "photon_bias.toml"])
+def test_shipped_photon_experiments_plan_in_a_dry_run(name):
+    from mitsuba_lab.experiment.sweep import sweep_command
+
+    out = io.StringIO()
+    assert sweep_command(os.path.join(ROOT, "experiments", name), None, True, out) == 0
+    text = out.getvalue()
+    assert "photon_photons" in text and "photon_nee" in text and "estimated total" in text
+    assert "passes" in text                      # lab_photon's levels are shown as passes
+
+
+def test_sample_count_means_passes_for_lab_photon():
+    photon = PluginSpec("p", "lab_photon", {"radius": 0.03})
+    spec, spp = sample_count_plugin(photon, 12)
+    assert spp == 1 and spec.params == {"radius": 0.03, "passes": 12} and photon.params == {"radius": 0.03}
+    mis = PluginSpec("m", "lab_mis", {"heuristic": "balance"})
+    assert sample_count_plugin(mis, 12) == (mis, 12)
+
+
+def test_a_lab_photon_strategy_may_not_set_passes():
+    data = {"experiment": {"spp": [4]}, "scenes": {"s": {"path": CORNELL}},
+            "strategies": {"ph": {"type": "lab_photon", "passes": 8}}}
+    with pytest.raises(ConfigError) as err:
+        parse_config(data, os.path.join(ROOT, "x.toml"))
+    message = str(err.value)
+    assert "\n" not in message and "strategies.ph.passes" in message and "time budget" in message
+
+
+def test_calibration_fits_the_count_to_the_budget():
+    """A fake render whose time is 0.2 s fixed + 0.05 s per pass: a 1.2 s budget is 20 passes."""
+    class Stats:
+        def __init__(self, wall_s):
+            self.wall_s = wall_s
+
+    calls = []
+
+    def render_at(count, seed):
+        calls.append(count)
+        return None, Stats(0.2 + 0.05 * count)
+
+    point = Point("s/p/i/t1.2s", "s", "p", "i", None, 1.2, (1, 2), 0)
+    count, row = calibrate(point, render_at)
+    assert count == 20 and row["fixed_s"] == pytest.approx(0.2) and row["per_spp_s"] == pytest.approx(0.05)
+    assert set(calls) == {2, 8}
+
+
+def test_calibration_grows_the_pilots_until_the_per_sample_cost_is_measurable():
+    """A fixed cost of 10 ms and 10 us per sample, with the 8-spp pilot timed faster than the
+    2-spp one (noise): the pilots grow 4x until their times differ by 5% of the 1 s budget."""
+    class Stats:
+        def __init__(self, wall_s):
+            self.wall_s = wall_s
+
+    def render_at(count, seed):
+        return None, Stats(0.0099 if count == 8 else 0.01 + 1e-5 * count)
+
+    point = Point("s/p/i/t1s", "s", "p", "i", None, 1.0, (1, 2), 0)
+    count, row = calibrate(point, render_at)
+    assert row["pilots"] == [2048, 8192] and row["per_spp_s"] == pytest.approx(1e-5)
+    assert count == pytest.approx(99_000, rel=1e-3)
+
+
+def stats(spp, bias2, bias2_se, variance=1e-3, budget=None, strategy="ph", regions=None, time_s=1.0):
+    """A point whose relative (relMSE-unit) bias^2 and variance are the given ones."""
+    return PointStats(point=f"s/{strategy}/i/{spp}", scene="s", strategy=strategy, sampler="i", spp=spp,
+                      budget_s=budget, seeds=8, time_s=time_s, kernel_s=time_s, mse=0.0, mse_std=0.0,
+                      rel_mse=bias2 + variance, rel_mse_std=0.0, mse_corrected=0.0, rel_mse_corrected=0.0,
+                      variance=0.0, bias2=0.0, bias2_se=0.0, efficiency=math.nan, near_floor=False,
+                      rel_variance=variance, rel_bias2=bias2, rel_bias2_se=bias2_se, regions=regions or {})
+
+
+def test_bias_by_passes_sorts_flags_and_fits_the_resolved_bias():
+    # bias^2 = 0.01 / passes where resolved; the 64-pass point is within noise of zero
+    points = [stats(64, 1e-5, 1e-4), stats(4, 2.5e-3, 1e-4), stats(1, 1e-2, 1e-4), stats(16, 6.25e-4, 1e-4)]
+    result = bias_by_passes(points, lambda p: p.spp)
+    assert [r["passes"] for r in result["rows"]] == [1, 4, 16, 64]
+    assert [r["resolved"] for r in result["rows"]] == [True, True, True, False]
+    assert result["slope"] == pytest.approx(-1.0)
+    assert result["rows"][0]["rel_mse"] == pytest.approx(1e-2 + 1e-3)
+    assert math.isnan(bias_by_passes(points[:1], lambda p: p.spp)["slope"])
+
+
+def test_region_at_budgets_gives_the_equal_time_ratio_to_the_best():
+    region = lambda rel: {"caustic": {"rel_mse": rel, "mse": 0.0}}
+    points = [stats(100, 0, 0, budget=2.0, strategy="mis", regions=region(0.051), time_s=2.0),
+              stats(10, 0, 0, budget=2.0, strategy="ph", regions=region(0.006), time_s=2.5),
+              stats(4, 0, 0, strategy="ph", regions=region(0.5))]                  # no budget: not listed
+    table = region_at_budgets(points, lambda p: p.strategy, "caustic", rel_floor=0.001)
+    assert list(table) == [2.0]
+    cells = table[2.0]
+    assert cells["ph"]["x_best"] == pytest.approx(1.0) and cells["ph"]["rel_mse_corrected"] == pytest.approx(0.005)
+    assert cells["mis"]["x_best"] == pytest.approx(0.05 * 2.0 / (0.005 * 2.5))
+
+
+TINY = """
+[experiment]
+spp = [1, 4]
+time_budgets = [0.4]
+repetitions = 2
+max_depth = 4
+metrics = []
+
+[reference]
+spp = 64
+chunks = 4
+cache = "{cache}"
+
+[scenes.cornell]
+path = "{scene}"
+resolution = 16
+regions = {{ light = [6, 0, 10, 3] }}
+
+[strategies]
+photon = {{ type = "lab_photon", direct = "photons", photons_per_pass = 2000 }}
+mis = {{ type = "lab_mis" }}
+"""
+
+
+def test_tiny_photon_sweep_runs_passes_and_reports_bias_against_passes(tmp_path):
+    from mitsuba_lab.experiment.config import load_config
+    from mitsuba_lab.experiment.plan import build_plan
+    from mitsuba_lab.experiment.report import build_report
+    from mitsuba_lab.experiment.run import SweepRunner
+    from mitsuba_lab.experiment.store import ResultStore
+
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY.format(cache=tmp_path / "cache", scene=CORNELL))
+    config = load_config(str(path))
+    store = ResultStore(str(tmp_path / "out"))
+    SweepRunner(config, build_plan(config), store).run()
+    runs = [r for r in store.of_kind("run") if r["strategy"] == "photon"]
+    assert len(runs) == 3 * 2 and all(r["finite"] and r["negative"] == 0 for r in runs)
+    for r in runs:                               # N camera samples per pixel = N passes of 1 spp
+        assert r["params"]["passes"] == r["spp"] and r["rays"]["camera"] == 16 * 16 * r["spp"]
+    fitted = {c["point"]: c["spp"] for c in store.of_kind("calibration")}
+    assert {r["spp"] for r in runs if r["budget_s"]} == {fitted["cornell/photon/independent/t0.4s"]}
+    summary = open(build_report(str(tmp_path / "out"))["md"]).read()
+    assert "photon: bias^2 and variance against passes" in summary and "mis: bias^2" not in summary
+    assert "Region `light` at each time budget" in summary and "Reference noise floor per region" in summary
+    assert os.path.exists(tmp_path / "out" / "report" / "cornell_passes.png")
+
+
+def test_relative_bias_is_zero_for_unbiased_renders_and_sees_a_scaled_one():
+    """Synthetic: renders = ref + noise (unbiased) and 1.2 x ref + noise; relative units make
+    the bright pixel count like the dim ones."""
+    import numpy as np
+
+    from mitsuba_lab.experiment.analysis import relative_bias_variance
+    from mitsuba_lab.experiment.reference import Reference
+
+    rng = np.random.default_rng(3)
+    image = np.full((16, 16, 3), 0.5)
+    image[0, 0] = 1000.0                                     # a light pixel
+    ref = Reference("k", image, np.zeros_like(image), {})
+    noise = rng.normal(0.0, 0.05, (32, 16, 16, 3)) * np.sqrt(image ** 2 + 1e-2)
+    variance, bias2, se = relative_bias_variance(image + noise, ref)
+    assert abs(bias2) < 3 * se and variance == pytest.approx(0.05 ** 2, rel=0.1)
+    _, scaled, se = relative_bias_variance(1.2 * image + noise, ref)
+    assert scaled > 10 * se and scaled == pytest.approx(0.2 ** 2 * 0.25 / 0.26, rel=0.1)
