@@ -10,7 +10,7 @@ Small pure functions (the first three) and two report helpers built on them:
   white-noise error of the same MSE);
 * ``bright_mask``, ``rows_below_bright``: where a reference image shows an
   emitter directly. On the Cornell box at 64 spp, the 1% of pixels on and around
-  the light carry 40-50% of a QMC sampler's MSE (99% with direct lighting only):
+  the light carry 40-50% of a QMC sampler's MSE (over 90% with direct lighting only):
   anti-aliasing a 30:1 step. Those errors line up along the edge and swamp the
   spectrum, so the benchmarks report MSE and spectra without them as well;
 * ``mse_slope``: least-squares slope of log MSE against log spp (-1 for plain
