@@ -318,6 +318,21 @@ class LabSampler(mi.Sampler):
         raise NotImplementedError
 
 
+
+class Base2PairSampler(LabSampler):
+    """A lab sampler whose requests come from ``_scrambled(dim, two_d)``: a pair of
+    scrambled base-2 uint32 coordinates (the second None for a 1D request)."""
+
+    def _scrambled(self, dim, two_d: bool):
+        raise NotImplementedError
+
+    def _sample_1d(self, dim):
+        return to_unit_float(self._scrambled(dim, False)[0])
+
+    def _sample_2d(self, dim):
+        x, y = self._scrambled(dim, True)
+        return mi.Point2f(to_unit_float(x), to_unit_float(y))
+
 def pixel_seeds(seed_value, pixel_index):
     """One scramble key per pixel: TEA of (render seed, pixel), as Mitsuba seeds its RNGs."""
     return mi.sample_tea_32(mi.UInt32(seed_value), mi.UInt32(pixel_index))[0]

@@ -4,11 +4,11 @@ from __future__ import annotations
 import mitsuba as mi
 
 from mitsuba_lab.plugins.samplers.common import (
-    SALT_PERMUTE, SALT_X, SALT_Y, LabSampler, hash3, hash2, log2_ceil,
-    padded_index, pixel_seeds, sobol_02_owen, to_unit_float)
+    SALT_PERMUTE, SALT_X, SALT_Y, Base2PairSampler, hash3, hash2, log2_ceil,
+    padded_index, pixel_seeds, sobol_02_owen)
 
 
-class LabSobolSampler(LabSampler):
+class LabSobolSampler(Base2PairSampler):
     r"""Padded Owen-scrambled Sobol sampler (:monosp:`lab_sobol`)
 
     Each pixel draws its ``sample_count`` samples from the first two
@@ -61,13 +61,6 @@ class LabSobolSampler(LabSampler):
         index = padded_index(self.sample_index, self.spp, hash2(key, SALT_PERMUTE))
         return sobol_02_owen(index, self.n_bits, hash2(key, SALT_X),
                              hash2(key, SALT_Y) if two_d else None)
-
-    def _sample_1d(self, dim):
-        return to_unit_float(self._scrambled(dim, False)[0])
-
-    def _sample_2d(self, dim):
-        x, y = self._scrambled(dim, True)
-        return mi.Point2f(to_unit_float(x), to_unit_float(y))
 
 
 mi.register_sampler("lab_sobol", lambda props: LabSobolSampler(props))

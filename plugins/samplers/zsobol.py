@@ -5,8 +5,8 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.samplers.common import (
-    SALT_X, SALT_Y, LabSampler, check_int, dim_key, isqrt_exact, log2_ceil, mix32,
-    morton_2d, sobol_02_owen, to_unit_float)
+    SALT_X, SALT_Y, Base2PairSampler, check_int, dim_key, isqrt_exact, log2_ceil, mix32,
+    morton_2d, sobol_02_owen)
 
 #: Multiplication in GF(4) = {0, 1, a, a^2 = a + 1} coded 0..3: entry (x, y) at bits 2 (4x + y).
 GF4_MUL = [[0, 0, 0, 0], [0, 1, 2, 3], [0, 2, 3, 1], [0, 3, 1, 2]]
@@ -25,7 +25,7 @@ def _gf4_permute(digit, h):
     return prod ^ (h & 3)
 
 
-class LabZSobolSampler(LabSampler):
+class LabZSobolSampler(Base2PairSampler):
     r"""Blue-noise Z-ordered Sobol sampler (:monosp:`lab_zsobol`)
 
     Ahmed & Wonka 2020, "Screen-Space Blue-Noise Diffusion of Monte Carlo
@@ -129,13 +129,6 @@ class LabZSobolSampler(LabSampler):
         key = dim_key(self.seed_key, dim, self.pass_index)
         return sobol_02_owen(self._sobol_index(dim), self.n_bits, mix32(key ^ SALT_X),
                              mix32(key ^ SALT_Y) if two_d else None)
-
-    def _sample_1d(self, dim):
-        return to_unit_float(self._scrambled(dim, False)[0])
-
-    def _sample_2d(self, dim):
-        x, y = self._scrambled(dim, True)
-        return mi.Point2f(to_unit_float(x), to_unit_float(y))
 
 
 mi.register_sampler("lab_zsobol", lambda props: LabZSobolSampler(props))
