@@ -29,21 +29,26 @@ def make(kind: str, spp: int, **params) -> mi.Sampler:
     return mi.load_dict({"type": kind, "sample_count": spp, **params})
 
 
-def draw(kind: str, spp: int, n_pixels: int, seed: int, pattern: str = "2212", **params):
+def draw(kind: str, spp: int, n_pixels: int, seed: int, pattern: str = "2212",
+         static_dims: bool = True, **params):
     """Seed a wavefront of n_pixels x spp lanes and draw one request per letter
-    of ``pattern`` ('1' = next_1d, '2' = next_2d); returns (n_pixels, spp, n_dims)."""
+    of ``pattern`` ('1' = next_1d, '2' = next_2d); returns (n_pixels, spp, n_dims).
+    ``static_dims=False`` makes the sampler treat every dimension as known only
+    to the kernel (the path taken inside an integrator's loop)."""
     if kind == "lab_zsobol":
         params.setdefault("width", int(np.sqrt(n_pixels)))
     s = make(kind, spp, **params)
+    s.static_dims = static_dims
     s.seed(seed, n_pixels * spp)
     cols = []
     for c in pattern:
         if c == "1":
-            cols.append(np.array(s.next_1d()))
+            cols.append(s.next_1d())
         else:
             p = s.next_2d()
-            cols += [np.array(p.x), np.array(p.y)]
-    return np.stack(cols, axis=-1).reshape(n_pixels, spp, -1)
+            cols += [p.x, p.y]
+    dr.eval(*cols)                      # one kernel for all requests (one compilation)
+    return np.stack([np.array(c) for c in cols], axis=-1).reshape(n_pixels, spp, -1)
 
 
 # ---------------------------------------------------------------------------
@@ -206,6 +211,43 @@ def test_deterministic_seeds_and_clone(kind):
     assert "sample_count=16" in str(s)
 
 
+@pytest.mark.parametrize("kind", ("lab_stratified", "lab_halton", "lab_sobol", "lab_zsobol"))
+@pytest.mark.parametrize("spp", (1, 3, 16, 64))
+def test_trace_time_dimensions_give_the_same_numbers(kind, spp):
+    """A request whose dimension is known at trace time (before an integrator's loop)
+    takes a specialised path (lab_halton unrolls its digit loop); it must return
+    exactly what the general path does, here forced with ``static_dims = False``,
+    for 70 dimensions (past lab_halton's 64 bases) and both Halton randomisations."""
+    variants = ({"randomization": "owen"}, {"randomization": "permute_digits"}) if kind == "lab_halton" else ({},)
+    for params in variants:
+        known = draw(kind, spp, 16, seed=4, pattern="21" * 23 + "2", **params)
+        general = draw(kind, spp, 16, seed=4, pattern="21" * 23 + "2", static_dims=False, **params)
+        assert known.shape[-1] == 71
+        assert np.array_equal(known, general), params
+
+
+@pytest.mark.parametrize("kind", ("lab_halton", "lab_sobol"))
+def test_requests_inside_a_symbolic_loop(kind):
+    """Inside a symbolic loop (as in Mitsuba's path integrator) the dimension is a
+    loop variable: the loop's draws equal the same requests made in sequence."""
+    n, trips = 16 * 64, 3
+    s = make(kind, 64)
+    s.seed(2, n)
+    s.next_2d()                                    # the pixel request, before the loop
+    out = dr.zeros(mi.Float, 3 * n * trips)
+    lane = dr.arange(mi.UInt32, n)
+
+    def body(k, s):
+        p, u = s.next_2d(), s.next_1d()
+        for j, v in enumerate((p.x, p.y, u)):
+            dr.scatter(out, v, (k * 3 + j) * n + lane)
+        return k + 1, s
+
+    dr.while_loop((mi.UInt32(0), s), lambda k, s: k < trips, body)
+    looped = np.array(out).reshape(trips * 3, n).T.reshape(16, 64, -1)
+    assert np.array_equal(looped, draw(kind, 64, 16, seed=2, pattern="2" + "21" * trips)[..., 2:])
+
+
 @pytest.mark.parametrize("params, name", [
     ({"type": "lab_sobol", "sample_count": 0}, "sample_count"),
     ({"type": "lab_independent", "seed": -1}, "seed"),
@@ -296,6 +338,8 @@ def test_halton_float_digits_are_exact():
         inv = dr.rcp(base)
         q = dr.floor(dr.fma(mi.Float(n), inv, 0.5 * inv))
         assert np.array_equal(np.array(mi.UInt32(q)), ref // b), b
+        # the constant used where the dimension is known at trace time is the same float
+        assert np.float32(1.0 / b) == np.array(inv)[0], b
 
 
 def test_halton_is_stratified_per_base():

@@ -73,7 +73,14 @@ def dim_key(seed, dim, pass_index):
 
 def to_unit_float(x):
     """uint32 -> float32 in [0, 1): the top 24 bits, so the result is never 1."""
-    return mi.Float(mi.UInt32(x) >> 8) * (2.0 ** -24)
+    return to_float(mi.UInt32(x) >> 8) * (2.0 ** -24)
+
+
+def to_float(x):
+    """uint32 below 2^31 -> float32 through the *signed* conversion: AVX2 has a
+    single instruction for int32 -> float32 and none for uint32 (LLVM emits a
+    multi-instruction sequence), and the two agree below 2^31."""
+    return mi.Float(mi.Int32(x))
 
 
 # ----------------------------------------------------------------------------
@@ -198,9 +205,10 @@ class LabSampler(mi.Sampler):
     Subclasses set ``plugin_name`` and implement ``_seed_state`` (per-render
     arrays, called with the opaque combined seed), ``_sample_1d(dim)`` and
     ``_sample_2d(dim)``; ``dim`` is the index of the first dimension the call
-    consumes (a 1D request uses one, a 2D request two, as in pbrt). The base
-    keeps the dimension counter as an opaque Dr.Jit array so symbolic loops
-    carry it.
+    consumes (a 1D request uses one, a 2D request two, as in pbrt), a Python
+    int where it is known at trace time and a UInt32 array otherwise
+    (``_current_dim``). The base keeps the dimension counter as an opaque
+    Dr.Jit array so symbolic loops carry it.
     """
 
     plugin_name = "lab_sampler"
@@ -225,6 +233,7 @@ class LabSampler(mi.Sampler):
         self._warned_spp = None
         self.dim = dr.opaque(mi.UInt32, 0)
         self.pass_index = dr.opaque(mi.UInt32, 0)
+        self._static_dim = None
 
     # -- layout ----------------------------------------------------------------
     def wavefront_layout(self, wavefront_size: int, spp: int):
@@ -252,6 +261,7 @@ class LabSampler(mi.Sampler):
             seed_value = seed_value + dr.opaque(mi.UInt32, self.base_seed)
         self.dim = dr.opaque(mi.UInt32, 0)
         self.pass_index = dr.opaque(mi.UInt32, 0)
+        self._track_dim(0)
         self._seed_state(seed_value, n, spp)
 
     def advance(self):
@@ -265,16 +275,46 @@ class LabSampler(mi.Sampler):
         super().advance()
         self.dim = dr.opaque(mi.UInt32, 0)
         self.pass_index = self.pass_index + 1
+        self._track_dim(0)
+
+    # -- dimension counter -----------------------------------------------------
+    #: Hand subclasses the dimension as a Python int where it is known (see _current_dim).
+    static_dims = True
+
+    def _track_dim(self, value: int | None):
+        """Remember that ``self.dim`` (this very Dr.Jit variable) holds ``value``."""
+        self._static_dim = None if value is None else (value, self.dim.index)
+
+    def _current_dim(self):
+        """The dimension counter as a Python int where its value is known, else the array.
+
+        The requests an integrator makes before its path loop (the pixel
+        position) happen in program order, so the counter is known at trace
+        time; a subclass can then unroll work that depends on the dimension
+        (lab_halton's digit count) instead of looping over it at run time.
+        Inside a symbolic loop or call, or once anything else has replaced
+        ``self.dim`` (a loop writing back its state, ``clone``), the value is
+        only known to the kernel, and the array is returned. Both paths must
+        give the same numbers (tested).
+        """
+        known = self._static_dim
+        if (self.static_dims and known is not None and known[1] == self.dim.index
+                and not dr.flag(dr.JitFlag.SymbolicScope)):
+            return known[0]
+        return self.dim
+
+    def _next(self, sample, n_dims: int):
+        dim = self._current_dim()
+        value = sample(dim)
+        self.dim = self.dim + n_dims
+        self._track_dim(dim + n_dims if isinstance(dim, int) else None)
+        return value
 
     def next_1d(self, active=True):
-        value = self._sample_1d(self.dim)
-        self.dim = self.dim + 1
-        return value
+        return self._next(self._sample_1d, 1)
 
     def next_2d(self, active=True):
-        value = self._sample_2d(self.dim)
-        self.dim = self.dim + 2
-        return value
+        return self._next(self._sample_2d, 2)
 
     def _state_names(self) -> list[str]:
         return [k for k, v in self.__dict__.items() if dr.is_array_v(v) or isinstance(v, mi.PCG32)]

@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from mitsuba_lab.plugins.samplers.common import (
-    ONE_MINUS_EPS, LabSampler, check_choice, dim_key, mix32, pixel_seeds, to_unit_float)
+    ONE_MINUS_EPS, LabSampler, check_choice, dim_key, mix32, pixel_seeds, to_float, to_unit_float)
 
 RANDOMIZATIONS = ("permute_digits", "owen")
 
@@ -66,15 +67,20 @@ class LabHaltonSampler(LabSampler):
     infinitely many zero digits amounts to. Each pixel uses the first spp
     points of the sequence, so any sample count is fine.
 
-    Cost: the dimension index is a loop variable of the integrator, so the
-    base and K_b come from one gather in a 64-entry table; the first digit is
-    unrolled and the rest run in one symbolic loop shared by both coordinates
-    of a 2D request. There is no integer division in the kernel: digits and
-    ``(a d + c) mod b`` are float32 ``floor((n + 1/2) / b)`` on integers below
-    2^21 (exact); ``c = floor(b (h >> 8) / 2^24)`` (uniform up to 2^-24, the
-    float resolution), ``a`` from the top 16 bits of ``h`` times an odd constant. A uniformly random affine map over GF(b) is sharply 2-transitive
-    (a pair of distinct digits goes to a uniform pair of distinct digits), which
-    is all that Owen's variance analysis asks of the nested permutations.
+    Cost: inside the integrator's path loop the dimension index is a loop
+    variable, so the base and K_b come from one gather in a 64-entry table; the
+    first digit is unrolled and the rest run in one symbolic loop shared by
+    both coordinates of a 2D request. Where the dimension is known at trace
+    time (the pixel position, requested before the loop) the bases are
+    constants and all digits are unrolled, with the same numbers as the loop.
+    There is no integer division in the kernel: digits and ``(a d + c) mod b``
+    are float32 ``floor((n + 1/2) / b)`` on integers below 2^21 (exact). The
+    affine map takes one uniform ``u = b (h >> 9) / 2^23`` from the digit's
+    hash: ``c = floor(u)`` (uniform up to b 2^-23) and ``a = 1 + floor((b - 1)
+    frac(u))`` (frac(u) keeps at least 14 bits, and given c it is still about
+    uniform). A uniformly random affine map over GF(b) is sharply 2-transitive
+    (a pair of distinct digits goes to a uniform pair of distinct digits),
+    which is all that Owen's variance analysis asks of the nested permutations.
 
     .. code-block:: python
 
@@ -104,6 +110,20 @@ class LabHaltonSampler(LabSampler):
         # base | K_b << 16: one gather gives both (K_b <= 32, base <= 311).
         self.base_table = mi.UInt32([b | n_digits(spp, b) << 16 for b in PRIMES])
 
+    def _static_base(self, dim: int):
+        """(b, 1/b, 1/(2b), b 2^-23, K_b) of a dimension known at trace time: constants."""
+        base = PRIMES[dim % len(PRIMES)]
+        inv = float(np.float32(1.0 / base))   # what dr.rcp gives (correctly rounded)
+        return float(base), inv, 0.5 * inv, base * 2.0 ** -23, n_digits(self.spp, base)
+
+    def _gathered_base(self, dim):
+        """The same for a dimension known only to the kernel: one table gather."""
+        packed = dr.gather(mi.UInt32, self.base_table, mi.UInt32(dim) & (len(PRIMES) - 1))
+        # max(., 2): lanes past the end of a packet gather 0.
+        base = to_float(dr.maximum(packed & 0xFFFF, 2))
+        inv = dr.rcp(base)
+        return base, inv, 0.5 * inv, base * 2.0 ** -23, packed >> 16
+
     def _radical_inverses(self, dims):
         """Randomised radical inverses of the sample index for the dimensions ``dims``.
 
@@ -113,41 +133,41 @@ class LabHaltonSampler(LabSampler):
         uniform tail, so no coordinate needs a mask.
         """
         owen = self.randomization == "owen"
-        coords = []
-        for dim in dims:
-            slot = mi.UInt32(dim) & (len(PRIMES) - 1)
-            packed = dr.gather(mi.UInt32, self.base_table, slot)
-            # max(., 2): lanes past the end of a packet gather 0.
-            base = mi.Float(dr.maximum(packed & 0xFFFF, 2))
-            coords.append((base, dr.rcp(base), packed >> 16))
+        static = all(isinstance(dim, int) for dim in dims)
+        coords = [self._static_base(dim) if static else self._gathered_base(dim) for dim in dims]
 
         def digit_step(c, rest, h, value, scale):
             """Digit k of ``rest`` permuted by d -> (a d + c) mod b; (a, c) from the hash h
             of the prefix (owen) or of the level (permute_digits). Float arithmetic on
             integers < 2^24 (exact); floor((n + 1/2) / b) cannot round across an
             integer for n < 2^21, b <= 311 (the margin 1/(2b) beats the rounding)."""
-            base, inv_base, _ = coords[c]
-            q = dr.floor(dr.fma(rest, inv_base, 0.5 * inv_base))
+            base, inv_base, half_inv, u_scale, _ = coords[c]
+            q = dr.floor(dr.fma(rest, inv_base, half_inv))
             digit = dr.fma(-q, base, rest)
-            a = 1.0 + dr.floor(mi.Float((h * 0x9E3779B1) >> 16) * ((base - 1.0) * 2.0 ** -16))
-            c_shift = dr.minimum(dr.floor(mi.Float(h >> 8) * (base * 2.0 ** -24)), base - 1.0)
+            u = to_float(h >> 9) * u_scale
+            c_shift = dr.floor(u)
+            a = dr.floor(dr.fma(u - c_shift, base - 1.0, 1.0))
             t = dr.fma(a, digit, c_shift)
-            permuted = dr.fma(-dr.floor(dr.fma(t, inv_base, 0.5 * inv_base)), base, t)
+            permuted = dr.fma(-dr.floor(dr.fma(t, inv_base, half_inv)), base, t)
             scale = scale * inv_base
             value = dr.fma(permuted, scale, value)
-            h = mix32(h ^ mi.UInt32(digit)) if owen else mix32(h + 0x9E3779B9)
+            h = mix32(h ^ mi.UInt32(mi.Int32(digit))) if owen else mix32(h + 0x9E3779B9)
             return q, h, value, scale
 
+        index = to_float(self.sample_index)
         state = []
         for c, dim in enumerate(dims):
-            st = (mi.Float(self.sample_index), dim_key(self.pixel_seed, dim, self.pass_index),
-                  mi.Float(0), mi.Float(1))
+            st = (index, dim_key(self.pixel_seed, dim, self.pass_index), mi.Float(0), mi.Float(1))
             state.append(digit_step(c, *st) if self.spp > 1 else st)   # K_b >= 1 once spp >= 2
 
-        if self.spp > 2:   # K_b > 1 happens for base 2 at spp >= 3 only
-            trips = coords[0][2]
+        if static:
+            # The loop's trip count, max K_b over the request, unrolled: same numbers.
+            for _ in range(max(co[4] for co in coords) - 1):
+                state = [digit_step(c, *st) for c, st in enumerate(state)]
+        elif self.spp > 2:   # K_b > 1 happens for base 2 at spp >= 3 only
+            trips = coords[0][4]
             for co in coords[1:]:
-                trips = dr.maximum(trips, co[2])
+                trips = dr.maximum(trips, co[4])
 
             def body(k, *flat):
                 out = []
