@@ -26,6 +26,7 @@ import hashlib
 import os
 import statistics
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +35,8 @@ import mitsuba_lab  # noqa: F401
 import drjit as dr
 import mitsuba as mi
 from mitsuba_lab.experiment.spectrum import bright_mask, low_frequency_fraction, rows_below_bright
+from mitsuba_lab.pixel_integrals import exact_owen_pair, first_pair, integrand_families, pixel_integral_mse
+from mitsuba_lab.plugins.samplers.common import log2_ceil
 
 CORNELL = Path(__file__).resolve().parents[1] / "scenes" / "cornell_box.xml"
 CACHE = Path(__file__).resolve().parents[1] / "out" / "bench_samplers"
@@ -127,6 +130,37 @@ def paired_ratio(times, reference_times) -> float:
     return statistics.median(t / r for t, r in zip(times, reference_times))
 
 
+def integrand_study(args):
+    """Pixel-integral MSE of each sampler's first dimension pair on smooth and
+    discontinuous 2D integrands, against multijitter: where Owen-scrambled nets win."""
+    names = [n for n in args.samplers if n != "orthogonal"]   # orthogonal changes the spp
+    exact = "lab_sobol" in names and all(1 << log2_ceil(n) == n for n in args.integrand_spp)
+    if exact:
+        names.append("exact Owen")
+    print(f"\n2D pixel integrals ({args.integrand_pixels} random integrands per family, "
+          f"{args.integrand_seeds} seeds): MSE / multijitter's (+- relative standard error)")
+    families = integrand_families(args.integrand_pixels, np.random.default_rng(2024))
+    print(f"{'sampler':16s} " + " ".join(f"{fam + ' ' + str(spp):>17s}"
+                                         for fam in families for spp in args.integrand_spp))
+    sq = {}
+    for name in names:
+        pair = exact_owen_pair if name == "exact Owen" else partial(first_pair, name)
+        for spp in args.integrand_spp:
+            per_seed = pixel_integral_mse(pair, spp, families, range(args.integrand_seeds))
+            for fam, values in per_seed.items():
+                sq[name, fam, spp] = mean_se(values)
+    for name in names:
+        cells = []
+        for fam in families:
+            for spp in args.integrand_spp:
+                (m, se), base = sq[name, fam, spp], sq["multijitter", fam, spp][0]
+                cells.append(f"{m / base:8.3f} +-{100 * se / m:4.1f}%")
+        print(f"{name:16s} " + " ".join(f"{c:>17s}" for c in cells))
+    if exact:
+        print("(exact Owen: the same Sobol points with exactly nested uniform scrambling in numpy,"
+              " a reference for lab_sobol's hash-based scramble)")
+
+
 def mean_se(values) -> tuple[float, float]:
     return statistics.mean(values), statistics.stdev(values) / len(values) ** 0.5
 
@@ -152,7 +186,13 @@ def main():
     ap.add_argument("--blue-study-spp", dest="blue_spp_study", type=int, nargs="+", default=[1, 2, 4, 16])
     ap.add_argument("--blue-seeds", type=int, default=8)
     ap.add_argument("--blue-ref-spp", type=int, default=4096)
+    ap.add_argument("--integrand-spp", type=int, nargs="*", default=[16, 64, 256],
+                    help="sample counts of the 2D pixel-integral study (none: skip it)")
+    ap.add_argument("--integrand-pixels", type=int, default=4096, help="random integrands per family")
+    ap.add_argument("--integrand-seeds", type=int, default=8)
     args = ap.parse_args()
+    if args.integrand_spp and "multijitter" not in args.samplers:
+        ap.error("the 2D pixel-integral study compares with multijitter: add it to --samplers or pass --integrand-spp")
 
     if not args.spp:
         args.spp, args.blue_spp = [], []
@@ -209,6 +249,8 @@ def main():
                 print_blue_noise(f"spp {spp:4d}", {n: errors[n, spp] for n in ("lab_sobol", "lab_zsobol")},
                                  {n: rows[n, spp][0][0] for n in ("lab_sobol", "lab_zsobol")}, row0)
 
+    if args.integrand_spp:
+        integrand_study(args)
     if args.blue_depths:
         blue_noise_study(argparse.Namespace(**{**vars(args), "blue_spp": args.blue_spp_study}))
 
