@@ -232,7 +232,7 @@ def test_deterministic_seeds_and_clone(kind):
 
 
 @pytest.mark.parametrize("kind", ("lab_stratified", "lab_halton", "lab_sobol", "lab_zsobol"))
-@pytest.mark.parametrize("spp", (1, 3, 16, 64))
+@pytest.mark.parametrize("spp", (1, 3, 16, 64, 256))
 def test_trace_time_dimensions_give_the_same_numbers(kind, spp):
     """A request whose dimension is known at trace time (before an integrator's loop)
     takes a specialised path (lab_halton unrolls its digit loop); it must return
