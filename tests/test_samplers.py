@@ -246,6 +246,29 @@ def test_trace_time_dimensions_give_the_same_numbers(kind, spp):
         assert np.array_equal(known, general), params
 
 
+@pytest.mark.parametrize("kind", QMC)
+def test_advance_restarts_the_dimensions(kind):
+    """A new pass (advance(), as Mitsuba's multi-pass rendering calls it) restarts at
+    dimension 0 with a fresh randomisation: dimension 0 is stratified again (16 spp,
+    one sample per interval of 1/16 for every QMC sampler), the points differ from
+    the first pass, and trace-time and general dimensions still agree."""
+    passes = []
+    for static in (True, False):
+        s = make(kind, 16, **({"width": 4} if kind == "lab_zsobol" else {}))
+        s.static_dims = static
+        s.seed(6, 16 * 16)
+        first = [s.next_2d().x, s.next_1d(), s.next_2d().y]
+        s.advance()
+        second = [s.next_2d().x, s.next_1d(), s.next_2d().y]
+        dr.eval(*first, *second)
+        passes.append([np.array(v).reshape(16, 16) for v in first + second])
+    known, general = passes
+    assert all(np.array_equal(a, b) for a, b in zip(known, general))
+    x0 = known[3]
+    assert all(len(set(np.floor(px * 16).astype(int))) == 16 for px in x0)
+    assert not np.allclose(x0, known[0])
+
+
 @pytest.mark.parametrize("kind", ("lab_halton", "lab_sobol"))
 def test_requests_inside_a_symbolic_loop(kind):
     """Inside a symbolic loop (as in Mitsuba's path integrator) the dimension is a

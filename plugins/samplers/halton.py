@@ -22,6 +22,10 @@ def first_primes(n: int) -> list[int]:
 
 #: Bases of the supported dimensions; dimension d uses PRIMES[d mod 64].
 PRIMES = first_primes(64)
+#: Gaps PRIMES[d + 1] - PRIMES[d] (all <= 14) as 4-bit nibbles, 8 per word:
+#: dimension d's gap is nibble d & 7 of word d >> 3 (the last one, 0, is never read).
+GAP_WORDS = tuple(sum((PRIMES[8 * w + j + 1] - PRIMES[8 * w + j] if 8 * w + j + 1 < len(PRIMES) else 0) << (4 * j)
+                      for j in range(8)) for w in range(len(PRIMES) // 8))
 #: Largest sample count: digits are extracted in float32 as floor((n + 1/2) / b),
 #: exact for every n < 2^21 and b <= 311 (checked exhaustively in the tests).
 MAX_SPP = 1 << 21
@@ -68,8 +72,12 @@ class LabHaltonSampler(LabSampler):
     points of the sequence, so any sample count is fine.
 
     Cost: inside the integrator's path loop the dimension index is a loop
-    variable, so the base and K_b come from one gather in a 64-entry table; the
-    first digit is unrolled and the rest run in one symbolic loop shared by
+    variable. The base of the next dimension is carried from request to request
+    as sampler state (the next prime is the current one plus a 4-bit gap read
+    from eight 32-bit constants through a 3-level select tree: a table gather
+    costs several times more where LLVM scalarises gathers, as on this
+    project's AMD CPUs), K_b is a few comparisons with thresholds fixed by spp,
+    the first digit is unrolled and the rest run in one symbolic loop shared by
     both coordinates of a 2D request. Where the dimension is known at trace
     time (the pixel position, requested before the loop) the bases are
     constants and all digits are unrolled, with the same numbers as the loop.
@@ -96,7 +104,7 @@ class LabHaltonSampler(LabSampler):
         self._check_spp(self.spp)
         self.pixel_seed = mi.UInt32(0)
         self.sample_index = mi.UInt32(0)
-        self.base_table = mi.UInt32(0)
+        self.base = mi.UInt32(PRIMES[0])   # base of the next dimension to be drawn
 
     def _check_spp(self, spp: int):
         if spp > MAX_SPP:
@@ -107,8 +115,11 @@ class LabHaltonSampler(LabSampler):
         pixel, sample = self.wavefront_layout(wavefront_size, spp)
         self.pixel_seed = pixel_seeds(seed_value, pixel)
         self.sample_index = sample
-        # base | K_b << 16: one gather gives both (K_b <= 32, base <= 311).
-        self.base_table = mi.UInt32([b | n_digits(spp, b) << 16 for b in PRIMES])
+        self.base = mi.UInt32(PRIMES[0])
+
+    def advance(self):
+        super().advance()
+        self.base = mi.UInt32(PRIMES[0])
 
     def _static_base(self, dim: int):
         """(b, 1/b, 1/(2b), b 2^-23, K_b) of a dimension known at trace time: constants."""
@@ -116,13 +127,39 @@ class LabHaltonSampler(LabSampler):
         inv = float(np.float32(1.0 / base))   # what dr.rcp gives (correctly rounded)
         return float(base), inv, 0.5 * inv, base * 2.0 ** -23, n_digits(self.spp, base)
 
-    def _gathered_base(self, dim):
-        """The same for a dimension known only to the kernel: one table gather."""
-        packed = dr.gather(mi.UInt32, self.base_table, mi.UInt32(dim) & (len(PRIMES) - 1))
-        # max(., 2): lanes past the end of a packet gather 0.
-        base = to_float(dr.maximum(packed & 0xFFFF, 2))
-        inv = dr.rcp(base)
-        return base, inv, 0.5 * inv, base * 2.0 ** -23, packed >> 16
+    def _next_base(self, base, dim):
+        """PRIMES[(dim + 1) mod 64] given base = PRIMES[dim mod 64], without a gather."""
+        d = mi.UInt32(dim) & (len(PRIMES) - 1)
+        words, word_index = [mi.UInt32(w) for w in GAP_WORDS], d >> 3
+        for bit in (1, 2, 4):
+            pick = (word_index & bit) != 0
+            words = [dr.select(pick, words[i + 1], words[i]) for i in range(0, len(words), 2)]
+        gap = (words[0] >> ((d & 7) << 2)) & 15
+        return dr.select(d == len(PRIMES) - 1, mi.UInt32(PRIMES[0]), base + gap)
+
+    def _digit_count(self, base):
+        """K_b = 1 + #{j >= 1 : b^j < spp}; b^j < spp iff b < r_j, the least r with r^j >= spp."""
+        count = mi.UInt32(1 if self.spp > 1 else 0)
+        j = 1
+        while 2 ** j < self.spp:
+            r_j = 2
+            while r_j ** j < self.spp:
+                r_j += 1
+            count += dr.select(base < r_j, mi.UInt32(1), mi.UInt32(0))
+            j += 1
+        return count
+
+    def _carried_bases(self, dims):
+        """(b, 1/b, 1/(2b), b 2^-23, K_b) per dimension from the carried base, which then
+        moves past ``dims`` (consecutive dimensions)."""
+        coords, base = [], self.base
+        for dim in dims:
+            b = to_float(base)
+            inv = dr.rcp(b)
+            coords.append((b, inv, 0.5 * inv, b * 2.0 ** -23, self._digit_count(base)))
+            base = self._next_base(base, dim)
+        self.base = base
+        return coords
 
     def _radical_inverses(self, dims):
         """Randomised radical inverses of the sample index for the dimensions ``dims``.
@@ -134,7 +171,11 @@ class LabHaltonSampler(LabSampler):
         """
         owen = self.randomization == "owen"
         static = all(isinstance(dim, int) for dim in dims)
-        coords = [self._static_base(dim) if static else self._gathered_base(dim) for dim in dims]
+        if static:
+            coords = [self._static_base(dim) for dim in dims]
+            self.base = mi.UInt32(PRIMES[(dims[-1] + 1) % len(PRIMES)])
+        else:
+            coords = self._carried_bases(dims)
 
         def digit_step(c, rest, h, value, scale):
             """Digit k of ``rest`` permuted by d -> (a d + c) mod b; (a, c) from the hash h
