@@ -259,9 +259,8 @@ class LabSampler(mi.Sampler):
             seed_value = mi.UInt32(seed)
             dr.make_opaque(seed_value)
             seed_value = seed_value + dr.opaque(mi.UInt32, self.base_seed)
-        self.dim = dr.opaque(mi.UInt32, 0)
         self.pass_index = dr.opaque(mi.UInt32, 0)
-        self._track_dim(0)
+        self._restart_dims()
         self._seed_state(seed_value, n, spp)
 
     def advance(self):
@@ -273,13 +272,18 @@ class LabSampler(mi.Sampler):
         of different passes are not jointly stratified.
         """
         super().advance()
-        self.dim = dr.opaque(mi.UInt32, 0)
         self.pass_index = self.pass_index + 1
-        self._track_dim(0)
+        self._restart_dims()
 
     # -- dimension counter -----------------------------------------------------
     #: Hand subclasses the dimension as a Python int where it is known (see _current_dim).
     static_dims = True
+
+    def _restart_dims(self):
+        """Back to dimension 0 (a new render or pass); subclasses reset state that follows
+        the dimension counter here."""
+        self.dim = dr.opaque(mi.UInt32, 0)
+        self._track_dim(0)
 
     def _track_dim(self, value: int | None):
         """Remember that ``self.dim`` (this very Dr.Jit variable) holds ``value``."""

@@ -1,6 +1,8 @@
 """``lab_halton``: randomised Halton points per pixel."""
 from __future__ import annotations
 
+import functools
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -38,6 +40,27 @@ def n_digits(spp: int, base: int) -> int:
         reach *= base
         k += 1
     return k
+
+
+def digit_constants(base, inv_base, k_b):
+    """What the digit steps of one coordinate use: (b, 1/b, 1/(2b), b 2^-23, K_b)."""
+    return base, inv_base, 0.5 * inv_base, base * 2.0 ** -23, k_b
+
+
+@functools.lru_cache(maxsize=None)
+def digit_thresholds(spp: int) -> tuple[int, ...]:
+    """r_j, the least integer with r_j^j >= spp, for every j >= 1 with 2^j < spp
+    (larger j cannot count: no base is below 2)."""
+    out, j = [], 1
+    while 2 ** j < spp:
+        r = max(2, round(spp ** (1.0 / j)))
+        while r ** j < spp:
+            r += 1
+        while r > 2 and (r - 1) ** j >= spp:
+            r -= 1
+        out.append(r)
+        j += 1
+    return tuple(out)
 
 
 class LabHaltonSampler(LabSampler):
@@ -116,17 +139,16 @@ class LabHaltonSampler(LabSampler):
         pixel, sample = self.wavefront_layout(wavefront_size, spp)
         self.pixel_seed = pixel_seeds(seed_value, pixel)
         self.sample_index = sample
-        self.base = mi.UInt32(PRIMES[0])
 
-    def advance(self):
-        super().advance()
+    def _restart_dims(self):
+        super()._restart_dims()
         self.base = mi.UInt32(PRIMES[0])
 
     def _static_base(self, dim: int):
-        """(b, 1/b, 1/(2b), b 2^-23, K_b) of a dimension known at trace time: constants."""
+        """Digit constants of a dimension known at trace time: Python numbers."""
         base = PRIMES[dim % len(PRIMES)]
         inv = float(np.float32(1.0 / base))   # what dr.rcp gives (correctly rounded)
-        return float(base), inv, 0.5 * inv, base * 2.0 ** -23, n_digits(self.spp, base)
+        return digit_constants(float(base), inv, n_digits(self.spp, base))
 
     def _next_base(self, base, dim):
         """PRIMES[(dim + 1) mod 64] given base = PRIMES[dim mod 64], without a gather."""
@@ -139,25 +161,19 @@ class LabHaltonSampler(LabSampler):
         return dr.select(d == len(PRIMES) - 1, mi.UInt32(PRIMES[0]), base + gap)
 
     def _digit_count(self, base):
-        """K_b = 1 + #{j >= 1 : b^j < spp}; b^j < spp iff b < r_j, the least r with r^j >= spp."""
+        """K_b = 1 + #{j >= 1 : b^j < spp}, with b^j < spp iff b < r_j (``digit_thresholds``)."""
         count = mi.UInt32(1 if self.spp > 1 else 0)
-        j = 1
-        while 2 ** j < self.spp:
-            r_j = 2
-            while r_j ** j < self.spp:
-                r_j += 1
+        for r_j in digit_thresholds(self.spp):
             count += dr.select(base < r_j, mi.UInt32(1), mi.UInt32(0))
-            j += 1
         return count
 
     def _carried_bases(self, dims):
-        """(b, 1/b, 1/(2b), b 2^-23, K_b) per dimension from the carried base, which then
-        moves past ``dims`` (consecutive dimensions)."""
+        """Digit constants per dimension from the carried base, which then moves past
+        ``dims`` (consecutive dimensions)."""
         coords, base = [], self.base
         for dim in dims:
             b = to_float(base)
-            inv = dr.rcp(b)
-            coords.append((b, inv, 0.5 * inv, b * 2.0 ** -23, self._digit_count(base)))
+            coords.append(digit_constants(b, dr.rcp(b), self._digit_count(base)))
             base = self._next_base(base, dim)
         self.base = base
         return coords
