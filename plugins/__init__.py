@@ -6,6 +6,10 @@ class is defined, so after a variant switch the modules are executed again
 (a reload replaces the module's globals in place, so registrations made for an
 earlier variant would build the new variant's classes: re-running on every
 switch keeps the registration and the classes in step).
+
+``params`` (every plugin's declared parameters, ``resolve``) imports no Mitsuba
+variant and holds no variant-bound class, so it is neither a plugin nor a helper
+module here: it is imported once and never re-run.
 """
 from __future__ import annotations
 

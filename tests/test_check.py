@@ -9,6 +9,7 @@ import pytest
 
 from mitsuba_lab import check
 from mitsuba_lab.errors import LabError
+from mitsuba_lab.scene_xml import scene_defaults
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STIFF = os.path.join(ROOT, "scenes", "stiff")
@@ -68,6 +69,40 @@ def test_scene_warnings(tmp_path):
     assert "beyond far_clip = 1e+04" in text
     status, text = run_check([os.path.join(STIFF, "zero_emitters.xml"), *SMALL, "-o", prefix])
     assert text.count("emits nothing") == 2
+
+
+USER_SCENE = """<scene version="3.0.0">
+    <sensor type="perspective">
+        <float name="fov" value="45"/>
+        <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="300"/><integer name="height" value="200"/></film>
+    </sensor>
+    <shape type="sphere"><float name="radius" value="0.8"/><bsdf type="diffuse"/></shape>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="0.5"/><rotate x="1" angle="90"/><translate y="2"/></transform>
+        <emitter type="area"><rgb name="radiance" value="10"/></emitter>
+    </shape>
+</scene>
+"""
+
+
+def test_a_user_scene_without_a_res_default(tmp_path):
+    # No <default name="res">: --res sets the film's width and height instead of failing with
+    # "unused parameters: $res".
+    scene = tmp_path / "my_scene.xml"
+    scene.write_text(USER_SCENE)
+    assert set(scene_defaults(str(scene))) == set()
+    assert set(scene_defaults(os.path.join(STIFF, "all_specular.xml"))) >= {"res", "spp"}
+    prefix = str(tmp_path / "report")
+    status, text = run_check([str(scene), "--res", "8", "--spp", "16", "--ref-spp", "32", "--splits", "4",
+                              "--max-depth", "3", "-o", prefix])
+    assert status == 0, text
+    rows = {r["strategy"]: r for r in read_rows(prefix)}
+    assert {"lab_naive", "lab_nee", "lab_mis_power", "lab_mis_balance"} <= set(rows)
+    assert float(rows["lab_nee"]["camera_rays_per_pixel"]) == 16      # rays / (8 x 8 pixels): the film is 8x8
+    assert float(rows["lab_nee"]["mean"]) > 0
+    film = check.load_check_scene(str(scene), 8, {}).sensors()[0].film().size()
+    assert (film[0], film[1]) == (8, 8)
 
 
 def test_firefly_rule():

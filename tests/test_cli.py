@@ -28,14 +28,17 @@ def run(argv):
 
 def test_render_writes_exr_with_metadata_and_png(tmp_path):
     target = tmp_path / "cb.exr"
-    code, out, err = run(["render", CORNELL, "-D", "res=32", "--spp", "4", "--max-depth", "4",
-                          "--heuristic", "balance", "--seed", "3", "-o", str(target)])
+    code, out, err = run(["render", CORNELL, "-D", "res=32", "--spp", "4", "--integrator", "lab_mis",
+                          "--max-depth", "4", "--heuristic", "balance", "--seed", "3", "-o", str(target)])
     assert code == 0, err
     image, meta = images.read_exr(str(target))
     assert image.shape == (32, 32, 3) and image.dtype == np.float32
     assert np.isfinite(image).all() and image.mean() > 0.05
     assert meta["mitsuba_lab.integrator"] == "lab_mis"
-    assert json.loads(meta["mitsuba_lab.params"]) == {"max_depth": 4, "heuristic": "balance"}
+    assert json.loads(meta["mitsuba_lab.params"]) == {      # as used: every default filled in
+        "max_depth": 4, "rr_depth": 5, "hide_emitters": False, "count_rays": True,
+        "heuristic": "balance", "beta": 2.0, "emitter_samples": 1}
+    assert json.loads(meta["mitsuba_lab.sampler"]) == {"type": "independent", "params": {"sample_count": 4}}
     stats = json.loads(meta["mitsuba_lab.stats"])
     assert stats["spp"] == 4 and stats["seed"] == 3 and stats["rays"]["camera"] == 32 * 32 * 4
     assert meta["mitsuba_lab.variant"] == "llvm_ad_rgb" and int(meta["mitsuba_lab.libllvm"].split(".")[0]) >= 16
@@ -50,10 +53,13 @@ def test_param_values_are_parsed():
 
 @pytest.mark.parametrize("argv, expected", [
     (["render", CORNELL, "--integrator", "foo"], "unknown integrator 'foo'; lab integrators: lab_naive"),
-    (["render", CORNELL, "--heuristic", "foo"], "parameter 'heuristic' must be one of balance, power"),
-    (["render", CORNELL, "--beta", "0"], "parameter 'beta' must be a finite number > 0"),
-    (["render", CORNELL, "--emitter-samples", "0"], "parameter 'emitter_samples' must be >= 1"),
-    (["render", CORNELL, "--integrator", "lab_nee", "--heuristic", "power"], "unknown parameter(s): heuristic"),
+    (["render", CORNELL, "--integrator", "lab_mis", "--heuristic", "foo"],
+     "parameter 'heuristic' must be one of balance, power"),
+    (["render", CORNELL, "--integrator", "lab_mis", "--beta", "0"], "parameter 'beta' must be a finite number > 0"),
+    (["render", CORNELL, "--integrator", "lab_mis", "--emitter-samples", "0"],
+     "parameter 'emitter_samples' must be an integer >= 1"),
+    (["render", CORNELL, "--integrator", "lab_nee", "--heuristic", "power"], "unknown parameter 'heuristic'"),
+    (["render", CORNELL, "--heuristic", "power"], "integrator 'path': unknown parameter 'heuristic'"),
     (["render", CORNELL, "--spp", "0"], "--spp: must be a positive integer"),
     (["render", os.path.join(ROOT, "scenes", "missing.xml")], "scene file not found"),
     (["render", CORNELL, "--param", "oops"], "--param expects KEY=VALUE"),
@@ -78,8 +84,9 @@ def test_malformed_scene_names_file_and_line(tmp_path):
 
 
 def test_unwritable_output_is_refused_before_rendering(tmp_path):
-    code, out, err = run(["render", CORNELL, "-o", str(tmp_path / "no" / "such" / "x.exr")])
-    assert code == 2 and "output folder does not exist" in err and out == ""
+    (tmp_path / "file").write_text("")
+    code, out, err = run(["render", CORNELL, "-o", str(tmp_path / "file" / "x.exr")])
+    assert code == 2 and "output folder" in err and out == "" and len(err.strip().splitlines()) == 1
 
 
 def test_console_script_end_to_end(tmp_path):

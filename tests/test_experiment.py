@@ -124,9 +124,20 @@ def test_store_cuts_a_torn_last_line(tmp_path):
     with open(store.path, "ab") as f:
         f.write(b'{"kind": "run", "point": "p", "se')            # killed mid-write
     again = ResultStore(str(tmp_path))
-    assert again.done_runs() == {("p", 1)}
+    assert again.done_runs() == {("p", 1): None}          # (no identity recorded in this row)
     again.append({"kind": "run", "point": "p", "seed": 2})
     assert [json.loads(line)["seed"] for line in open(store.path)] == [1, 2]
+
+
+def test_store_current_runs_skip_superseded_rows(tmp_path):
+    store = ResultStore(str(tmp_path))
+    store.append({"kind": "run", "point": "p", "seed": 1, "identity_hash": "old"})
+    store.append({"kind": "run", "point": "q", "seed": 1, "identity_hash": "old"})
+    store.append({"kind": "superseded", "point": "p", "seed": 1, "identity_hash": "old", "changes": "x"})
+    assert store.done_runs() == {("q", 1): "old"}
+    store.append({"kind": "run", "point": "p", "seed": 1, "identity_hash": "new"})   # rerun
+    store.append({"kind": "superseded", "point": "q", "seed": 1, "identity_hash": "other", "changes": "x"})
+    assert ResultStore(str(tmp_path)).done_runs() == {("p", 1): "new", ("q", 1): "old"}
 
 
 def run_cli(*args, **kwargs):

@@ -111,8 +111,8 @@ def test_zero_max_depth_renders_black():
 
 
 @pytest.mark.parametrize("params, message", [
-    ({"max_depth": -2}, "'max_depth' must be -1 (unbounded) or >= 0"),
-    ({"rr_depth": 0}, "'rr_depth' must be >= 1"),
+    ({"max_depth": -2}, "'max_depth' must be -1 (unbounded) or an integer >= 0"),
+    ({"rr_depth": 0}, "'rr_depth' must be an integer >= 1"),
 ])
 def test_shared_parameter_errors(params, message):
     from mitsuba_lab.errors import LabError

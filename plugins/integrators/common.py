@@ -20,22 +20,15 @@ from dataclasses import dataclass
 import drjit as dr
 import mitsuba as mi
 
-#: Mitsuba's convention: max_depth = -1 means unbounded.
-UNBOUNDED = -1
+from mitsuba_lab.plugins import params
+from mitsuba_lab.plugins.variant import require_jit_variant
+from mitsuba_lab.plugins.params import HEURISTICS, UNBOUNDED  # noqa: F401 (re-exported)
+
 #: Survival probability cap: every path stops with probability >= 5% per bounce
 #: past rr_depth, so even a closed box of albedo 1 terminates.
 RR_MAX_SURVIVAL = 0.95
-
-HEURISTICS = ("balance", "power", "max", "average")
-
-
-def parse_depth(value: int, name: str, plugin: str) -> int:
-    """-1 (unbounded) or a non-negative int; unbounded maps to 2^32 - 1."""
-    if value == UNBOUNDED:
-        return 0xFFFFFFFF
-    if value < 0:
-        raise ValueError(f"{plugin}: parameter '{name}' must be -1 (unbounded) or >= 0, got {value}")
-    return int(value)
+#: max_depth = -1 (unbounded) as the path loop holds it: 2^32 - 1 segments.
+DEPTH_UNBOUNDED = 0xFFFFFFFF
 
 
 def mis_weight(pdf_self, pdf_other, heuristic: str = "power", beta: float = 2.0):
@@ -183,12 +176,14 @@ class RayCounters:
 class LabPathIntegrator(mi.SamplingIntegrator):
     """Base class: parameters shared by every lab path tracer and the path loop.
 
-    Parameters (read from the plugin's properties):
+    Parameters (declared in ``plugins/params.py``, ``params.PATH_TRACER``, and read
+    from the plugin's properties by ``params.read_properties``; subclasses extend them):
 
     ============= ====== ==========================================================
     max_depth     int    Longest path, in segments: 1 = only emitters seen
-                         directly, 2 = direct lighting, -1 = unbounded (Default: -1)
-    rr_depth      int    Depth at which Russian roulette starts (Default: 5)
+                         directly, 2 = direct lighting, 0 = nothing (black),
+                         -1 = unbounded (Default: -1)
+    rr_depth      int    Depth at which Russian roulette starts, >= 1 (Default: 5)
     hide_emitters bool   Mitsuba's meaning: camera rays pass through area
                          emitters to what lies behind them, and where they
                          see only the environment the pixel is invalid
@@ -201,17 +196,23 @@ class LabPathIntegrator(mi.SamplingIntegrator):
 
     #: Plugin name, for messages.
     plugin_name = "lab_path"
+    #: Declared parameters (``plugins/params.py``); subclasses extend the tuple there.
+    PARAMETERS = params.PATH_TRACER
 
     def __init__(self, props: mi.Properties):
+        # Checked before the C++ base reads hide_emitters, so its type errors never come first.
+        require_jit_variant(type(self).plugin_name)
+        values = params.read_properties(type(self).plugin_name, props, type(self).PARAMETERS, "integrator")
         super().__init__(props)
-        name = self.plugin_name
-        self.max_depth = parse_depth(props.get("max_depth", UNBOUNDED), "max_depth", name)
-        self.rr_depth = int(props.get("rr_depth", 5))
-        if self.rr_depth <= 0:
-            raise ValueError(f"{name}: parameter 'rr_depth' must be >= 1, got {self.rr_depth}")
-        self.hide_emitters = bool(props.get("hide_emitters", False))
-        self.count_rays = bool(props.get("count_rays", True))
+        self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
+        self.rr_depth = values["rr_depth"]
+        self.hide_emitters = values["hide_emitters"]
+        self.count_rays = values["count_rays"]
         self.counters = RayCounters()
+        self.configure(values)
+
+    def configure(self, values: dict):
+        """Take the subclass's own parameters from the checked ``values`` (all declared names)."""
 
     # -- What differs between the estimators ------------------------------------
 
@@ -399,10 +400,11 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         return self.counters.read(reset)
 
     def settings(self) -> dict:
-        """The parameters in force, as plain values (for file metadata and messages)."""
-        depth = -1 if self.max_depth == 0xFFFFFFFF else self.max_depth
-        return {"max_depth": depth, "rr_depth": self.rr_depth,
-                "hide_emitters": self.hide_emitters, "count_rays": self.count_rays}
+        """The parameters in force, as plain values, every declared one in declaration
+        order (equal to ``params.resolve(plugin_name, given)``; for file metadata and messages)."""
+        values = {p.name: getattr(self, p.name) for p in self.PARAMETERS}
+        values["max_depth"] = UNBOUNDED if self.max_depth == DEPTH_UNBOUNDED else self.max_depth
+        return values
 
     def to_string(self):
         fields = ", ".join(f"{k}={v}" for k, v in self.settings().items())

@@ -4,7 +4,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators.common import HEURISTICS, LabPathIntegrator, mis_weight
+from mitsuba_lab.plugins import params
+from mitsuba_lab.plugins.integrators.common import LabPathIntegrator, mis_weight
 
 
 class LabMISIntegrator(LabPathIntegrator):
@@ -30,8 +31,9 @@ class LabMISIntegrator(LabPathIntegrator):
                            (Default: 2)
     emitter_samples int    Shadow rays per vertex, n_L >= 1. The kernel holds
                            n_L copies of the emitter-sampling code. (Default: 1)
-    max_depth       int    Longest path in segments, -1 = unbounded (Default: -1)
-    rr_depth        int    Depth at which Russian roulette starts (Default: 5)
+    max_depth       int    Longest path in segments, -1 = unbounded, >= 0
+                           otherwise (0 renders black) (Default: -1)
+    rr_depth        int    Depth at which Russian roulette starts, >= 1 (Default: 5)
     hide_emitters   bool   Camera rays pass through area emitters; the bare
                            environment is invalid (Default: false)
     count_rays      bool   Count camera / extension / shadow rays (Default: true)
@@ -46,20 +48,13 @@ class LabMISIntegrator(LabPathIntegrator):
     """
     plugin_name = "lab_mis"
     samples_emitters = True
+    #: The path tracer's parameters and heuristic, beta, emitter_samples (``params.LAB_MIS``).
+    PARAMETERS = params.LAB_MIS
 
-    def __init__(self, props: mi.Properties):
-        super().__init__(props)
-        self.heuristic = str(props.get("heuristic", "power"))
-        if self.heuristic not in HEURISTICS:
-            raise ValueError(f"lab_mis: parameter 'heuristic' must be one of {', '.join(HEURISTICS)}, "
-                             f"got '{self.heuristic}'")
-        self.beta = float(props.get("beta", 2.0))
-        if not (self.beta > 0 and dr.isfinite(self.beta)):
-            raise ValueError(f"lab_mis: parameter 'beta' must be a finite number > 0, got {self.beta}")
-        self.emitter_samples = int(props.get("emitter_samples", 1))
-        if self.emitter_samples < 1:
-            raise ValueError(f"lab_mis: parameter 'emitter_samples' must be >= 1, "
-                             f"got {self.emitter_samples}")
+    def configure(self, values: dict):
+        self.heuristic = values["heuristic"]
+        self.beta = values["beta"]
+        self.emitter_samples = values["emitter_samples"]
 
     def weight(self, pdf_self, pdf_other):
         return mis_weight(pdf_self, pdf_other, self.heuristic, self.beta)
@@ -73,10 +68,6 @@ class LabMISIntegrator(LabPathIntegrator):
     # ----------------------- Emitter sampling ----------------------
     def emitter_sample_weight(self, ds, bsdf_pdf):
         return dr.select(ds.delta, 1.0, self.weight(self.emitter_samples * ds.pdf, bsdf_pdf))
-
-    def settings(self) -> dict:
-        return {"heuristic": self.heuristic, "beta": self.beta,
-                "emitter_samples": self.emitter_samples, **super().settings()}
 
 
 mi.register_integrator("lab_mis", lambda props: LabMISIntegrator(props))

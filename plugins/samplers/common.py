@@ -26,6 +26,9 @@ import warnings
 import drjit as dr
 import mitsuba as mi
 
+from mitsuba_lab.plugins import params
+from mitsuba_lab.plugins.variant import require_jit_variant
+
 #: 2^-32: maps a uint32 to [0, 1).
 INV_2_32 = 2.0 ** -32
 #: Largest float32 below 1.
@@ -212,24 +215,31 @@ class LabSampler(mi.Sampler):
     """
 
     plugin_name = "lab_sampler"
+    #: Declared parameters (``plugins/params.py``): sample_count and seed here, each
+    #: sampler's own added there (``params.LAB_STRATIFIED``, ...).
+    PARAMETERS = params.SAMPLER
     #: Whether a power-of-two sample count matters (a warning otherwise).
     prefers_power_of_two = False
     #: Names of Python-level settings copied by ``clone``/``fork`` (besides props).
     _settings: tuple[str, ...] = ()
 
     def __init__(self, props: mi.Properties):
-        super().__init__(props)
-        # A copy: the Properties passed to the constructor die with mi.load_dict, and
-        # clone() builds a twin from them later (a stored reference dangles).
-        self._props = mi.Properties(props)
-        spp = int(props.get("sample_count", 4))
-        if spp < 1:
-            raise ValueError(f"{self.plugin_name}: parameter 'sample_count' must be a positive integer, got {spp}")
-        base_seed = int(props.get("seed", 0))
-        if not 0 <= base_seed < 2 ** 32:
-            raise ValueError(f"{self.plugin_name}: parameter 'seed' must be in [0, 2^32), got {base_seed}")
-        self.base_seed = base_seed
-        self.spp = spp
+        cls = type(self)
+        require_jit_variant(cls.plugin_name)
+        # Checked first: the C++ base reads sample_count and seed itself, and its own type
+        # errors must not come first (nor refuse an integral float such as 8.0).
+        values = params.read_properties(cls.plugin_name, props, cls.PARAMETERS, "sampler")
+        # A copy with the normalised values: the Properties passed to the constructor die with
+        # mi.load_dict, and clone() builds a twin from it later (a stored reference dangles).
+        own = mi.Properties(props)
+        own["sample_count"] = values["sample_count"]
+        own["seed"] = values["seed"]
+        super().__init__(own)
+        self._props = own
+        #: The declared parameters as read (``settings()``; subclasses take their own from it).
+        self._values = values
+        self.base_seed = values["seed"]
+        self.spp = values["sample_count"]
         self._warned_spp = None
         self.dim = dr.opaque(mi.UInt32, 0)
         self.pass_index = dr.opaque(mi.UInt32, 0)
@@ -347,6 +357,14 @@ class LabSampler(mi.Sampler):
     def fork(self):
         return self._copy_settings(type(self)(self._props), with_state=False)
 
+    def settings(self) -> dict:
+        """The parameters in force, every declared one in declaration order (equal to
+        ``params.resolve(plugin_name, given)`` until a render sets another sample count)."""
+        values = {p.name: getattr(self, p.name, self._values[p.name]) for p in self.PARAMETERS}
+        values["sample_count"] = int(self.sample_count())
+        values["seed"] = self.base_seed
+        return values
+
     def to_string(self):
         extra = "".join(f", {k}={getattr(self, k)!r}" for k in self._settings)
         return f"{type(self).__name__}[sample_count={self.sample_count()}, seed={self.base_seed}{extra}]"
@@ -380,20 +398,6 @@ class Base2PairSampler(LabSampler):
 def pixel_seeds(seed_value, pixel_index):
     """One scramble key per pixel: TEA of (render seed, pixel), as Mitsuba seeds its RNGs."""
     return mi.sample_tea_32(mi.UInt32(seed_value), mi.UInt32(pixel_index))[0]
-
-
-def check_choice(plugin: str, name: str, value: str, allowed: tuple[str, ...]) -> str:
-    if value not in allowed:
-        raise ValueError(f"{plugin}: parameter '{name}' must be one of {', '.join(allowed)}, got '{value}'")
-    return value
-
-
-def check_int(plugin: str, name: str, value: int, lo: int, hi: int | None = None) -> int:
-    value = int(value)
-    if value < lo or (hi is not None and value > hi):
-        bound = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
-        raise ValueError(f"{plugin}: parameter '{name}' must be an integer {bound}, got {value}")
-    return value
 
 
 def isqrt_exact(n: int) -> int | None:

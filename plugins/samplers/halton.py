@@ -7,10 +7,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mitsuba_lab.plugins import params
+from mitsuba_lab.plugins.params import RANDOMIZATIONS  # noqa: F401 (re-exported)
 from mitsuba_lab.plugins.samplers.common import (
-    ONE_MINUS_EPS, LabSampler, check_choice, dim_key, mix32, pixel_seeds, to_float, to_unit_float)
-
-RANDOMIZATIONS = ("permute_digits", "owen")
+    ONE_MINUS_EPS, LabSampler, dim_key, mix32, pixel_seeds, to_float, to_unit_float)
 
 
 def first_primes(n: int) -> list[int]:
@@ -30,7 +30,7 @@ GAP_WORDS = tuple(sum((PRIMES[8 * w + j + 1] - PRIMES[8 * w + j] if 8 * w + j + 
                       for j in range(8)) for w in range(len(PRIMES) // 8))
 #: Largest sample count: digits are extracted in float32 as floor((n + 1/2) / b),
 #: exact for every n < 2^21 and b <= 311 (checked exhaustively in the tests).
-MAX_SPP = 1 << 21
+MAX_SPP = params.HALTON_MAX_SPP
 
 
 def n_digits(spp: int, base: int) -> int:
@@ -119,20 +119,20 @@ class LabHaltonSampler(LabSampler):
         {'type': 'lab_halton', 'sample_count': 64, 'randomization': 'owen'}
     """
     plugin_name = "lab_halton"
+    #: sample_count limited to [1, 2^21], and randomization (``params.LAB_HALTON``).
+    PARAMETERS = params.LAB_HALTON
     _settings = ("randomization",)
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        self.randomization = check_choice(self.plugin_name, "randomization",
-                                          str(props.get("randomization", "owen")), RANDOMIZATIONS)
-        self._check_spp(self.spp)
+        self.randomization = self._values["randomization"]
         self.pixel_seed = mi.UInt32(0)
         self.sample_index = mi.UInt32(0)
         self.base = mi.UInt32(PRIMES[0])   # base of the next dimension to be drawn
 
     def _check_spp(self, spp: int):
-        if spp > MAX_SPP:
-            raise ValueError(f"{self.plugin_name}: parameter 'sample_count' must be <= {MAX_SPP}, got {spp}")
+        """A render's sample count (set after construction), checked by the declaration."""
+        next(p for p in self.PARAMETERS if p.name == "sample_count").convert(self.plugin_name, spp)
 
     def _seed_state(self, seed_value, wavefront_size, spp):
         self._check_spp(spp)

@@ -5,6 +5,7 @@ import math
 
 import mitsuba as mi
 
+from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.samplers.common import (
     SALT_JITTER, SALT_PERMUTE, LabSampler, hash2, hash3, padded_index, pixel_seeds, to_unit_float)
 
@@ -38,11 +39,12 @@ class LabStratifiedSampler(LabSampler):
         {'type': 'lab_stratified', 'sample_count': 16, 'jitter': True}
     """
     plugin_name = "lab_stratified"
+    PARAMETERS = params.LAB_STRATIFIED
     _settings = ("jitter",)
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        self.jitter = bool(props.get("jitter", True))
+        self.jitter = self._values["jitter"]
         self.pixel_seed = mi.UInt32(0)
         self.sample_index = mi.UInt32(0)
         self.nx = self.ny = 1

@@ -4,8 +4,9 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.samplers.common import (
-    SALT_X, SALT_Y, Base2PairSampler, check_int, dim_key, isqrt_exact, log2_ceil, mix32,
+    SALT_X, SALT_Y, Base2PairSampler, dim_key, isqrt_exact, log2_ceil, mix32,
     morton_2d, sobol_02_owen)
 
 #: Multiplication in GF(4) = {0, 1, a, a^2 = a + 1} coded 0..3: entry (x, y) at bits 2 (4x + y).
@@ -63,11 +64,12 @@ class LabZSobolSampler(Base2PairSampler):
     """
     plugin_name = "lab_zsobol"
     prefers_power_of_two = True
+    PARAMETERS = params.LAB_ZSOBOL
     _settings = ("width",)
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        self.width = check_int(self.plugin_name, "width", props.get("width", 0), 0)
+        self.width = self._values["width"]
         self.morton_index = mi.UInt32(0)
         self.seed_key = mi.UInt32(0)
         self.n_bits = 0

@@ -9,6 +9,10 @@ samples per pixel. Each strategy and the reference are rendered as ``--splits``
 independent renders (seeds 0.. and 1000..), whose spread gives the standard error
 of the image mean.
 
+Resolution: ``--res N`` renders N x N. A scene that declares ``<default name="res" .../>``
+(the shipped ones do) gets it as its ``res`` parameter; any other scene gets its first
+sensor's film width and height set to N by editing the XML (``scene_xml.load_scene_variant``).
+
 Columns: finite fraction (of pixel channels), negative pixels, max value, fireflies,
 mean luminance, its z-score against the reference, rays per pixel by kind, time.
 
@@ -76,7 +80,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenes", nargs="*", metavar="SCENE",
                         help="Mitsuba XML scene files (default: every scenes/stiff/*.xml)")
     parser.add_argument("--res", type=positive_int, default=32,
-                        help="image width and height, passed as the scene's 'res' default (default: 32)")
+                        help="image width and height (default: 32): passed as the scene's 'res' "
+                             "parameter when the scene declares <default name=\"res\" .../>, otherwise "
+                             "set as the first sensor's film width and height (the XML is edited)")
     parser.add_argument("--spp", type=positive_int, default=64,
                         help="samples per pixel of each lab strategy, over all splits (default: 64)")
     parser.add_argument("--ref-spp", type=positive_int, default=256,
@@ -169,11 +175,25 @@ def default_scenes() -> list[str]:
     return sorted(glob.glob(os.path.join(project_root(), "scenes", "stiff", "*.xml")))
 
 
-def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
-    from .scene import (SceneTraits, equivalent_strategies, load_scene, make_integrator,
-                        strategy_applicability)
+def load_check_scene(path: str, res: int, defines: dict):
+    """The scene at ``res`` x ``res``: through its ``res`` parameter when it declares one
+    (``<default name="res" .../>``, as the shipped scenes do), else by setting the first
+    sensor's film width and height in the XML (``scene_xml.load_scene_variant``), so any
+    scene works. ``defines`` (-D) fill the scene's other <default> parameters."""
+    from .scene import load_scene
+    from .scene_xml import load_scene_variant, scene_defaults
 
-    scene = load_scene(path, **{"res": args.res, **defines})
+    if "res" in scene_defaults(path):
+        return load_scene(path, **{"res": res, **defines})
+    defines = dict(defines)
+    res = int(defines.pop("res", res))        # -D res=N means the film size here too
+    return load_scene_variant(path, res, None, defines)
+
+
+def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
+    from .scene import SceneTraits, equivalent_strategies, make_integrator, strategy_applicability
+
+    scene = load_check_scene(path, args.res, defines)
     traits = SceneTraits.from_scene(scene)
     name = os.path.basename(path)
     warnings = traits.warnings()

@@ -1,7 +1,9 @@
 """``mitsuba-lab``: the command line. The CLI owns the terminal; library code never prints.
 
 Every user error (bad scene, unknown plugin, bad value, unwritable output)
-ends in one line on stderr and exit status 2; ``--debug`` shows the traceback.
+ends in one line on stderr (one per problem when a config has several) and exit
+status 2; ``--debug`` shows the traceback. Ctrl-C ends with "interrupted" and
+status 130, a closed output pipe quietly with status 141.
 """
 from __future__ import annotations
 
@@ -11,6 +13,8 @@ import sys
 import traceback
 
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130        # 128 + SIGINT, as shells report Ctrl-C
+EXIT_PIPE = 141               # 128 + SIGPIPE, as for any command whose reader closed the pipe
 
 INTEGRATOR_OPTIONS = (
     # (option, parameter, type, help)
@@ -49,9 +53,22 @@ def parse_assignments(items: list[str] | None, option: str) -> dict:
 
 
 def positive_int(text: str) -> int:
-    value = int(text)
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got '{text}'") from None
     if value <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def seed_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer in [0, 2^32), got '{text}'") from None
+    if not 0 <= value < 2 ** 32:
+        raise argparse.ArgumentTypeError(f"must be an integer in [0, 2^32), got {text}")
     return value
 
 
@@ -87,9 +104,12 @@ def build_parser() -> argparse.ArgumentParser:
                             description="Render SCENE and write an EXR (float32 RGB, settings and "
                                         "timings in its header) and an sRGB PNG preview.")
     render.add_argument("scene", help="Mitsuba XML scene file")
-    render.add_argument("--integrator", default="lab_mis",
-                        help="integrator plugin: lab_naive, lab_nee, lab_mis or any of Mitsuba's "
-                             "(path, direct, ...) (default: lab_mis)")
+    render.add_argument("--integrator",
+                        help="integrator plugin: lab_naive, lab_nee, lab_mis, lab_photon or any of "
+                             "Mitsuba's (path, direct, ...) (default: the scene's <integrator> with "
+                             "its parameters, else lab_mis). Options below override the scene's "
+                             "parameters; with another type, the scene's parameters that it "
+                             "declares carry over")
     for option, name, kind, help_text in INTEGRATOR_OPTIONS:
         render.add_argument(option, dest=name, type=kind, help=help_text)
     render.add_argument("--hide-emitters", action="store_true",
@@ -98,8 +118,15 @@ def build_parser() -> argparse.ArgumentParser:
                         help="any other integrator parameter (repeatable)")
     render.add_argument("--define", "-D", action="append", metavar="KEY=VALUE",
                         help="scene <default> value, e.g. -D res=64 (repeatable)")
-    render.add_argument("--spp", type=positive_int, default=64, help="samples per pixel (default: 64)")
-    render.add_argument("--seed", type=int, default=0, help="sampler seed (default: 0)")
+    render.add_argument("--sampler", help="sampler plugin (default: the scene's sampler with its "
+                                          "parameters); sample_count and seed carry over to another type")
+    render.add_argument("--sampler-param", action="append", metavar="KEY=VALUE",
+                        help="sampler parameter, e.g. --sampler-param randomization=owen (repeatable)")
+    render.add_argument("--spp", type=positive_int,
+                        help="camera samples per pixel (default: the scene sampler's sample_count). "
+                             "For lab_photon, N camera samples = N passes of one sample each, as in a "
+                             "sweep (or passes = P given: N / P samples per pass)")
+    render.add_argument("--seed", type=seed_int, default=0, help="render seed, in [0, 2^32) (default: 0)")
     render.add_argument("-o", "--output", help="output EXR path (default: out/SCENE_INTEGRATOR.exr)")
     render.add_argument("--no-png", action="store_true", help="do not write the PNG preview")
 
@@ -223,24 +250,94 @@ def default_output(scene: str, integrator: str) -> str:
     return os.path.join("out", f"{stem}_{integrator}.exr")
 
 
+#: Integrator used when neither the scene nor --integrator names one.
+DEFAULT_INTEGRATOR = "lab_mis"
+#: Sampler parameters every sampler has: kept when --sampler names another type.
+SAMPLER_SHARED = ("sample_count", "seed")
+
+
+def _accepted_names(plugin_type: str):
+    from .plugins.params import declared
+
+    params = declared(plugin_type)
+    return None if params is None else {p.name for p in params}
+
+
+def chosen_plugin(scene_spec, cli_type: str | None, overrides: dict, fallback: str,
+                  shared=()) -> tuple[str, dict, list[str]]:
+    """(type, parameters, dropped scene parameters): the scene's plugin and parameters are the
+    defaults and the command line overrides them. When the command line names another type,
+    the scene's parameters that the new plugin declares (or ``shared`` ones) carry over."""
+    scene_type, scene_params = scene_spec or (fallback, {})
+    kind = cli_type or scene_type
+    if kind == scene_type:
+        carried = dict(scene_params)
+    else:
+        accepted = _accepted_names(kind) or set(shared)
+        carried = {k: v for k, v in scene_params.items() if k in accepted}
+    dropped = sorted(set(scene_params) - set(carried))
+    return kind, {**carried, **overrides}, dropped
+
+
+def render_plan(args, defines: dict):
+    """What ``render`` will run: integrator and sampler (type, parameters), the scene's
+    parameters that do not apply, and the camera samples per pixel in all."""
+    from .errors import LabError
+    from .experiment.config import PASS_PARAMETER
+    from .scene_xml import plugin_spec
+
+    if not os.path.isfile(args.scene):
+        raise LabError(f"scene file not found: {args.scene}")
+
+    integrator = chosen_plugin(plugin_spec(args.scene, "integrator", defines), args.integrator,
+                               integrator_params(args), DEFAULT_INTEGRATOR)
+    sampler_overrides = parse_assignments(args.sampler_param, "--sampler-param")
+    sampler = chosen_plugin(plugin_spec(args.scene, "sampler", defines), args.sampler,
+                            sampler_overrides, "independent", SAMPLER_SHARED)
+    return integrator, sampler, PASS_PARAMETER.get(integrator[0])
+
+
 def cmd_render(args, out) -> int:
     from . import images, scene as scenes
+    from .plugins.params import resolve
     from .render import render
+    from .errors import LabError
     from .runtime import versions
+    from .scene_xml import load_scene_variant
 
-    output = args.output or default_output(args.scene, args.integrator)
+    defines = parse_assignments(args.define, "--define")
+    (kind, params, dropped), (sampler_type, sampler_params, _), pass_name = render_plan(args, defines)
+    output = args.output or default_output(args.scene, kind)
     if not output.lower().endswith(".exr"):
         raise ValueError(f"output must be an .exr path, got '{output}'")
-    if args.output is None:
-        os.makedirs(os.path.dirname(output), exist_ok=True)
-    images.check_writable(output)
-    params = integrator_params(args)
-    scene = scenes.load_scene(args.scene, **parse_assignments(args.define, "--define"))
-    integrator = scenes.make_integrator(args.integrator, params)
-    image, stats = render(scene, integrator, spp=args.spp, seed=args.seed)
-    write_outputs(output, image, stats, args.integrator, params, args.scene, versions(),
-                  png=not args.no_png)
-    print(format_stats(args.integrator, stats), file=out)
+    images.ensure_parent(output)
+    if args.sampler or args.sampler_param:
+        scenes.make_sampler(sampler_type, sampler_params)          # its own errors, named
+        scene = load_scene_variant(args.scene, None, {"type": sampler_type, **sampler_params}, defines)
+    else:
+        scene = scenes.load_scene(args.scene, **defines)
+    samples = args.spp or scene.sensors()[0].sampler().sample_count()    # per pixel, in all
+    spp = samples
+    if pass_name:                # pass-scaled (lab_photon): N camera samples = passes x spp per pass
+        passes = params.setdefault(pass_name, samples)
+        if samples % passes:
+            raise LabError(f"{kind}: {samples} camera samples per pixel (--spp or the scene's "
+                           f"sample_count) is not a multiple of {pass_name} = {passes}")
+        spp = samples // passes
+    integrator = scenes.make_integrator(kind, params)
+    for note in render_warnings(scene, kind, params):
+        print(f"mitsuba-lab: warning: {note}", file=sys.stderr)
+    if dropped:
+        print(f"mitsuba-lab: note: the scene's integrator parameters {', '.join(dropped)} do not "
+              f"apply to {kind} and are not used", file=sys.stderr)
+    image, stats = render(scene, integrator, spp=spp, seed=args.seed)
+    stats.spp = samples
+    settings = {"integrator": {"type": kind, "params": resolve(kind, params)},
+                "sampler": {"type": sampler_type,
+                            "params": {**resolve(sampler_type, sampler_params), "sample_count": spp}}}
+    write_outputs(output, image, stats, settings, args.scene, versions(), png=not args.no_png)
+    print(format_stats(kind, stats), file=out)
+    print(f"settings: {describe_settings(settings)}", file=out)
     if hasattr(integrator, "photon_stats"):
         print("photons: " + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
                                       for k, v in integrator.photon_stats().items()), file=out)
@@ -248,24 +345,47 @@ def cmd_render(args, out) -> int:
     return 0
 
 
+def render_warnings(scene, kind: str, params: dict) -> list[str]:
+    """What the user should know before trusting this render: the scene's own problems and
+    the planner's reason when the estimator cannot render the scene's light correctly."""
+    from .scene import SceneTraits, strategy_applicability
+
+    traits = SceneTraits.from_scene(scene)
+    notes = traits.warnings()
+    ok, reason = strategy_applicability(traits, kind, params)
+    if not ok and reason not in notes:
+        notes.append(reason)
+    return notes
+
+
+def describe_settings(settings: dict) -> str:
+    parts = []
+    for role in ("integrator", "sampler"):
+        plugin = settings[role]
+        values = ", ".join(f"{k}={v}" for k, v in sorted(plugin["params"].items()))
+        parts.append(f"{role} {plugin['type']} ({values})")
+    return "; ".join(parts)
+
+
 def png_path(exr_path: str) -> str:
     return os.path.splitext(exr_path)[0] + ".png"
 
 
-def write_outputs(output, image, stats, integrator, params, scene_path, version_info, png=True):
+def write_outputs(output, image, stats, settings: dict, scene_path, version_info, png=True):
+    """EXR with the settings as used (``{"integrator": {type, params}, "sampler": {...}}``),
+    the stats and the versions in its header, and the PNG preview."""
     from . import images
 
-    settings = integrator_settings(integrator, params)
-    metadata = {"mitsuba_lab.scene": scene_path, "mitsuba_lab.integrator": integrator,
-                "mitsuba_lab.params": settings, "mitsuba_lab.stats": stats.as_dict(),
+    metadata = {"mitsuba_lab.scene": scene_path,
+                "mitsuba_lab.integrator": settings["integrator"]["type"],
+                "mitsuba_lab.params": settings["integrator"]["params"],
+                "mitsuba_lab.stats": stats.as_dict(),
                 **{f"mitsuba_lab.{k}": v for k, v in version_info.items()}}
+    if "sampler" in settings:
+        metadata["mitsuba_lab.sampler"] = settings["sampler"]
     images.write_exr(output, image, metadata)
     if png:
         images.write_png(png_path(output), image)
-
-
-def integrator_settings(integrator: str, params: dict) -> dict:
-    return dict(params)
 
 
 def format_stats(label: str, stats) -> str:
@@ -285,6 +405,7 @@ DEMO_STRATEGIES = (
 
 def cmd_demo(args, out) -> int:
     from . import images, scene as scenes
+    from .plugins.params import resolve
     from .render import render
     from .runtime import versions
 
@@ -302,7 +423,8 @@ def cmd_demo(args, out) -> int:
         image, stats = render(scene, integrator, spp=args.spp, seed=1)
         label = name + "".join(f"_{v}" for v in extra.values())
         output = os.path.join(args.output, f"cornell_box_{label}.exr")
-        write_outputs(output, image, stats, name, params, scene_path, info)
+        settings = {"integrator": {"type": name, "params": resolve(name, params)}}
+        write_outputs(output, image, stats, settings, scene_path, info)
         print(f"  {format_stats(label, stats)}", file=out)
     print(f"wrote EXR + PNG files to {args.output}", file=out)
     return 0
@@ -341,15 +463,35 @@ def main(argv: list[str] | None = None, out=None) -> int:
             activate(args.variant)
         return COMMANDS[args.command](args, out)
     except KeyboardInterrupt:
-        print("mitsuba-lab: interrupted", file=sys.stderr)
-        return 130
+        return interrupted()
+    except BrokenPipeError:
+        return closed_pipe()
     except Exception as err:  # noqa: BLE001 - every failure becomes one line (see module doc)
+        from .errors import is_interrupt, one_line
+
+        if is_interrupt(err):                 # Ctrl-C inside a Dr.Jit loop arrives wrapped
+            return interrupted()
         if args.debug:
             traceback.print_exc()
-        from .errors import one_line
-
-        print(f"mitsuba-lab: error: {one_line(err)}", file=sys.stderr)
+        for line in getattr(err, "problems", None) or [one_line(err)]:
+            print(f"mitsuba-lab: error: {line}", file=sys.stderr)
         return EXIT_USAGE
+
+
+def interrupted() -> int:
+    print("mitsuba-lab: interrupted", file=sys.stderr)
+    return EXIT_INTERRUPTED
+
+
+def closed_pipe() -> int:
+    """The reader of our output went away (``| head``): stop quietly. Python would report the
+    failed flush of stdout at exit, so stdout is pointed at /dev/null first."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):     # a stdout without a file descriptor
+        pass
+    return EXIT_PIPE
 
 
 if __name__ == "__main__":

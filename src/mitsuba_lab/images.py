@@ -1,7 +1,9 @@
 """Images on disk: float32 OpenEXR with metadata, and sRGB PNG previews.
 
 Every write goes to a temporary file in the target folder and is renamed into
-place, so an interrupted run never leaves a half-written image behind.
+place, so an interrupted run never leaves a half-written image behind; the file
+then has the mode an ordinary ``open(path, "w")`` would give it (0o666 less the
+umask), not the temporary file's 0o600.
 """
 from __future__ import annotations
 
@@ -9,6 +11,7 @@ import contextlib
 import json
 import os
 import tempfile
+import threading
 
 import numpy as np
 
@@ -18,15 +21,48 @@ _EXR_STANDARD = {"channels", "compression", "dataWindow", "displayWindow", "line
                  "version", "chunkCount", "tiles", "name"}
 
 
+_UMASK_LOCK = threading.Lock()
+
+
+def current_umask() -> int:
+    """The process umask, read without changing it (Linux: /proc/self/status).
+
+    Elsewhere falls back to setting and restoring it (``os.umask`` has no
+    read-only form), under a lock so that two of our threads never race; a
+    file created by another thread during that instant gets umask 0o022.
+    """
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    with _UMASK_LOCK:
+        mask = os.umask(0o022)
+        os.umask(mask)
+    return mask
+
+
+def default_file_mode() -> int:
+    """The mode ``open(path, "w")`` gives a new file: 0o666 less the umask."""
+    return 0o666 & ~current_umask()
+
+
 @contextlib.contextmanager
 def atomic_path(path: str):
-    """Yield a temporary path next to ``path``; rename it onto ``path`` on success."""
+    """Yield a temporary path next to ``path``; rename it onto ``path`` on success.
+
+    The temporary file (created 0o600 by ``mkstemp``) gets the umask's mode
+    (``default_file_mode``) just before the rename, whatever the writer did to it.
+    """
     folder = os.path.dirname(os.path.abspath(path))
     stem, ext = os.path.splitext(os.path.basename(path))
     fd, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=f".tmp{ext}", dir=folder)
     os.close(fd)
     try:
         yield tmp
+        os.chmod(tmp, default_file_mode())
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -42,6 +78,21 @@ def check_writable(path: str) -> None:
         raise OSError(f"output folder is not writable: {folder}")
     if os.path.isdir(path):
         raise OSError(f"output path is a folder: {path}")
+
+
+def ensure_parent(path: str) -> str:
+    """Create the folder that will hold ``path`` (and its parents) if missing, then
+    ``check_writable(path)``; returns the folder. Raises OSError with one line
+    (e.g. when a component of the folder is a file or cannot be created)."""
+    folder = os.path.dirname(os.path.abspath(path)) or "."
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except FileExistsError:
+        raise OSError(f"output folder is a file: {folder}") from None
+    except OSError as err:
+        raise OSError(f"cannot create output folder {folder}: {err.strerror or err}") from None
+    check_writable(path)
+    return folder
 
 
 def _as_rgb(image: np.ndarray) -> np.ndarray:

@@ -8,9 +8,10 @@ from dataclasses import dataclass
 import mitsuba as mi
 
 from .errors import LabError, one_line
+from .plugins.params import lab_plugins, plugin_kind
 
 LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis")   # the path tracers the traits reason about
-ALL_LAB_INTEGRATORS = LAB_INTEGRATORS + ("lab_photon",)
+ALL_LAB_INTEGRATORS = tuple(name for name in lab_plugins() if plugin_kind(name) == "integrator")
 #: Mitsuba's own integrators (those present in this build are listed in messages).
 MITSUBA_INTEGRATORS = ("path", "direct", "volpath", "volpathmis", "ptracer", "aov", "depth",
                        "moment", "stokes", "prb", "prb_basic", "prbvolpath", "direct_projective",
@@ -27,27 +28,68 @@ def load_scene(path: str, **params) -> mi.Scene:
         raise LabError(f"cannot load scene {path}: {one_line(err)}") from err
 
 
-def make_integrator(type_name: str, params: dict | None = None) -> mi.Integrator:
-    """Instantiate an integrator plugin by name, with its parameters checked by the plugin."""
+#: Mitsuba's own samplers (named in messages).
+MITSUBA_SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
+LAB_SAMPLERS = tuple(name for name in lab_plugins() if plugin_kind(name) == "sampler")
+_KNOWN = {"integrator": (ALL_LAB_INTEGRATORS, MITSUBA_INTEGRATORS),
+          "sampler": (LAB_SAMPLERS, MITSUBA_SAMPLERS)}
+
+
+def make_plugin(kind: str, type_name: str, params: dict | None = None):
+    """Instantiate a plugin of ``kind`` ('integrator' or 'sampler') by name, its parameters
+    checked by the plugin. Errors are LabError lines: "unknown integrator 'lab_nea' (did you
+    mean 'lab_nee'?) ...", "integrator 'lab_mis': unknown parameter 'heuristc' ..."."""
+    import difflib
+
     try:
-        return mi.load_dict({"type": type_name, **(params or {})})
+        plugin = mi.load_dict({"type": type_name, **(params or {})})
     except RuntimeError as err:
         text = one_line(err)
         if "not found" in text and f'"{type_name}"' in text:
-            raise LabError(f"unknown integrator '{type_name}'; lab integrators: "
-                           f"{', '.join(ALL_LAB_INTEGRATORS)}; Mitsuba's: "
-                           f"{', '.join(MITSUBA_INTEGRATORS)}") from err
-        reason = plugin_error_reason(text)
-        reason = reason[len(type_name) + 2:] if reason.startswith(f"{type_name}: ") else reason
-        raise LabError(f"integrator '{type_name}': {reason}") from err
+            lab, mitsuba = _KNOWN[kind]
+            close = difflib.get_close_matches(type_name, lab + mitsuba, n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise LabError(f"unknown {kind} '{type_name}'{hint}; lab {kind}s: {', '.join(lab)}; "
+                           f"Mitsuba's: {', '.join(mitsuba)}") from err
+        reason = plugin_error_reason(text, params or {})
+        if reason.startswith(f"{type_name}: "):       # a lab plugin's own message names it already
+            raise LabError(reason) from err
+        raise LabError(f"{kind} '{type_name}': {reason}") from err
+    expected = {"integrator": mi.Integrator, "sampler": mi.Sampler}[kind]
+    if not isinstance(plugin, expected):
+        raise LabError(f"'{type_name}' is not {_article(kind)} plugin")
+    return plugin
 
 
-def plugin_error_reason(text: str) -> str:
+def make_integrator(type_name: str, params: dict | None = None) -> mi.Integrator:
+    """Instantiate an integrator plugin by name, with its parameters checked by the plugin."""
+    return make_plugin("integrator", type_name, params)
+
+
+def make_sampler(type_name: str, params: dict | None = None) -> mi.Sampler:
+    """Instantiate a sampler plugin by name, with its parameters checked by the plugin."""
+    return make_plugin("sampler", type_name, params)
+
+
+def plugin_error_reason(text: str, params: dict | None = None) -> str:
     """The reason inside Mitsuba's 'failed to instantiate' / 'unreferenced property' messages."""
     unused = re.findall(r'- \w+ "([^"]+)"', text)
     if "unreferenced propert" in text and unused:
-        return f"unknown parameter(s): {', '.join(unused)}"
+        names = ", ".join(f"'{name}'" for name in unused)
+        return f"unknown parameter{'s' if len(unused) > 1 else ''} {names}"
+    wrong = re.search(r'property "(\w+)" has the wrong type \(expected (\w+), got (\w+)\)', text)
+    if wrong:
+        given = (params or {}).get(wrong[1], ...)
+        got = repr(given) if given is not ... else _article(wrong[3])
+        return f"parameter '{wrong[1]}' expects {_article(wrong[2])}, got {got}"
+    bounds = re.search(r'Property "(\w+)": value (\S+) is out of bounds, must be in the range (\[[^\]]+\])', text)
+    if bounds:
+        return f"parameter '{bounds[1]}' must be in {bounds[3]}, got {bounds[2]}"
     return re.sub(r'^.*?plugin of type "[^"]+":\s*', "", text)
+
+
+def _article(word: str) -> str:
+    return f"an {word}" if word[:1] in "aeiou" else f"a {word}"
 
 
 def film_size(scene: mi.Scene, sensor: int = 0) -> tuple[int, int]:
@@ -77,9 +119,11 @@ def _emits_nothing(emitter) -> bool:
     """True only when the emitter provably emits nothing: a zero emission factor
     (radiance, intensity, irradiance, texture, scale, bitmap data) or, for an area
     light, a shape of zero area. Unknown parametrisations count as emitting."""
+    import numpy as np
+
     shape = emitter.get_shape()
     if shape is not None:
-        area = float(shape.surface_area()[0])
+        area = float(np.asarray(shape.surface_area(), dtype=np.float64).ravel()[0])
         if not area > 0:
             return True
     params = mi.traverse(emitter)
@@ -227,8 +271,6 @@ class SceneTraits:
 # ---------------------------------------------------------------------------
 # Strategies: which apply to a scene, and which are the same estimator on it
 # ---------------------------------------------------------------------------
-_SHARED_DEFAULTS = {"max_depth": -1, "rr_depth": 5, "hide_emitters": False}
-_MIS_DEFAULTS = {"heuristic": "power", "beta": 2.0, "emitter_samples": 1}
 #: Parameters that do not change the estimator (only what is counted).
 _NO_EFFECT = {"count_rays"}
 
@@ -278,15 +320,15 @@ def _estimator_key(traits: SceneTraits, integrator_type: str, params: dict):
     """
     if integrator_type not in LAB_INTEGRATORS:
         return ("exact", integrator_type, tuple(sorted((k, repr(v)) for k, v in params.items())))
-    p = {**_SHARED_DEFAULTS, **{k: v for k, v in params.items() if k not in _NO_EFFECT}}
-    if integrator_type == "lab_mis":
-        p = {**_MIS_DEFAULTS, **p}
-    max_depth = int(p.pop("max_depth"))
-    rr_depth = int(p.pop("rr_depth"))
-    hide = bool(p.pop("hide_emitters")) and traits.hittable_emitters   # nothing to hide otherwise
-    heuristic, beta = str(p.pop("heuristic", "")), float(p.pop("beta", 2.0))
-    n_L = int(p.pop("emitter_samples", 1))
-    extras = tuple(sorted((k, repr(v)) for k, v in p.items()))          # unknown: must match
+    from .plugins.params import resolve   # checked, normalised, every default filled in
+
+    p = {k: v for k, v in resolve(integrator_type, params).items() if k not in _NO_EFFECT}
+    max_depth = p.pop("max_depth")
+    rr_depth = p.pop("rr_depth")
+    hide = p.pop("hide_emitters") and traits.hittable_emitters         # nothing to hide otherwise
+    heuristic, beta = p.pop("heuristic", ""), p.pop("beta", 2.0)
+    n_L = p.pop("emitter_samples", 1)
+    extras = tuple(sorted((k, repr(v)) for k, v in p.items()))          # Mitsuba's own: must match
     if max_depth == 0 or not traits.emits_light:
         return ("black", extras)
     if max_depth == 1:

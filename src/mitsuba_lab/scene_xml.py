@@ -96,3 +96,60 @@ def scene_digest(path: str) -> str:
         with open(name, "rb") as f:
             digest.update(hashlib.sha256(f.read()).digest())
     return digest.hexdigest()
+
+
+_PARSERS = {"integer": int, "float": float, "string": str,
+            "boolean": lambda text: {"true": True, "false": False}[text.strip().lower()]}
+
+
+def scene_defaults(path: str) -> dict[str, str]:
+    """The scene's top-level ``<default name=... value=...>`` values, as written."""
+    root = _parse(path).getroot()
+    return {e.get("name"): e.get("value", "") for e in root.findall("default")}
+
+
+def _parse(path: str) -> ET.ElementTree:
+    try:
+        return ET.parse(path)
+    except ET.ParseError as err:
+        raise LabError(f"cannot load scene {path}: {err}") from err
+
+
+def _substitute(text: str, values: dict[str, str]) -> str:
+    for name in sorted(values, key=len, reverse=True):     # $max_depth before $max
+        text = text.replace(f"${name}", str(values[name]))
+    return text
+
+
+def plugin_spec(path: str, tag: str, defines: dict | None = None) -> tuple[str, dict] | None:
+    """(type, parameters) of the scene's ``<integrator>`` (tag='integrator') or first sensor's
+    ``<sampler>`` (tag='sampler'), with ``$name`` references resolved from the scene's
+    defaults and ``defines``; None when the scene has none. Raises LabError for a plugin with
+    nested plugins or values that are not plain numbers, booleans or strings."""
+    tree = _parse(path)
+    root = tree.getroot()
+    values = {**scene_defaults(path), **{k: str(v) for k, v in (defines or {}).items()}}
+    if tag == "sampler":
+        sensor = root.find("sensor")
+        element = sensor.find("sampler") if sensor is not None else None
+    else:
+        element = root.find(tag)
+    if element is None:
+        return None
+    params = {}
+    for child in element:
+        if not isinstance(child.tag, str):            # comments
+            continue
+        parse = _PARSERS.get(child.tag)
+        name = child.get("name")
+        if parse is None or name is None:
+            raise LabError(f"scene {path}: the {tag} '{element.get('type')}' has a <{child.tag}> "
+                           f"element; only integer, float, boolean and string parameters can be "
+                           f"combined with command-line settings")
+        text = _substitute(child.get("value", ""), values)
+        try:
+            params[name] = parse(text)
+        except (KeyError, ValueError) as err:
+            raise LabError(f"scene {path}: {tag} parameter '{name}': '{text}' is not "
+                           f"{'an' if child.tag == 'integer' else 'a'} {child.tag}") from err
+    return _substitute(element.get("type", ""), values), params

@@ -8,67 +8,40 @@ from dataclasses import asdict, dataclass, field
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators.common import UNBOUNDED
+from mitsuba_lab.plugins import params
+from mitsuba_lab.plugins.variant import require_jit_variant
+from mitsuba_lab.plugins.params import DIRECT_MODES, UNBOUNDED  # noqa: F401 (re-exported)
 
 from .gather import CameraPass
 from .grid import PhotonGrid
 from .records import RECORD_BYTES
 from .tracer import PhotonTracer
 
-DIRECT_MODES = ("photons", "nee")
 #: max_depth = -1 (unbounded) is stored as this many segments (sums of depths stay in uint32).
 DEPTH_CAP = 1 << 30
 #: Automatic radius: r_1 = RADIUS_SCALE x (bounding-box diagonal) / max(film width, height).
 RADIUS_SCALE = 1.0
-#: Smallest record buffer; also the smallest allowed ``max_records``.
-MIN_RECORDS = 1024
+#: Smallest record buffer; also the smallest allowed ``max_records`` (declared in params.py).
+MIN_RECORDS = params.PHOTON_MIN_RECORDS
 
 
 @dataclass
 class PhotonSettings:
-    """The parameters of ``lab_photon``, read and checked in one place."""
-    photons_per_pass: int = 100_000
-    passes: int = 16
-    alpha: float = 2.0 / 3.0
-    radius: float = 0.0
-    max_depth: int = UNBOUNDED
-    rr_depth: int = 5
-    direct: str = "nee"
-    max_records: int = 1 << 21
+    """The parameters of ``lab_photon``, typed; declared and checked in ``params.LAB_PHOTON``
+    (build it with ``PhotonSettings.resolve(given)``, or from already checked values)."""
+    photons_per_pass: int
+    passes: int
+    alpha: float
+    radius: float
+    max_depth: int
+    rr_depth: int
+    direct: str
+    max_records: int
 
     @classmethod
-    def from_properties(cls, props: mi.Properties) -> "PhotonSettings":
-        d = cls()
-        s = cls(photons_per_pass=int(props.get("photons_per_pass", d.photons_per_pass)),
-                passes=int(props.get("passes", d.passes)),
-                alpha=float(props.get("alpha", d.alpha)),
-                radius=float(props.get("radius", d.radius)),
-                max_depth=int(props.get("max_depth", d.max_depth)),
-                rr_depth=int(props.get("rr_depth", d.rr_depth)),
-                direct=str(props.get("direct", d.direct)),
-                max_records=int(props.get("max_records", d.max_records)))
-        s.check()
-        return s
-
-    def check(self):
-        def fail(name, allowed, value):
-            raise ValueError(f"lab_photon: parameter '{name}' must be {allowed}, got {value!r}")
-        if self.photons_per_pass < 1:
-            fail("photons_per_pass", "an integer >= 1", self.photons_per_pass)
-        if self.passes < 1:
-            fail("passes", "an integer >= 1", self.passes)
-        if not 0.0 < self.alpha < 1.0:
-            fail("alpha", "a number in (0, 1)", self.alpha)
-        if not (self.radius >= 0.0 and math.isfinite(self.radius)):
-            fail("radius", "0 (automatic) or a finite number > 0", self.radius)
-        if self.max_depth != UNBOUNDED and self.max_depth < 1:
-            fail("max_depth", "-1 (unbounded) or an integer >= 1", self.max_depth)
-        if self.rr_depth < 1:
-            fail("rr_depth", "an integer >= 1", self.rr_depth)
-        if self.direct not in DIRECT_MODES:
-            fail("direct", f"one of {', '.join(DIRECT_MODES)}", self.direct)
-        if self.max_records < MIN_RECORDS:
-            fail("max_records", f"an integer >= {MIN_RECORDS}", self.max_records)
+    def resolve(cls, given: dict | None = None) -> "PhotonSettings":
+        """Checked settings, defaults filled in (``params.resolve``; ValueError when invalid)."""
+        return cls(**params.resolve("lab_photon", given or {}))
 
     @property
     def depth_limit(self) -> int:
@@ -158,9 +131,11 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
                             footprint of one pixel if the scene fills the view.
                             (Default: 0)
     max_depth        int    Longest path in segments (camera + light subpath),
-                            -1 = unbounded (Default: -1)
+                            -1 = unbounded, otherwise >= 1 (0 is refused: the
+                            camera needs one segment to reach a photon; the
+                            path tracers accept 0) (Default: -1)
     rr_depth         int    Depth at which Russian roulette starts, on both
-                            subpaths (Default: 5)
+                            subpaths, >= 1 (Default: 5)
     direct           string ``photons``: all light at the camera vertex from the
                             density estimate (photons stored from the first hit
                             on). ``nee``: direct light by next-event estimation
@@ -199,10 +174,14 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
          'alpha': 0.66, 'radius': 0.0, 'max_depth': -1, 'direct': 'nee'}
     """
     plugin_name = "lab_photon"
+    #: Declared parameters (``params.LAB_PHOTON``), in the order of the table above.
+    PARAMETERS = params.LAB_PHOTON
 
     def __init__(self, props: mi.Properties):
+        require_jit_variant(type(self).plugin_name)
+        values = params.read_properties(type(self).plugin_name, props, type(self).PARAMETERS, "integrator")
         super().__init__(props)
-        self.settings_ = PhotonSettings.from_properties(props)
+        self.settings_ = PhotonSettings(**values)
         self.stats = PhotonStats()
         self._camera = CameraPass(self.settings_)
         self._camera_rays = 0

@@ -2,7 +2,8 @@
 
 Key = SHA-256 of: the scene file and the files it references (bytes), film
 resolution, scene defaults, the reference integrator and its parameters, spp,
-chunk count, and the Mitsuba / Dr.Jit versions and variant. The reference is
+chunk count, the Mitsuba / Dr.Jit versions and variant, and, when a lab plugin
+renders the reference, the lab plugins' code version. The reference is
 rendered in K independent chunks (disjoint seeds); their mean is the image and
 their spread gives the per-pixel variance of that mean: the noise floor that
 the reference adds to every MSE measured against it. Stored as two EXRs
@@ -23,7 +24,9 @@ from ..render import render
 from ..runtime import versions
 from ..scene import make_integrator
 from ..scene_xml import load_scene_variant, scene_digest
+from ..plugins.params import declared
 from .config import PluginSpec
+from .identity import plugin_code_version
 
 #: Reference chunks use seeds from here on, apart from every sweep seed.
 REFERENCE_SEED_BASE = 1 << 24
@@ -50,6 +53,8 @@ def reference_key(scene_path, resolution, defaults, integrator: PluginSpec, spp,
     payload = {"scene": scene_digest(scene_path), "resolution": resolution, "defaults": defaults,
                "integrator": integrator.type, "params": integrator.params, "spp": spp, "chunks": chunks,
                "mitsuba": info["mitsuba"], "drjit": info["drjit"], "variant": info["variant"]}
+    if declared(integrator.type) is not None:      # a lab plugin renders it: its code is part of it
+        payload["lab_plugins"] = plugin_code_version()
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:24]
 
 

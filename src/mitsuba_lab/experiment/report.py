@@ -20,6 +20,7 @@ from .. import images, metrics
 from .analysis import (FLOOR_WARNING_FACTOR, PointStats, bias_by_passes, curve, equal_time_budgets,
                        point_stats, region_at_budgets, region_floor, region_stack_stats, run_image, slope,
                        veach_bound)
+from ..plugins.params import resolve as resolve_params
 from .config import PASS_PARAMETER
 from .reference import Reference
 from .spectrum import plot_error_spectra, slope_table
@@ -43,14 +44,18 @@ def fmt(value, digits=3) -> str:
 class Report:
     def __init__(self, folder: str):
         self.folder = folder
+        check_sweep_folder(folder)                  # before ResultStore, which would create it
         self.store = ResultStore(folder)
-        if not self.store.of_kind("run"):
+        metas = self.store.of_kind("meta")
+        self.meta = metas[-1] if metas else {}
+        if not self.store.current_runs():
             from ..errors import LabError
 
-            raise LabError(f"no results in {self.store.path}: run `mitsuba-lab sweep` first")
+            config = self.meta.get("config") or "CONFIG"
+            raise LabError(f"{folder} holds no finished renders yet ({self.store.path} has no run rows): "
+                           f"run or resume the sweep with `mitsuba-lab sweep {config} -o {folder}` first")
         self.out = os.path.join(folder, "report")
         os.makedirs(self.out, exist_ok=True)
-        self.meta = self.store.of_kind("meta")[-1]
         self.references = self._references()
         self.stats = self._stats()
 
@@ -65,7 +70,7 @@ class Report:
 
     def _stats(self) -> dict[str, list[PointStats]]:
         by_point = defaultdict(list)
-        for row in self.store.of_kind("run"):
+        for row in self.store.current_runs():
             by_point[row["point"]].append(row)
         stats = defaultdict(list)
         for rows in by_point.values():
@@ -89,13 +94,13 @@ class Report:
         return paths
 
     def write_csv(self) -> None:
-        region_names = sorted({n for r in self.store.of_kind("run") for n in r.get("regions", {})})
+        region_names = sorted({n for r in self.store.current_runs() for n in r.get("regions", {})})
         columns = list(CSV_COLUMNS) + [f"rays_{k}" for k in ("camera", "extension", "shadow")] + \
             [f"region_{n}_{m}" for n in region_names for m in ("mse", "rel_mse")]
         with images.atomic_path(os.path.join(self.folder, "results.csv")) as tmp, open(tmp, "w", newline="") as f:
             writer = csv.writer(f)
             writer.writerow(columns)
-            for row in self.store.of_kind("run"):
+            for row in self.store.current_runs():
                 values = [row.get(c) for c in CSV_COLUMNS]
                 values += [row.get("rays", {}).get(k) for k in ("camera", "extension", "shadow")]
                 values += [row.get("regions", {}).get(n, {}).get(m) for n in region_names
@@ -281,33 +286,78 @@ class Report:
             md += ["", f"![bias^2 and variance against passes]({os.path.basename(self.plot_passes(scene, curves))})"]
         return md
 
+    def _mis_setting(self, stats: PointStats) -> tuple[str, int, tuple]:
+        """(weighting, emitter_samples, the rest of the estimator's parameters) of a lab_mis point,
+        with lab_mis's defaults filled in, so a stored row that spells a default out and one that
+        leaves it implicit mean the same. Weighting: 'balance' (also power with beta 1, the same
+        weights), 'power (beta B)', 'max' or 'average'."""
+        stored = self._run_row(stats).get("params", {})
+        try:
+            params = resolve_params("lab_mis", stored)
+        except ValueError:                  # a value resolve rejects (an older row): read as stored
+            params = dict(stored)
+        params.pop("count_rays", None)      # changes only what is counted
+        heuristic, beta = str(params.pop("heuristic", "power")), float(params.pop("beta", 2.0))
+        n_l = int(params.pop("emitter_samples", 1))
+        if heuristic == "power" and beta == 1.0:
+            heuristic = "balance"
+        weighting = f"power (beta {beta:g})" if heuristic == "power" else heuristic
+        rest = tuple(sorted((k, repr(v)) for k, v in params.items()))
+        return weighting, n_l, rest
+
     def veach_table(self, scene, groups) -> list[str]:
-        """Veach's bound, where the sweep has lab_mis balance and other lab_mis weightings."""
-        mis = {key: pts for key, pts in groups.items() if pts and self._integrator(pts[0]) == "lab_mis"}
-        balance = [k for k, pts in mis.items() if self._param(pts[0], "heuristic", "power") == "balance"]
-        if not balance:
+        """Veach's bound: the balance heuristic against each other lab_mis weighting (power, max,
+        average) run with the same sampler, the same emitter_samples and otherwise the same
+        parameters (max_depth, rr_depth, ...), at equal spp; one group of rows per (sampler,
+        emitter_samples). Never across samplers or emitter counts: the bound compares
+        weightings of one set of samples."""
+        blocks = defaultdict(dict)          # (sampler, n_L, other parameters) -> {strategy: (weighting, points)}
+        for (strategy, sampler), points in groups.items():
+            if points and self._integrator(points[0]) == "lab_mis":
+                weighting, n_l, rest = self._mis_setting(points[0])
+                blocks[(sampler, n_l, rest)][strategy] = (weighting, points)
+        if not any(w == "balance" for block in blocks.values() for w, _ in block.values()):
             return []
         ref = self.references[scene]
         height, width = ref.image.shape[:2]
         regions = self._regions(scene, width, height) or {"image": (0, 0, width, height)}
+        rows, unmatched = [], []
+        for (sampler, n_l, _), block in sorted(blocks.items(), key=lambda item: (item[0][0], item[0][1])):
+            balance = [s for s, (w, _) in block.items() if w == "balance"]
+            others = [s for s, (w, _) in block.items() if w != "balance"]
+            where = f"sampler {sampler}, emitter_samples {n_l}"
+            if not balance:
+                unmatched += [f"{s} ({where}): no balance weighting with this sampler, emitter_samples "
+                              f"and other parameters" for s in others]
+            for bname in balance:
+                bpoints = block[bname][1]
+                for oname in others:
+                    weighting, opoints = block[oname]
+                    pairs = [(bp, op) for bp in sorted(bpoints, key=lambda p: p.spp)
+                             for op in [next((p for p in opoints if p.spp == bp.spp), None)] if op is not None]
+                    if not pairs:
+                        unmatched.append(f"{oname} ({where}): no spp in common with {bname}")
+                    for bp, op in pairs:
+                        for name, rect in regions.items():
+                            b = region_stack_stats(bp, self.folder, ref, rect)
+                            o = region_stack_stats(op, self.folder, ref, rect)
+                            v = veach_bound(b, o, n_l, bp.spp)
+                            rows.append(f"| {sampler} | {n_l} | {bname} | {oname} | {weighting} | {bp.spp} | "
+                                        f"{name} | {fmt(v['lhs'])} | {fmt(v['rhs'])} | {fmt(v['se'], 2)} | "
+                                        f"{v['verdict']} |")
         md = ["", "### Veach's bound: Var[balance] <= Var[other] + (1/min n_i - 1/sum n_i) I^2", "",
-              "| other weighting | spp | region | Var balance | Var other + slack | standard error | verdict |",
-              "|---|---|---|---|---|---|---|"]
-        for bkey in balance:
-            n_l = int(self._param(mis[bkey][0], "emitter_samples", 1))
-            for okey, opts in mis.items():
-                if okey == bkey or int(self._param(opts[0], "emitter_samples", 1)) != n_l:
-                    continue
-                for bp in mis[bkey]:
-                    op = next((p for p in opts if p.spp == bp.spp), None)
-                    if op is None:
-                        continue
-                    for name, rect in regions.items():
-                        b = region_stack_stats(bp, self.folder, ref, rect)
-                        o = region_stack_stats(op, self.folder, ref, rect)
-                        v = veach_bound(b, o, n_l, bp.spp)
-                        md.append(f"| {okey[0]} | {bp.spp} | {name} | {fmt(v['lhs'])} | {fmt(v['rhs'])} | "
-                                  f"{fmt(v['se'], 2)} | {v['verdict']} |")
+              "Each weighting against the balance heuristic on the same sampler with the same emitter_samples "
+              "(n_L shadow rays and 1 BSDF sample per vertex, so min n_i = 1 and sum n_i = n_L + 1) and "
+              "otherwise the same parameters, at equal spp."]
+        if rows:
+            md += ["", "| sampler | emitter_samples | balance | other | weighting | spp | region | Var balance | "
+                       "Var other + slack | standard error | verdict |",
+                   "|---|---|---|---|---|---|---|---|---|---|---|", *rows]
+        for line in unmatched:
+            md += ["", f"Not compared: {line}."]
+        if not rows and not unmatched:
+            md += ["", "Nothing to compare: no other lab_mis weighting shares a sampler and emitter_samples "
+                       "with a balance one."]
         md.append("")
         md.append("Variances are sample variances over the seeds (jackknife standard errors); "
                   "'within noise' means the excess is under two standard errors. The bound is exact for "
@@ -315,7 +365,13 @@ class Report:
         return md
 
     def _run_row(self, stats: PointStats) -> dict:
-        return next(r for r in self.store.of_kind("run") if r["point"] == stats.point)
+        """A run row of the point (rows in force only; the store does not change while the
+        report is built, so the point -> row map is made once)."""
+        if not hasattr(self, "_row_of_point"):
+            self._row_of_point = {}
+            for row in self.store.current_runs():
+                self._row_of_point.setdefault(row["point"], row)
+        return self._row_of_point[stats.point]
 
     def _integrator(self, stats: PointStats) -> str:
         return self._run_row(stats).get("integrator", "")
@@ -469,5 +525,26 @@ img {{ max-width: 100%; }}
 """
 
 
+def check_sweep_folder(folder: str) -> None:
+    """LabError unless ``folder`` is an existing folder with a results.jsonl; it only looks
+    (ResultStore would create a missing folder)."""
+    from ..errors import LabError
+
+    if os.path.isfile(folder):
+        message = f"report expects a sweep's output folder, got the file {folder}"
+        if folder.lower().endswith(".toml"):
+            message += f"; to run the sweep: mitsuba-lab sweep {folder}"
+        raise LabError(message)
+    if not os.path.exists(folder):
+        raise LabError(f"no such folder: {folder}")
+    if not os.path.isdir(folder):
+        raise LabError(f"report expects a sweep's output folder, got {folder}, which is not a folder")
+    if not os.path.isfile(os.path.join(folder, "results.jsonl")):
+        raise LabError(f"{folder} holds no sweep results (no results.jsonl): run "
+                       f"`mitsuba-lab sweep CONFIG -o {folder}` first")
+
+
 def build_report(folder: str) -> dict[str, str]:
+    """Rebuild the report of the sweep stored in ``folder`` (LabError when it holds none)."""
+    check_sweep_folder(folder)
     return Report(folder).write()

@@ -19,10 +19,12 @@ import numpy as np
 from .. import images, metrics
 from ..errors import LabError
 from ..runtime import versions
+from ..scene_xml import scene_digest
 from .config import Config, SceneSpec, with_depth
 from .executors import LocalExecutor
 from .plan import Plan, Point
 from .reference import Reference, get_reference
+from .identity import describe_changes, identity_hash, point_identity
 from .store import ResultStore
 from .worker import PointResult, PointTask
 
@@ -56,6 +58,7 @@ class SweepRunner:
         self.executor = executor or LocalExecutor()
         self.progress = progress or (lambda event, **info: None)
         self.references: dict[str, Reference] = {}
+        self.identities: dict[str, tuple[dict, str]] = {}
 
     def run(self) -> None:
         self.store.append({"kind": "meta", "config": self.config.source, "name": self.config.name,
@@ -63,11 +66,53 @@ class SweepRunner:
                            "left_out": self.plan.left_out, "aliases": self.plan.aliases})
         for scene in self.config.scenes:
             self.references[scene.name] = self.reference(scene)
+        self.identities = self.point_identities()
+        for (changes, planned), count in self.retire_stale_runs().items():
+            self.progress("stale", count=count, changes=changes, planned=planned)
         done = self.store.done_runs()
-        todo = [p for p in self.plan.points if any((p.id, s) not in done for s in p.seeds)]
+        todo = [p for p in self.plan.points
+                if any(done.get((p.id, s), "missing") != self.identities[p.id][1] for s in p.seeds)]
         self.progress("start", total=len(todo), skipped=len(self.plan.points) - len(todo))
         for result in self.executor.map(list(self.tasks(todo, done))):
             self.record(result)
+
+    def point_identities(self) -> dict[str, tuple[dict, str]]:
+        """Point id -> (identity, its hash): what determines the point's runs (``identity``)."""
+        scenes = {s.name: s for s in self.config.scenes}
+        samplers = {s.name: s for s in self.config.samplers}
+        strategies = {s.name: s for s in self.config.strategies}
+        digests = {name: scene_digest(spec.path) for name, spec in scenes.items()}
+        out = {}
+        for point in self.plan.points:
+            ident = point_identity(scenes[point.scene],
+                                   with_depth(strategies[point.strategy], self.config.max_depth),
+                                   samplers[point.sampler], point, self.references[point.scene].key,
+                                   digests[point.scene])
+            out[point.id] = (ident, identity_hash(ident))
+        return out
+
+    def retire_stale_runs(self) -> dict[tuple[str, bool], int]:
+        """Mark every stored run that the sweep would not produce now as superseded (it stays
+        in the store; resumes and reports skip it). Returns {(what changed, still planned): runs}."""
+        seeds = {p.id: set(p.seeds) for p in self.plan.points}
+        counts: dict[tuple[str, bool], int] = {}
+        for row in self.store.current_runs():
+            planned = self.identities.get(row["point"])
+            if planned is None:
+                changes = "not in this sweep's plan any more"
+            elif row["seed"] not in seeds[row["point"]]:
+                changes = f"seed {row['seed']} not in this sweep's plan any more (experiment.seed or repetitions)"
+                planned = None
+            elif row.get("identity_hash") != planned[1]:
+                changes = describe_changes(row.get("identity"), planned[0])
+            else:
+                continue
+            self.store.append({"kind": "superseded", "point": row["point"], "seed": row["seed"],
+                               "identity_hash": row.get("identity_hash"), "changes": changes,
+                               "time": time.time()})
+            key = (changes, planned is not None)
+            counts[key] = counts.get(key, 0) + 1
+        return counts
 
     def reference(self, scene: SceneSpec) -> Reference:
         spec = self.config.reference
@@ -78,8 +123,8 @@ class SweepRunner:
                                     progress=lambda k, n: self.progress("reference_chunk", scene=scene.name,
                                                                         done=k, total=n))
         self.keep_copy(ref)
-        if not any(r.get("kind") == "reference" and r["key"] == ref.key and r["scene"] == scene.name
-                   for r in self.store.rows):
+        in_force = [r for r in self.store.of_kind("reference") if r["scene"] == scene.name]
+        if not in_force or in_force[-1]["key"] != ref.key:      # the report reads the last one
             height, width = ref.image.shape[:2]
             self.store.append({"kind": "reference", "scene": scene.name, "key": ref.key, "cached": cached,
                                "regions": pixel_regions(scene, width, height),
@@ -106,23 +151,26 @@ class SweepRunner:
         scenes = {s.name: s for s in self.config.scenes}
         samplers = {s.name: s for s in self.config.samplers}
         strategies = {s.name: s for s in self.config.strategies}
-        calibrated = {row["point"]: row["spp"] for row in self.store.of_kind("calibration")}
+        calibrated = {row["point"]: row["spp"] for row in self.store.of_kind("calibration")
+                      if row.get("identity_hash") == self.identities.get(row["point"], (None, "-"))[1]}
         for point in todo:
+            identity, ident_hash = self.identities[point.id]
             ref = self.references[point.scene]
             height, width = ref.image.shape[:2]
             yield PointTask(point=point, scene=scenes[point.scene], sampler=samplers[point.sampler],
                             strategy=with_depth(strategies[point.strategy], self.config.max_depth),
-                            seeds=tuple(s for s in point.seeds if (point.id, s) not in done),
+                            seeds=tuple(s for s in point.seeds if done.get((point.id, s)) != ident_hash),
                             spp=point.spp or calibrated.get(point.id), reference_image=ref.image,
                             regions=pixel_regions(scenes[point.scene], width, height),
-                            metrics=self.config.metrics, variant=mi.variant())
+                            metrics=self.config.metrics, variant=mi.variant(),
+                            identity=identity, identity_hash=ident_hash)
 
     def record(self, result: PointResult) -> None:
         """Store one finished point: calibration, then each image before the row naming it."""
         if result.calibration:
             self.store.append(result.calibration)
         for row, image in result.runs:
-            path = self.store.image_path(row["point"], row["seed"])
+            path = self.store.image_path(row["point"], row["seed"], row.get("identity_hash"))
             os.makedirs(os.path.dirname(path), exist_ok=True)
             images.write_exr(path, image, {"mitsuba_lab.point": row["point"], "mitsuba_lab.seed": str(row["seed"])})
             self.store.append({**row, "image": os.path.relpath(path, self.store.folder)})

@@ -64,8 +64,28 @@ class ResultStore:
     def of_kind(self, kind: str) -> list[dict]:
         return [r for r in self.rows if r.get("kind") == kind]
 
-    def done_runs(self) -> set[tuple[str, int]]:
-        return {(r["point"], r["seed"]) for r in self.of_kind("run")}
+    def current_runs(self) -> list[dict]:
+        """Run rows in force: the latest row of each (point, seed), unless a later
+        ``superseded`` row retired it (its identity no longer matched the sweep's).
+        Superseded rows stay in the file; reports and resumes read only these."""
+        current: dict[tuple[str, int], dict] = {}
+        for row in self.rows:
+            kind = row.get("kind")
+            if kind == "run":
+                current[(row["point"], row["seed"])] = row
+            elif kind == "superseded":
+                held = current.get((row["point"], row["seed"]))
+                if held is not None and held.get("identity_hash") == row.get("identity_hash"):
+                    del current[(row["point"], row["seed"])]
+        return list(current.values())
 
-    def image_path(self, point_id: str, seed: int) -> str:
-        return os.path.join(self.folder, "images", point_id.replace("/", "__") + f"__seed{seed}.exr")
+    def done_runs(self) -> dict[tuple[str, int], str | None]:
+        """(point, seed) -> identity hash of the run in force (None for rows stored before
+        run identities existed)."""
+        return {(r["point"], r["seed"]): r.get("identity_hash") for r in self.current_runs()}
+
+    def image_path(self, point_id: str, seed: int, identity_hash: str | None = None) -> str:
+        """Where a run's image goes; runs of another identity get their own file, so the image
+        of a superseded run is never overwritten."""
+        tag = f"__{identity_hash[:8]}" if identity_hash else ""
+        return os.path.join(self.folder, "images", point_id.replace("/", "__") + f"__seed{seed}{tag}.exr")

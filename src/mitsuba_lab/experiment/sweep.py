@@ -10,6 +10,7 @@ from .config import PASS_PARAMETER, PluginSpec, load_config, with_depth
 from .plan import build_plan, estimated_seconds
 from .reference import get_reference, load_cached, reference_key
 from .store import ResultStore
+from .validate import validate
 
 
 def assess_scene(scene_spec, strategies):
@@ -74,6 +75,7 @@ def print_plan(config, plan, out) -> None:
 
 def sweep_command(config_path: str, output: str | None, dry_run: bool, out, cluster: str | None = None) -> int:
     config = load_config(config_path)
+    validate(config)                  # every plugin and scene x sampler, before anything renders
     plan = build_plan(config, assess_scene)
     folder = output or config.output
     if dry_run:
@@ -105,6 +107,12 @@ def sweep_command(config_path: str, output: str | None, dry_run: bool, out, clus
         elif event == "reference_done":
             origin = "from the cache" if info["cached"] else "rendered"
             bar.message(f"reference for {info['scene']} {origin}; noise floor MSE {info['floor']:.3g}")
+        elif event == "stale":
+            runs = f"{info['count']} stored run{'s' if info['count'] != 1 else ''}"
+            if info["planned"]:
+                bar.message(f"{runs} no longer match: {info['changes']}; rerunning them")
+            else:
+                bar.message(f"{runs} left out of the report: {info['changes']}")
         elif event == "start":
             bar.begin(info["total"], f"{info['total']} points to run ({info['skipped']} already done)")
         elif event == "point_done":

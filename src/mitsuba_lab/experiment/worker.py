@@ -44,6 +44,8 @@ class PointTask:
     regions: dict                   # name -> pixel rectangle
     metrics: tuple[str, ...]
     variant: str
+    identity: dict = field(default_factory=dict)    # what determines the runs (experiment.identity)
+    identity_hash: str = ""
 
 
 @dataclass
@@ -103,6 +105,7 @@ def execute(task: PointTask) -> PointResult:
     result = PointResult(task, task.spp or 0)
     if not task.spp:
         result.spp, result.calibration = calibrate(task.point, render_at)
+        result.calibration["identity_hash"] = task.identity_hash
     params = sample_count_plugin(task.strategy, result.spp)[0].params
     render_at(result.spp, task.point.warmup_seed)                            # compile, untimed
     for seed in task.seeds:
@@ -112,6 +115,7 @@ def execute(task: PointTask) -> PointResult:
                "budget_s": task.point.budget_s, "seed": seed, "wall_s": stats.wall_s,
                "kernel_s": stats.kernel_s, "compile_s": stats.compile_s, "rays": stats.rays,
                "integrator": task.strategy.type, "params": params,
+               "identity": task.identity, "identity_hash": task.identity_hash,
                "host": socket.gethostname(), "pid": os.getpid(),
                # process-wide high-water mark so far (Linux reports KiB): cheap, not per render
                "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,

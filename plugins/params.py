@@ -1,0 +1,297 @@
+"""Declared, typed parameters of every lab plugin, and the one place they are read.
+
+Each lab plugin's parameters are declared once, here, as a tuple of ``Param``
+(name, kind, default, constraint, one-line doc); the plugin classes reference
+their tuple (``PARAMETERS``) and read their ``mi.Properties`` through
+``read_properties``. The same declarations serve code that has no Mitsuba
+object at all (the experiment runner's eager checks, a run's identity):
+
+* ``declared(plugin_type)``: the tuple of ``Param`` of a lab plugin, or None;
+* ``resolve(plugin_type, params)``: names, types and constraints checked, every
+  declared parameter returned with its default filled in, values normalised
+  (8.0 -> 8); any other plugin's parameters come back unchanged.
+
+Errors are ``ParameterError`` (a ``ValueError``) whose text is one line naming
+the plugin and the parameter, e.g. ``lab_mis: parameter 'rr_depth' must be an
+integer >= 1, got 0``; Mitsuba wraps it, with its traceback, and the last line
+of its message is still that line.
+
+No Mitsuba import: nothing here depends on the variant, so the module is not
+re-run on a variant switch (``plugins/__init__.py``).
+"""
+from __future__ import annotations
+
+import difflib
+import math
+import numbers
+from dataclasses import dataclass, replace
+from typing import Any, Callable
+
+
+class ParameterError(ValueError):
+    """A lab plugin parameter with a wrong name, type or value (one-line message)."""
+
+
+def _show(value) -> str:
+    """A value as the messages show it: strings quoted, numbers plain."""
+    if isinstance(value, str):
+        return repr(value)
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return repr(value)
+    if isinstance(value, numbers.Integral):
+        return repr(int(value))
+    return repr(float(value))
+
+
+def _is_bool(value) -> bool:
+    return isinstance(value, bool) or (type(value).__module__ == "numpy" and type(value).__name__ in ("bool_", "bool"))
+
+
+@dataclass(frozen=True)
+class Param:
+    """One declared parameter.
+
+    ``kind``: int, float, bool or str. ``check``: a predicate on the converted value,
+    with ``expected`` the text after "must be" when it fails ("an integer >= 1");
+    ``choices``: the allowed strings. ``doc``: one line for tables and messages.
+    """
+    name: str
+    kind: type
+    default: Any
+    doc: str = ""
+    check: Callable[[Any], bool] | None = None
+    expected: str = ""
+    choices: tuple[str, ...] = ()
+
+    def convert(self, plugin: str, value):
+        """``value`` checked and normalised to ``kind``; ParameterError otherwise."""
+        def fail(text):
+            raise ParameterError(f"{plugin}: parameter '{self.name}' {text}")
+
+        if self.kind is int:
+            if _is_bool(value) or not isinstance(value, numbers.Real):
+                fail(f"expects an integer, got {_show(value)}")
+            if not isinstance(value, numbers.Integral):
+                f = float(value)
+                if not (math.isfinite(f) and f.is_integer()):
+                    fail(f"expects an integer, got {_show(value)}")
+            value = int(value)
+        elif self.kind is float:
+            if _is_bool(value) or not isinstance(value, numbers.Real):
+                fail(f"expects a number, got {_show(value)}")
+            value = float(value)
+        elif self.kind is bool:
+            if not _is_bool(value):
+                fail(f"expects a boolean, got {_show(value)}")
+            value = bool(value)
+        elif self.kind is str:
+            if not isinstance(value, str):
+                fail(f"expects a string, got {_show(value)}")
+            value = str(value)
+        else:  # pragma: no cover - a declaration error
+            raise TypeError(f"{plugin}: parameter '{self.name}' has unsupported kind {self.kind!r}")
+        if self.choices and value not in self.choices:
+            fail(f"must be one of {', '.join(self.choices)}, got {_show(value)}")
+        if self.check is not None and not self.check(value):
+            fail(f"must be {self.expected or 'valid'}, got {_show(value)}")
+        return value
+
+
+def _int_at_least(lo: int) -> dict:
+    return {"check": lambda v: v >= lo, "expected": f"an integer >= {lo}"}
+
+
+def _override(parameters: tuple[Param, ...], *replacements: Param) -> tuple[Param, ...]:
+    """``parameters`` with the entries of the same names replaced, order kept."""
+    by_name = {p.name: p for p in replacements}
+    return tuple(by_name.get(p.name, p) for p in parameters)
+
+
+# ---------------------------------------------------------------------------
+# Declarations
+# ---------------------------------------------------------------------------
+#: Mitsuba's convention: max_depth = -1 means unbounded.
+UNBOUNDED = -1
+#: lab_mis heuristics (``common.mis_weight``).
+HEURISTICS = ("balance", "power", "max", "average")
+#: lab_photon's ``direct`` modes.
+DIRECT_MODES = ("photons", "nee")
+#: lab_photon: the smallest record buffer, also the smallest allowed ``max_records``.
+PHOTON_MIN_RECORDS = 1024
+#: lab_halton's randomisations, and its largest sample count (float32 digit extraction
+#: is exact below 2^21, see halton.py).
+RANDOMIZATIONS = ("permute_digits", "owen")
+HALTON_MAX_SPP = 1 << 21
+
+#: Shared by lab_naive, lab_nee and lab_mis (``LabPathIntegrator``).
+PATH_TRACER = (
+    Param("max_depth", int, UNBOUNDED,
+          "longest path in segments: -1 unbounded, 0 black, 1 emitters seen directly, 2 direct lighting",
+          check=lambda v: v == UNBOUNDED or v >= 0, expected="-1 (unbounded) or an integer >= 0"),
+    Param("rr_depth", int, 5, "depth at which Russian roulette starts", **_int_at_least(1)),
+    Param("hide_emitters", bool, False,
+          "camera rays pass through area emitters; the bare environment is invalid (alpha 0)"),
+    Param("count_rays", bool, True, "count camera, extension and shadow rays (ray_counts())"),
+)
+
+#: lab_mis: the path tracer's and its own.
+LAB_MIS = PATH_TRACER + (
+    Param("heuristic", str, "power", "MIS heuristic", choices=HEURISTICS),
+    Param("beta", float, 2.0, "power-heuristic exponent (1 = balance)",
+          check=lambda v: v > 0 and math.isfinite(v), expected="a finite number > 0"),
+    Param("emitter_samples", int, 1, "shadow rays per vertex, n_L", **_int_at_least(1)),
+)
+
+#: lab_photon (progressive photon mapping). Its max_depth is -1 or >= 1: a camera
+#: path needs one segment to reach a photon.
+LAB_PHOTON = (
+    Param("photons_per_pass", int, 100_000, "photons emitted per pass", **_int_at_least(1)),
+    Param("passes", int, 16, "passes (photon maps) averaged", **_int_at_least(1)),
+    Param("alpha", float, 2.0 / 3.0, "radius reduction r_{i+1}^2 = r_i^2 (i + alpha) / (i + 1)",
+          check=lambda v: 0.0 < v < 1.0, expected="a number in (0, 1)"),
+    Param("radius", float, 0.0, "first-pass radius in scene units; 0 = automatic",
+          check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
+    Param("max_depth", int, UNBOUNDED, "longest path in segments (camera + light subpath), -1 unbounded",
+          check=lambda v: v == UNBOUNDED or v >= 1, expected="-1 (unbounded) or an integer >= 1"),
+    replace(PATH_TRACER[1], doc="depth at which Russian roulette starts, on both subpaths"),
+    Param("direct", str, "nee", "direct light by photons, or by NEE + MIS (photons for the rest)",
+          choices=DIRECT_MODES),
+    Param("max_records", int, 1 << 21, "most photon records held at once (a pass is split to fit)",
+          **_int_at_least(PHOTON_MIN_RECORDS)),
+)
+
+#: Shared by every lab sampler (``LabSampler``).
+SAMPLER = (
+    Param("sample_count", int, 4, "samples per pixel", **_int_at_least(1)),
+    Param("seed", int, 0, "base seed, added to the render seed",
+          check=lambda v: 0 <= v < 2 ** 32, expected="an integer in [0, 2^32)"),
+)
+
+LAB_STRATIFIED = SAMPLER + (
+    Param("jitter", bool, True, "uniform offset inside each cell (false: cell centres, biased)"),
+)
+
+LAB_HALTON = _override(SAMPLER, Param(
+    "sample_count", int, 4, "samples per pixel",
+    check=lambda v: 1 <= v <= HALTON_MAX_SPP, expected=f"an integer in [1, {HALTON_MAX_SPP}]")) + (
+    Param("randomization", str, "owen", "digit randomisation", choices=RANDOMIZATIONS),
+)
+
+LAB_ZSOBOL = SAMPLER + (
+    Param("width", int, 0, "width of the rendered pixel block; 0 = infer from a square block",
+          **_int_at_least(0)),
+)
+
+_DECLARED: dict[str, tuple[Param, ...]] = {
+    "lab_naive": PATH_TRACER,
+    "lab_nee": PATH_TRACER,
+    "lab_mis": LAB_MIS,
+    "lab_photon": LAB_PHOTON,
+    "lab_independent": SAMPLER,
+    "lab_stratified": LAB_STRATIFIED,
+    "lab_halton": LAB_HALTON,
+    "lab_sobol": SAMPLER,
+    "lab_zsobol": LAB_ZSOBOL,
+}
+
+#: Parameters that Mitsuba's own C++ base classes read (``mi.SamplingIntegrator``:
+#: timeout, samples_per_pass, block_size): accepted, not listed, left to Mitsuba.
+#: (hide_emitters, which the base also reads, is declared by the path tracers; lab_photon
+#: does not support it, so there it is an unknown parameter.)
+MITSUBA_BASE_PARAMETERS = {
+    "integrator": ("timeout", "samples_per_pass", "block_size"),
+    "sampler": (),
+}
+
+
+def plugin_kind(plugin_type: str) -> str | None:
+    """'integrator' or 'sampler' for a lab plugin, None for any other name."""
+    if plugin_type not in _DECLARED:
+        return None
+    return "integrator" if plugin_type in ("lab_naive", "lab_nee", "lab_mis", "lab_photon") else "sampler"
+
+
+# ---------------------------------------------------------------------------
+# Public API
+# ---------------------------------------------------------------------------
+
+def declared(plugin_type: str) -> tuple[Param, ...] | None:
+    """The declared parameters of a lab plugin (``lab_mis``, ``lab_sobol``, ...), else None."""
+    return _DECLARED.get(plugin_type)
+
+
+def lab_plugins() -> tuple[str, ...]:
+    """Names of every lab plugin with declared parameters."""
+    return tuple(_DECLARED)
+
+
+def _unknown_message(plugin: str, unknown: list[str], parameters: tuple[Param, ...]) -> str:
+    valid = sorted(p.name for p in parameters)
+    names = ", ".join(f"'{n}'" for n in unknown)
+    text = (f"{plugin}: unknown parameter {names}" if len(unknown) == 1 else
+            f"{plugin}: unknown parameters {names}")
+    text += f"; valid parameters: {', '.join(valid)}"
+    hints = [(n, difflib.get_close_matches(n, valid, n=1)) for n in unknown]
+    hints = [f"'{close[0]}'" + (f" for '{n}'" if len(unknown) > 1 else "") for n, close in hints if close]
+    if hints:
+        text += f"; did you mean {', '.join(hints)}?"
+    return text
+
+
+def _check(plugin: str, given: dict, parameters: tuple[Param, ...], passthrough: tuple[str, ...]
+           ) -> tuple[dict, dict]:
+    """(declared values with defaults, given Mitsuba base parameters); raises ParameterError."""
+    names = {p.name for p in parameters}
+    unknown = [k for k in given if k not in names and k not in passthrough]
+    if unknown:
+        raise ParameterError(_unknown_message(plugin, unknown, parameters))
+    values = {p.name: p.convert(plugin, given[p.name]) if p.name in given else p.default
+              for p in parameters}
+    extra = {k: v for k, v in given.items() if k in passthrough}
+    return values, extra
+
+
+def resolve(plugin_type: str, params: dict) -> dict:
+    """Every declared parameter of ``plugin_type``, checked, normalised, defaults filled in.
+
+    Raises ParameterError (a ValueError) with a one-line message on an unknown name, a
+    value of the wrong type or one that breaks its constraint. Parameters that Mitsuba's
+    own base class reads (e.g. ``timeout``) are passed through unchanged after the
+    declared ones. For a plugin that is not the lab's, returns ``dict(params)``.
+    """
+    parameters = declared(plugin_type)
+    if parameters is None:
+        return dict(params)
+    values, extra = _check(plugin_type, dict(params), parameters,
+                           MITSUBA_BASE_PARAMETERS[plugin_kind(plugin_type)])
+    return {**values, **extra}
+
+
+def read_properties(plugin: str, props, parameters: tuple[Param, ...] | None = None,
+                    kind: str | None = None) -> dict:
+    """The declared parameters of ``plugin`` read from a ``mi.Properties``: checked like
+    ``resolve``, every declared name with its value (defaults filled in).
+
+    ``parameters`` defaults to ``declared(plugin)``, ``kind`` ('integrator' or 'sampler',
+    which decides the Mitsuba base parameters left alone) to ``plugin_kind(plugin)``.
+    Properties holding objects (nested plugins) or references are left to Mitsuba, which
+    reports those it finds unreferenced; every other property is read (so marked as
+    queried), and an undeclared one is an error. Call it before the Mitsuba base
+    class's constructor, so that its own type errors never come first.
+    """
+    if parameters is None:
+        parameters = declared(plugin)
+        if parameters is None:
+            raise KeyError(f"{plugin}: no declared parameters")
+    kind = kind or plugin_kind(plugin) or "integrator"
+    passthrough = MITSUBA_BASE_PARAMETERS[kind]
+    types = type(props).Type
+    skip = (types.Object, types.Reference, types.ResolvedReference)
+    given = {}
+    for name in props.keys():
+        if name in passthrough or props.type(name) in skip:
+            continue
+        given[name] = props[name]
+    values, _ = _check(plugin, given, parameters, passthrough)
+    return values
+
