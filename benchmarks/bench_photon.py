@@ -6,12 +6,14 @@ caustic's relMSE at (roughly) equal time against lab_mis.
    dr.sync_thread; it includes storing the records and reading back their count). Both use
    the same max_depth and rr_depth. Warm-up once (compilation), then --rounds alternating
    rounds; medians. Ratio = lab_photon seconds per photon / ptracer seconds per light path
-   (the issue's target: <= 1.5). ptracer does more per path (a camera connection and a splat
-   per vertex), lab_photon stores a record per smooth vertex.
+   ptracer does more per path (a camera connection and a splat per vertex), lab_photon
+   stores a record per smooth vertex.
 2. Gather cost: grid build and camera pass (gather) seconds per pass, from photon_stats().
 3. Caustic (scenes/caustic.xml, region `caustic` of caustic.regions.toml): a path-traced
-   reference (Mitsuba `path`, --ref-spp in 16 chunks, cached under out/bench_photon/, with its
-   noise floor from the chunks' spread). Each method gets the time budget --budget seconds:
+   reference (Mitsuba `path`, --ref-spp in 16 chunks, with its noise floor from the chunks'
+   spread), built and cached by the sweep runner's reference cache
+   (``mitsuba_lab.experiment.reference.get_reference``; ``$MITSUBA_LAB_CACHE`` or
+   ~/.cache/mitsuba_lab/references), so a sweep of the same scene shares it. Each method gets the time budget --budget seconds:
    its sample count (spp for lab_mis, passes for lab_photon) is calibrated by two runs to
    fill the budget, then --seeds renders are timed. lab_photon runs both direct modes with
    --caustic-radius (a sharp caustic wants a radius below the pixel-footprint default) and
@@ -26,7 +28,6 @@ caustic's relMSE at (roughly) equal time against lab_mis.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import os
 import statistics
 import sys
@@ -38,13 +39,17 @@ import mitsuba as mi
 import numpy as np
 
 import mitsuba_lab  # noqa: F401
+from mitsuba_lab.experiment.config import DEFAULT_CACHE, PluginSpec
+from mitsuba_lab.experiment.reference import get_reference
 from mitsuba_lab.metrics import fraction_rect_to_pixels, region
 from mitsuba_lab.render import render
 from mitsuba_lab.runtime import versions
 from mitsuba_lab.scene import load_scene, make_integrator
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-CACHE = os.path.join(ROOT, "out", "bench_photon")
+CACHE = os.path.abspath(os.path.expanduser(os.environ.get("MITSUBA_LAB_CACHE") or DEFAULT_CACHE))
+#: Reference chunks: their spread gives the reference's noise floor.
+REF_CHUNKS = 16
 
 
 def log(*args):
@@ -97,30 +102,22 @@ def throughput(scene_name, res, spp, photons, passes, depth, rounds):
 
 
 def caustic_reference(res, ref_spp, depth):
-    os.makedirs(CACHE, exist_ok=True)
-    with open(os.path.join(ROOT, "scenes", "caustic.xml"), "rb") as f:
-        digest = hashlib.sha1(f.read()).hexdigest()[:10]              # a changed scene is a new reference
-    path = os.path.join(CACHE, f"caustic_ref_{digest}_{res}_{ref_spp}_{depth}.npy")
-    if os.path.exists(path):
-        return np.load(path)
-    scene = load_scene(os.path.join(ROOT, "scenes", "caustic.xml"), res=res)
-    integrator = make_integrator("path", {"max_depth": depth})
-    chunks = []
-    for k in range(16):
-        chunks.append(np.array(mi.render(scene, integrator=integrator, spp=ref_spp // 16, seed=10_000 + k)))
-        log(f"reference chunk {k + 1}/16")
-    chunks = np.stack(chunks)
-    np.save(path, chunks)
-    return chunks
+    """The caustic scene's reference from the runner's cache (built on a miss): `path` with
+    ``ref_spp`` samples per pixel in REF_CHUNKS chunks (mean image, variance of the mean)."""
+    spp = ref_spp - ref_spp % REF_CHUNKS                             # the chunks must divide spp
+    reference, cached = get_reference(os.path.join(ROOT, "scenes", "caustic.xml"), None, {"res": res},
+                                      PluginSpec("reference", "path", {"max_depth": depth}), spp, REF_CHUNKS,
+                                      CACHE, progress=lambda k, n: log(f"reference chunk {k}/{n}"))
+    log(f"reference {'from the cache' if cached else 'built'}: {CACHE}/{reference.key}.exr")
+    return reference
 
 
 def caustic(res, ref_spp, depth, budget, seeds, photons, spp, radius):
-    chunks = caustic_reference(res, ref_spp, depth)
-    ref = chunks.mean(axis=0)
+    reference = caustic_reference(res, ref_spp, depth)
     with open(os.path.join(ROOT, "scenes", "caustic.regions.toml"), "rb") as f:
         rect = fraction_rect_to_pixels(tomllib.load(f)["regions"]["caustic"], res, res)
-    ref_r = region(ref, rect).astype(np.float64)
-    var_mean = region(chunks.var(axis=0, ddof=1) / len(chunks), rect)
+    ref_r = region(reference.image, rect).astype(np.float64)
+    var_mean = region(reference.variance, rect)
     floor = float(np.mean(var_mean / ref_r**2))
 
     def rel(img):
@@ -140,8 +137,9 @@ def caustic(res, ref_spp, depth, budget, seeds, photons, spp, radius):
         "lab_photon(nee,r=auto)": (photon("nee", 0.0), "passes"),
     }
     print(f"\ncaustic.xml {res}x{res}, max_depth {depth}, region {rect} (x0, y0, x1, y1); reference: path "
-          f"{ref_spp} spp in 16 chunks, region mean {ref_r.mean():.3f}, noise floor (per-pixel relMSE of "
-          f"the reference) {floor:.2e}; budget {budget} s, {seeds} seeds; lab_photon: {photons} photons "
+          f"{reference.meta['spp']} spp in {REF_CHUNKS} chunks, region mean {ref_r.mean():.3f}, noise floor "
+          f"(per-pixel relMSE of the reference) {floor:.2e}; budget {budget} s, {seeds} seeds; lab_photon: "
+          f"{photons} photons "
           f"and {spp} spp per pass")
     results = {}
     for name, (make, unit) in methods.items():
@@ -166,8 +164,9 @@ def caustic(res, ref_spp, depth, budget, seeds, photons, spp, radius):
     # `path` is the same estimator (BSDF sampling + NEE, power heuristic; test_consistency checks
     # they agree), so the reference's 16 chunks give its variance per sample far more reliably.
     n_mis = results["lab_mis"][0]
-    chunk_spp = ref_spp // 16
-    expected = float(np.mean(region(chunks.var(axis=0, ddof=1), rect) * chunk_spp / n_mis / ref_r**2))
+    chunk_spp = reference.meta["spp"] // REF_CHUNKS
+    chunk_variance = reference.variance * REF_CHUNKS                  # per chunk, from the mean's
+    expected = float(np.mean(region(chunk_variance, rect) * chunk_spp / n_mis / ref_r**2))
     print(f"  lab_mis expected relMSE at {n_mis} spp from the reference chunks' variance: {expected:.3e}")
     results["lab_mis(expected)"] = (n_mis, "spp", expected + floor, results["lab_mis"][3])
     for base_name in ("lab_mis", "lab_mis(expected)"):
@@ -185,7 +184,8 @@ def main(argv=None) -> int:
     parser.add_argument("--budget", type=float, default=4.0, help="caustic time budget in seconds (default: 4)")
     parser.add_argument("--seeds", type=int, default=6, help="timed renders per method on the caustic (default: 6)")
     parser.add_argument("--ref-spp", type=int, default=262144,
-                        help="caustic reference spp, in 16 chunks (default: 262144, ~6 min; cached)")
+                        help="caustic reference spp, in 16 chunks (default: 262144; built once, then read "
+                             "from the runner's reference cache)")
     parser.add_argument("--caustic-photons", type=int, default=200_000,
                         help="photons per pass on the caustic (default: 200000)")
     parser.add_argument("--caustic-spp", type=int, default=8,

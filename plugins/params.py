@@ -112,7 +112,7 @@ def _override(parameters: tuple[Param, ...], *replacements: Param) -> tuple[Para
 # ---------------------------------------------------------------------------
 #: Mitsuba's convention: max_depth = -1 means unbounded.
 UNBOUNDED = -1
-#: lab_mis heuristics (``common.mis_weight``).
+#: lab_mis heuristics (``mis_weight.mis_weight``).
 HEURISTICS = ("balance", "power", "max", "average")
 #: lab_photon's ``direct`` modes.
 DIRECT_MODES = ("photons", "nee")

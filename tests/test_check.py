@@ -16,6 +16,12 @@ STIFF = os.path.join(ROOT, "scenes", "stiff")
 SMALL = ["--res", "16", "--spp", "16", "--ref-spp", "64", "--splits", "4", "--max-depth", "6"]
 
 
+@pytest.fixture(autouse=True)
+def _private_reference_cache(tmp_path, monkeypatch):
+    """References go to a cache of the test's own (``--cache`` defaults to $MITSUBA_LAB_CACHE)."""
+    monkeypatch.setenv("MITSUBA_LAB_CACHE", str(tmp_path / "cache"))
+
+
 def run_check(argv):
     parser = argparse.ArgumentParser(prog="mitsuba-lab check")
     check.add_arguments(parser)
@@ -116,9 +122,47 @@ def test_firefly_rule():
 
 
 def test_z_score_limits():
-    assert check.z_score(np.array([1.0, 1.0]), np.array([1.0, 1.0])) == 0.0
-    assert check.z_score(np.array([0.0, 0.0]), np.array([1.0, 1.0])) == -np.inf
-    assert check.z_score(np.array([1.0, 3.0]), np.array([2.0, 2.0])) == 0.0
+    """z of the splits' mean luminance against the reference's (metrics.z_score): equal means
+    give 0 with or without spread, a difference without any spread is infinite."""
+    ones = np.ones((2, 4, 4, 3))                        # luminance 1 (the weights sum to 1)
+    ref = {"mean": 1.0, "mean_variance": 0.0, "finite": True}
+    assert check.measure(ones, {}, 0.0, ref, 10.0)["z"] == 0.0
+    assert check.measure(0 * ones, {}, 0.0, ref, 10.0)["z"] == -np.inf
+    spread = np.concatenate([0.5 * ones[:1], 1.5 * ones[:1]])
+    assert check.measure(spread, {}, 0.0, ref, 10.0)["z"] == 0.0
+    z = check.measure(spread, {}, 0.0, {**ref, "mean": 0.5, "mean_variance": 0.25}, 10.0)["z"]
+    assert z == pytest.approx(0.5 / np.sqrt(0.5 / 2 + 0.25))       # split variance 0.5 over 2 splits
+
+
+def test_reference_standard_error_from_its_pixel_variance():
+    """The reference's variance of its mean luminance, from the per-pixel variance of its mean
+    image: exact for independent pixels whose channels move together (here proportional), an
+    upper bound when they do not (here independent)."""
+    rng = np.random.default_rng(3)
+    chunks = 8
+    together = rng.gamma(0.5, size=(chunks, 6, 5, 1)) * np.array([1.0, 0.4, 0.1])
+    apart = rng.gamma(0.5, size=(chunks, 6, 5, 3))
+    for stack in (together, apart):
+        variance_of_mean = stack.var(axis=0, ddof=1) / chunks
+        exact = check.luminance(stack).var(axis=0, ddof=1).sum() / chunks / 30 ** 2
+        estimate = check.reference_mean_variance(variance_of_mean)
+        if stack is together:
+            assert estimate == pytest.approx(exact, rel=1e-12)
+        else:
+            assert estimate > exact
+
+
+def test_the_reference_comes_from_the_cache(tmp_path):
+    """The second check of a scene reuses the cached path reference: same numbers, note says so."""
+    scene = os.path.join(STIFF, "all_specular.xml")
+    small = ["--res", "8", "--spp", "8", "--ref-spp", "16", "--splits", "2", "--max-depth", "4"]
+    first, second = str(tmp_path / "first"), str(tmp_path / "second")
+    run_check([scene, *small, "--cache", str(tmp_path / "refs"), "-o", first])
+    run_check([scene, *small, "--cache", str(tmp_path / "refs"), "-o", second])
+    a, b = read_rows(first), read_rows(second)
+    assert "rendered into the cache" in a[0]["note"] and "from the cache" in b[0]["note"]
+    assert a[0]["mean"] == b[0]["mean"] and [r["z"] for r in a] == [r["z"] for r in b]
+    assert len(os.listdir(tmp_path / "refs")) == 3              # mean, variance, metadata
 
 
 @pytest.mark.parametrize("argv, message", [

@@ -116,3 +116,65 @@ def test_theory_json_rows():
     assert {"problem", "quantity", "predicted", "measured"} <= set(rows[0])
     by_quantity = {(r["problem"], r["quantity"]): r for r in rows}
     assert by_quantity[("P5", "rr_variance")]["predicted"] == pytest.approx(16.6667, abs=1e-4)
+
+
+def test_every_command_is_a_module_with_help():
+    """Each verb of the registry: a module of mitsuba_lab.commands with add_arguments and run,
+    and a --help page (exit 0)."""
+    import importlib
+
+    assert list(cli.COMMANDS) == ["render", "demo", "sweep", "reference", "report", "check", "invert",
+                                  "theory", "plugins"]
+    assert cli.NO_VARIANT == {"theory", "report", "plugins"}
+    for verb, (module, help_line) in cli.COMMANDS.items():
+        command = importlib.import_module(f"mitsuba_lab.commands.{module}")
+        assert callable(command.add_arguments) and callable(command.run) and help_line
+        code, out, _ = run([verb, "--help"])
+        assert code == 0 and out.startswith(f"usage: mitsuba-lab {verb}"), verb
+    code, out, _ = run(["--help"])
+    assert code == 0 and all(verb in out for verb in cli.COMMANDS)
+
+
+def test_shared_argument_helpers_stay_importable_from_cli():
+    from mitsuba_lab.commands import args
+
+    assert cli.parse_assignments is args.parse_assignments and cli.positive_int is args.positive_int
+    assert (cli.EXIT_USAGE, cli.EXIT_INTERRUPTED, cli.EXIT_PIPE) == (2, 130, 141)
+    assert cli.build_parser().parse_args(["render", "x.xml", "--spp", "4"]).spp == 4
+
+
+def test_help_imports_no_mitsuba():
+    """`mitsuba-lab --help` builds no subcommand: no command module, no Mitsuba, Dr.Jit or numpy."""
+    code = ("import sys\n"
+            "sys.argv[0] = 'mitsuba-lab'\n"
+            "from mitsuba_lab import cli\n"
+            "try:\n"
+            "    cli.main(['--help'])\n"
+            "except SystemExit as exc:\n"
+            "    assert exc.code == 0\n"
+            "heavy = ('mitsuba', 'drjit', 'numpy', 'mitsuba_lab.commands.render', 'mitsuba_lab.check')\n"
+            "print(sorted(m for m in heavy if m in sys.modules))\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_render_help_states_the_declared_defaults_and_values():
+    from mitsuba_lab.commands.plugins import allowed_text, default_text
+    from mitsuba_lab.plugins.params import declared, lab_plugins, plugin_kind
+
+    code, out, _ = run(["render", "--help"])
+    assert code == 0
+    text = " ".join(out.split())
+    integrators = [p for p in lab_plugins() if plugin_kind(p) == "integrator"]
+    assert "lab_photon" in integrators
+    assert f"integrator plugin: {', '.join(integrators)} or any of Mitsuba's" in text
+    options = {"--max-depth": "max_depth", "--rr-depth": "rr_depth", "--heuristic": "heuristic",
+               "--beta": "beta", "--emitter-samples": "emitter_samples"}
+    for option, name in options.items():
+        section = text.split(f"{option} {name.upper()} ", 1)[1].split(" --", 1)[0]
+        holders = [p for plugin in integrators for p in declared(plugin) if p.name == name]
+        assert section.startswith(holders[0].doc), (option, section)      # the first declaration's meaning
+        for p in holders:
+            assert f"{allowed_text(p)} (default: {default_text(p)})" in section, (option, section)
+    assert "lab_mis only: balance | power | max | average (default: power)" in text

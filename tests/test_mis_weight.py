@@ -1,4 +1,5 @@
-"""MIS weights from plugins/integrators/common.py at extreme densities."""
+"""The one MIS weight (plugins/integrators/mis_weight.py) at extreme densities, on Dr.Jit arrays
+as the plugins trace it and on numpy arrays as mitsuba_lab.theory uses it."""
 import itertools
 
 import drjit as dr
@@ -6,7 +7,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mitsuba_lab.plugins.integrators.common import HEURISTICS, mis_weight
+from mitsuba_lab.plugins.integrators.mis_weight import HEURISTICS, mis_weight
 
 # Dr.Jit flushes float32 denormals (< 1.18e-38) to zero, so the smallest density tested is normal.
 EXTREMES = [0.0, 1.2e-38, 1e-30, 1e-3, 0.5, 1.0, 3.0, 7e3, 1e7, 1.8e19, 1e30, 3.4e38, float("inf")]
@@ -39,7 +40,7 @@ def test_infinite_against_finite_density_gets_weight_one(heuristic):
 
 
 def test_power_heuristic_matches_formula_where_pdf_beta_is_representable():
-    # Seed text, Problem 4: p_A(1) = 0.16580, p_B(1) = 0.04382.
+    # mitsuba_lab.theory, Problem 4: p_A(1) = 0.16580, p_B(1) = 0.04382.
     pa, pb = mi.Float(0.16580), mi.Float(0.04382)
     assert mis_weight(pa, pb, "balance")[0] == pytest.approx(0.7909, abs=1e-4)
     assert mis_weight(pa, pb, "power", 2.0)[0] == pytest.approx(0.9347, abs=1e-4)
@@ -64,3 +65,26 @@ def test_max_and_average():
 def test_unknown_heuristic():
     with pytest.raises(ValueError, match="unknown MIS heuristic 'foo'"):
         mis_weight(mi.Float(1.0), mi.Float(1.0), "foo")
+
+
+@pytest.mark.parametrize("heuristic, beta", [(h, b) for h in HEURISTICS for b in BETAS])
+def test_numpy_and_drjit_give_the_same_weights(heuristic, beta):
+    """One formula on two array types: float32 Dr.Jit weights equal float64 numpy weights of
+    the same (float32-representable) densities, up to float32 rounding."""
+    a, b, w_ab, _ = weights(heuristic, beta)
+    w_np = mis_weight(a.astype(np.float64), b.astype(np.float64), heuristic, beta)
+    assert isinstance(w_np, np.ndarray) and w_np.dtype == np.float64
+    np.testing.assert_allclose(w_ab, w_np, rtol=1e-5, atol=1e-6)
+
+
+def test_average_is_one_half_wherever_both_techniques_can_sample():
+    """The plain average of the two estimators: 1/2 each for any densities (n_i p_i), 1 where
+    only this technique can sample, 0 where it cannot."""
+    a = np.array([1.0, 1e-30, 3.0, 0.0, 2.0])
+    b = np.array([3.0, 1e30, 3.0, 1.0, 0.0])
+    np.testing.assert_array_equal(mis_weight(a, b, "average"), [0.5, 0.5, 0.5, 0.0, 1.0])
+
+
+def test_bad_power_exponent():
+    with pytest.raises(ValueError, match="beta must be > 0"):
+        mis_weight(1.0, 1.0, "power", 0.0)

@@ -1,5 +1,6 @@
 """`mitsuba-lab report`: what a wrong argument says, and the Veach-bound table's grouping
-(on a synthetic stored sweep: rows and images made with numpy, nothing rendered)."""
+(on a synthetic stored sweep: rows and images made with numpy, nothing rendered); the shared
+report helpers (mitsuba_lab.reporting) that the sweep report, invert and check write with."""
 import json
 import os
 
@@ -153,3 +154,42 @@ def test_veach_table_is_absent_without_a_balance_weighting(synthetic):
         if p.strategy != "mis_balance" and p.strategy != "mis_balance_2":
             groups.setdefault((p.strategy, p.sampler), []).append(p)
     assert report.veach_table("s", groups) == []
+
+
+# -- mitsuba_lab.reporting ---------------------------------------------------------------------
+
+def test_number_formatting():
+    from mitsuba_lab.reporting import fmt
+
+    assert [fmt(v) for v in (0.123456, 1234567.0, float("nan"), float("inf"), float("-inf"), None, 7, "x")] == \
+        ["0.123", "1.23e+06", "n/a", "inf", "-inf", "n/a", "7", "x"]
+    assert fmt(0.123456, 2) == "0.12" and fmt(None, missing="-") == "-" and fmt("", missing="-") == "-"
+
+
+def test_markdown_table_and_its_html(tmp_path):
+    from mitsuba_lab.reporting import markdown_table, md_to_html
+
+    lines = markdown_table(["a", "b"], [[1, "x <y>"], [2.5, ""]])
+    assert lines == ["| a | b |", "|---|---|", "| 1 | x <y> |", "| 2.5 |  |"]
+    page = md_to_html("# Title\n\n" + "\n".join(lines) + "\n\n**Best:** `lab_mis`.")
+    assert page.splitlines() == [
+        "<h1>Title</h1>",
+        "<table><tr><th>a</th><th>b</th></tr><tr><td>1</td><td>x &lt;y&gt;</td></tr>"
+        "<tr><td>2.5</td><td></td></tr></table>",
+        "<p><strong>Best:</strong> lab_mis.</p>"]
+
+
+def test_a_page_embeds_its_images_and_honours_the_umask(tmp_path):
+    from mitsuba_lab.reporting import write_markdown_page
+
+    images.write_png(str(tmp_path / "plot.png"), np.full((2, 2, 3), 0.5, dtype=np.float32))
+    old = os.umask(0o027)
+    try:
+        paths = write_markdown_page(str(tmp_path), "T & U", "# T & U\n\n![a plot](plot.png)")
+    finally:
+        os.umask(old)
+    html = open(paths["html"]).read()
+    assert "<title>T &amp; U</title>" in html and '<img alt="a plot" src="data:image/png;base64,' in html
+    assert open(paths["md"]).read() == "# T & U\n\n![a plot](plot.png)\n"
+    assert all(os.stat(p).st_mode & 0o777 == 0o640 for p in paths.values())
+    assert sorted(os.listdir(tmp_path)) == ["index.html", "plot.png", "summary.md"]      # no temporary left

@@ -1,8 +1,7 @@
-"""The seed's worked problems: analytic numbers, a quick simulated run, MIS weights.
+"""The worked problems of mitsuba_lab.theory: analytic numbers, a quick simulated run, MIS weights.
 
-Analytic values are compared to the seed text's printed digits (rounded the
-same way). Simulated rows carry their own tolerances (4 standard errors, see
-``theory.TOL_SE``); the run uses seed 0 and ``quick=True`` (~2 s).
+Analytic values are compared to their known digits (rounded the same way). Simulated rows carry their own tolerances (4 standard errors, see
+``theory.TOL_SE``); the run uses seed 0 and ``quick=True``.
 """
 import itertools
 import math
@@ -100,7 +99,7 @@ def test_problem4_numbers():
 
 def test_problem4_predicted_rmse_ordering():
     rmse = {k: math.sqrt(v) for k, v in theory.p4_predicted_variances(8192).items()}
-    assert round(rmse["brdf"], 5) == 0.00073  # seed measured 0.00073
+    assert round(rmse["brdf"], 5) == 0.00073  # the analytic value
     assert rmse["balance"] < rmse["power"] < rmse["light"] < rmse["brdf"]
 
 
@@ -154,7 +153,8 @@ def test_mis_weight_formulas():
                                theory.mis_weights(p_a, p_b, "balance")[0])
     np.testing.assert_array_equal(theory.mis_weights(p_a, p_b, "max")[0], [0.0, 1.0])
     np.testing.assert_array_equal(theory.mis_weights(1.0, 1.0, "max")[0], 0.5)
-    np.testing.assert_allclose(theory.mis_weights(p_a, p_b, "average", n_a=1, n_b=3)[0], 0.25)
+    # average: the plain average of the two estimators, 1/2 each whatever the sample counts
+    np.testing.assert_allclose(theory.mis_weights(p_a, p_b, "average", n_a=1, n_b=3)[0], 0.5)
     assert theory.mis_weights(0.0, 0.0, "balance") == (0.0, 0.0)
 
 
@@ -163,3 +163,19 @@ def test_mis_weight_formulas():
 def test_mis_weights_reject_bad_input(args):
     with pytest.raises(ValueError):
         theory.mis_weights(*args)
+
+
+def test_theory_uses_the_plugins_mis_weight(monkeypatch):
+    """theory.mis_weights is the plugins' one MIS weight on n_i p_i, not a copy of it."""
+    from mitsuba_lab.plugins.integrators import mis_weight as shared
+
+    calls = []
+
+    def spy(pdf_self, pdf_other, heuristic, beta):
+        calls.append((np.asarray(pdf_self).tolist(), np.asarray(pdf_other).tolist(), heuristic, beta))
+        return shared.mis_weight(pdf_self, pdf_other, heuristic, beta)
+
+    monkeypatch.setattr(theory, "mis_weight", spy)
+    w_a, w_b = theory.mis_weights(np.array([0.2]), np.array([0.6]), "power", beta=3.0, n_a=2, n_b=1)
+    assert calls == [([0.2], [0.3], "power", 3.0), ([0.3], [0.2], "power", 3.0)]   # scaled by 1/max(n)
+    np.testing.assert_allclose(w_a, shared.mis_weight(0.4, 0.6, "power", 3.0))

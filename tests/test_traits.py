@@ -13,8 +13,9 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mitsuba_lab.plugins.integrators.common import (KernelTraits, mis_weight, rr_scale,
-                                                    russian_roulette_probability)
+from mitsuba_lab.plugins.integrators.mis_weight import mis_weight
+from mitsuba_lab.plugins.integrators.path import KernelPlan
+from mitsuba_lab.plugins.integrators.roulette import rr_scale, russian_roulette, survival_probability
 from mitsuba_lab.render import render
 from mitsuba_lab.scene import (SceneTraits, equivalent_strategies, load_scene, make_integrator,
                                strategy_applicability)
@@ -153,7 +154,10 @@ def test_equivalent_strategies_render_identical_images(scene_name):
 
 def test_no_shadow_rays_where_no_vertex_can_use_them():
     scene = load_scene(os.path.join(ROOT, "scenes", "stiff", "all_specular.xml"), res=16)
-    assert dataclasses.astuple(KernelTraits.of(scene)) == (True, True, False)   # hittable, any, smooth
+    t = SceneTraits.from_scene(scene)
+    assert (t.hittable_emitters, t.emitters > 0, t.smooth_bsdf) == (True, True, False)
+    plan = KernelPlan.of(t, make_integrator("lab_mis", {}).estimator)
+    assert dataclasses.astuple(plan) == (True, False, True)    # emitter hits, no NEE, every hit delta
     counts = {}
     for kind, params in (("lab_naive", {}), ("lab_nee", {}), ("lab_mis", {"emitter_samples": 3})):
         _, stats = image(scene, kind, params)
@@ -194,9 +198,22 @@ def test_mis_weight_ignores_a_broken_other_density():
 
 def test_russian_roulette_at_extreme_throughputs():
     beta = mi.Spectrum(mi.Float([0.0, 1e-30, 1e30, float("inf"), float("nan")]))
-    q = russian_roulette_probability(beta, mi.Float(1.0))
+    q = survival_probability(beta, mi.Float(1.0))
     values = np.array(q)
     assert np.all(np.isfinite(values)) and np.all((values >= 0) & (values <= 0.95))
     assert values[0] == 0.0 and values[1] == pytest.approx(1e-30, rel=1e-6) and values[2] == 0.95
     scale = np.array(rr_scale(q))
     assert scale[0] == 0.0 and np.all(np.isfinite(scale))
+
+
+def test_russian_roulette_for_camera_paths_and_photons():
+    """One rule: q = min(max(beta) / start * eta^2, 0.95); survivors are divided by q."""
+    beta = mi.Spectrum(mi.Float([0.5, 0.5, 2.0]), mi.Float([0.2, 0.2, 1.0]), mi.Float([0.1, 0.1, 1.0]))
+    q_camera = np.array(survival_probability(beta, eta=mi.Float([1.0, 1.5, 1.0])))
+    np.testing.assert_allclose(q_camera, [0.5, 0.95, 0.95], rtol=1e-6)      # 0.5 * 1.5^2 > 0.95
+    q_photon = np.array(survival_probability(beta, start=mi.Float(4.0)))
+    np.testing.assert_allclose(q_photon, [0.125, 0.125, 0.5], rtol=1e-6)
+    rr_active = mi.Bool([True, True, False])
+    out, survives = russian_roulette(beta, mi.Float([0.1, 0.9, 0.9]), rr_active, eta=mi.Float(1.0))
+    assert list(np.array(survives)) == [True, False, True]                 # u < q, or no roulette
+    np.testing.assert_allclose(np.array(out)[0], [1.0, 0.5 / 0.5, 2.0], rtol=1e-6)

@@ -1,73 +1,59 @@
-"""``lab_mis``: BSDF sampling and next-event estimation combined by MIS."""
+"""``lab_mis``: BSDF sampling and next-event estimation combined by MIS (the plugin class is in
+``path.py``)."""
 from __future__ import annotations
 
 import drjit as dr
-import mitsuba as mi
 
-from mitsuba_lab.plugins import params
-from mitsuba_lab.plugins.integrators.common import LabPathIntegrator, mis_weight
+from mitsuba_lab.plugins import params as declarations
+from mitsuba_lab.plugins.integrators.estimator import Densities, PathEstimator
+from mitsuba_lab.plugins.integrators.mis_weight import mis_weight
 
 
-class LabMISIntegrator(LabPathIntegrator):
-    r"""Multiple importance sampling path tracer (:monosp:`lab_mis`)
+class MIS(PathEstimator):
+    """lab_mis's estimator: Veach's multi-sample MIS of BSDF sampling and n_L emitter samples,
 
-    Every vertex with a smooth BSDF component takes ``emitter_samples`` (n_L)
-    emitter samples and one BSDF sample; each sample that reaches an emitter is
-    weighted by Veach's multi-sample MIS estimator (Veach & Guibas 1995):
+        w_B(x) = h(p_B(x), n_L p_L(x)),  w_L(x) = h(n_L p_L(x), p_B(x)),
 
-        w_L(x) = h(n_L p_L(x), p_B(x)),  w_B(x) = h(p_B(x), n_L p_L(x)),
-
-    with both densities in solid angle and the emitter-sample contributions
-    divided by n_L. Delta emitters (only NEE reaches them) and delta BSDF lobes
-    (only BSDF sampling reaches their emitters) get weight 1, which keeps the
-    estimator unbiased.
-
-    =============== ====== =====================================================
-    heuristic       string ``balance`` | ``power`` | ``max`` | ``average``
-                           (Default: ``power``). ``average`` weights 1/2 each
-                           wherever both techniques can sample x: the plain
-                           average the seed text warns about, kept for study.
-    beta            float  Exponent of the power heuristic, > 0; 1 = balance.
-                           (Default: 2)
-    emitter_samples int    Shadow rays per vertex, n_L >= 1. The kernel holds
-                           n_L copies of the emitter-sampling code. (Default: 1)
-    max_depth       int    Longest path in segments, -1 = unbounded, >= 0
-                           otherwise (0 renders black) (Default: -1)
-    rr_depth        int    Depth at which Russian roulette starts, >= 1 (Default: 5)
-    hide_emitters   bool   Camera rays pass through area emitters; the bare
-                           environment is invalid (Default: false)
-    count_rays      bool   Count camera / extension / shadow rays (Default: true)
-    =============== ====== =====================================================
-
-    All weights are computed from pdf ratios (``common.mis_weight``), so pdfs
-    of 0, 1e-30, 1e30 or inf give the right limit and never NaN.
-
-    .. code-block:: python
-
-        {'type': 'lab_mis', 'heuristic': 'power', 'beta': 2.0, 'emitter_samples': 1}
+    h the heuristic (``mis_weight``), 1 for a sample only its own technique can produce.
     """
     plugin_name = "lab_mis"
+    SIMPLICITY = 2
     samples_emitters = True
     #: The path tracer's parameters and heuristic, beta, emitter_samples (``params.LAB_MIS``).
-    PARAMETERS = params.LAB_MIS
+    PARAMETERS = declarations.LAB_MIS
+    OWN_PARAMETERS = ("heuristic", "beta", "emitter_samples")
 
-    def configure(self, values: dict):
-        self.heuristic = values["heuristic"]
-        self.beta = values["beta"]
-        self.emitter_samples = values["emitter_samples"]
-
-    def weight(self, pdf_self, pdf_other):
+    def h(self, pdf_self, pdf_other):
         return mis_weight(pdf_self, pdf_other, self.heuristic, self.beta)
 
     # ----------------------- Direct emission -----------------------
-    def emitter_hit_weight(self, scene, prev_it, ds, prev_bsdf_pdf, prev_bsdf_delta):
-        pdf_em = scene.pdf_emitter_direction(prev_it, ds, ~prev_bsdf_delta)
-        return dr.select(prev_bsdf_delta, 1.0,
-                         self.weight(prev_bsdf_pdf, self.emitter_samples * pdf_em))
+    def hit_weight(self, d: Densities):
+        return dr.select(d.delta, 1.0, self.h(d.bsdf, d.emitter))
 
     # ----------------------- Emitter sampling ----------------------
-    def emitter_sample_weight(self, ds, bsdf_pdf):
-        return dr.select(ds.delta, 1.0, self.weight(self.emitter_samples * ds.pdf, bsdf_pdf))
+    def sample_weight(self, d: Densities):
+        return dr.select(d.delta, 1.0, self.h(d.emitter, d.bsdf))
 
+    # -- Knowledge ------------------------------------------------------------------------
+    @staticmethod
+    def weighting(heuristic: str, beta: float) -> tuple[str, float | None]:
+        """(heuristic, beta) as the weights they give: the power heuristic with beta = 1 is the
+        balance heuristic, and beta (None here) enters no other heuristic."""
+        if heuristic == "power" and beta == 1.0:
+            heuristic = "balance"
+        return heuristic, (beta if heuristic == "power" else None)
 
-mi.register_integrator("lab_mis", lambda props: LabMISIntegrator(props))
+    @classmethod
+    def technique_key(cls, traits, own: dict, shared: tuple) -> tuple[tuple, str]:
+        """With only delta emitters every weight is 1 whatever the heuristic: lab_mis with n_L
+        shadow rays is NEE with n_L (lab_nee when n_L = 1). Otherwise the power heuristic with
+        beta = 1 is the balance heuristic, and beta does not enter balance, max or average."""
+        n_L = own["emitter_samples"]
+        if not traits.hittable_emitters:
+            return cls.nee_key(traits, n_L, shared)
+        heuristic, beta = cls.weighting(own["heuristic"], own["beta"])
+        if heuristic == "power":
+            return ("MIS", heuristic, beta, n_L, shared), "same parameters (MIS)"
+        return (("MIS", heuristic, None, n_L, shared),
+                "the power heuristic with beta = 1 is the balance heuristic, and beta does not enter the "
+                "balance, max or average heuristics")

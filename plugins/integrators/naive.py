@@ -1,35 +1,30 @@
-"""``lab_naive``: path tracing with BSDF sampling only."""
+"""``lab_naive``: path tracing with BSDF sampling only (the plugin class is in ``path.py``)."""
 from __future__ import annotations
 
-import mitsuba as mi
-
-from mitsuba_lab.plugins.integrators.common import LabPathIntegrator
+from mitsuba_lab.plugins.integrators.estimator import Densities, PathEstimator
 
 
-class LabNaiveIntegrator(LabPathIntegrator):
-    r"""Naive path tracer (:monosp:`lab_naive`)
-
-    Each vertex samples one direction from the BSDF; emitted radiance is added,
-    with weight 1, wherever a path happens to hit an emitter. This is the plain
-    Neumann-series estimator of the rendering equation (seed text, "Path
-    tracing"): unbiased for every emitter a BSDF-sampled ray can hit, and very
-    noisy when emitters are small.
-
-    It never samples emitters, so it **cannot reach delta lights** (point, spot,
-    directional): in scenes lit by them its image lacks that light (biased).
-
-    Parameters: ``max_depth`` (default -1, unbounded), ``rr_depth`` (5),
-    ``hide_emitters`` (false), ``count_rays`` (true); see ``LabPathIntegrator``.
-
-    .. code-block:: python
-
-        {'type': 'lab_naive', 'max_depth': 8}
-    """
+class Naive(PathEstimator):
+    """lab_naive's estimator: BSDF sampling only, w_B = 1 for every emitter hit (Kajiya 1986's
+    Neumann series); no emitter sampling, so delta lights are never reached."""
     plugin_name = "lab_naive"
+    SIMPLICITY = 0
 
     # ----------------------- Direct emission -----------------------
-    def emitter_hit_weight(self, scene, prev_it, ds, prev_bsdf_pdf, prev_bsdf_delta):
-        return mi.Float(1.0)   # the only way this estimator finds light
+    def hit_weight(self, d: Densities):
+        return 1.0   # the only way this estimator finds light
 
-
-mi.register_integrator("lab_naive", lambda props: LabNaiveIntegrator(props))
+    # -- Knowledge ------------------------------------------------------------------------
+    @classmethod
+    def applicability(cls, traits, params: dict) -> tuple[bool, str]:
+        """Left out where delta lights light a vertex it could shade: BSDF-sampled rays never
+        reach a delta light. (With only delta BSDFs no estimator can use a delta light, so
+        there lab_naive is not worse than the others.)"""
+        ok, reason = super().applicability(traits, params)
+        if ok and traits.delta_emitters and traits.smooth_bsdf:
+            kinds = ", ".join(dict.fromkeys(traits.delta_emitters))
+            if not traits.hittable_emitters:
+                return False, (f"lab_naive cannot reach delta lights ({kinds}): the scene has no other "
+                               f"emitter")
+            return False, f"lab_naive cannot reach delta lights ({kinds}): it would miss their light (biased)"
+        return ok, reason

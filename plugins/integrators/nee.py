@@ -1,43 +1,28 @@
-"""``lab_nee``: next-event estimation only."""
+"""``lab_nee``: next-event estimation only (the plugin class is in ``path.py``)."""
 from __future__ import annotations
 
 import drjit as dr
-import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators.common import LabPathIntegrator
+from mitsuba_lab.plugins.integrators.estimator import Densities, PathEstimator
 
 
-class LabNEEIntegrator(LabPathIntegrator):
-    r"""Next-event estimation (:monosp:`lab_nee`)
-
-    At every vertex whose BSDF has a non-delta (smooth) component, sample a
-    point on an emitter and trace a shadow ray (the three-point form's direct
-    term, seed text "The algorithm and next-event estimation"). BSDF sampling
-    only extends the path: emission it finds counts for camera rays and after
-    delta (specular) bounces, which NEE cannot produce, and nowhere else, so
-    no light is counted twice.
-
-    Unbiased for area, environment and delta emitters. Near-specular
-    reflections of large emitters are noisy here (a point sampled on the
-    emitter rarely falls in a sharp BSDF lobe): that is what ``lab_mis`` fixes.
-
-    Parameters: ``max_depth`` (default -1, unbounded), ``rr_depth`` (5),
-    ``hide_emitters`` (false), ``count_rays`` (true); see ``LabPathIntegrator``.
-
-    .. code-block:: python
-
-        {'type': 'lab_nee', 'max_depth': 8}
-    """
+class NEE(PathEstimator):
+    """lab_nee's estimator: emitter sampling at every smooth vertex, w_L = 1; emission found by
+    BSDF sampling counts only where emitter sampling cannot produce it (w_B = 1 after a camera
+    ray or a delta bounce, else 0), so no light is counted twice (Veach 1997, sec. 9.1)."""
     plugin_name = "lab_nee"
+    SIMPLICITY = 1
     samples_emitters = True
 
     # ----------------------- Direct emission -----------------------
-    def emitter_hit_weight(self, scene, prev_it, ds, prev_bsdf_pdf, prev_bsdf_delta):
-        return dr.select(prev_bsdf_delta, 1.0, 0.0)
+    def hit_weight(self, d: Densities):
+        return dr.select(d.delta, 1.0, 0.0)   # elsewhere emitter sampling finds this light
 
     # ----------------------- Emitter sampling ----------------------
-    def emitter_sample_weight(self, ds, bsdf_pdf):
-        return mi.Float(1.0)
+    def sample_weight(self, d: Densities):
+        return 1.0
 
-
-mi.register_integrator("lab_nee", lambda props: LabNEEIntegrator(props))
+    # -- Knowledge ------------------------------------------------------------------------
+    @classmethod
+    def technique_key(cls, traits, own: dict, shared: tuple) -> tuple[tuple, str]:
+        return cls.nee_key(traits, 1, shared)

@@ -5,9 +5,12 @@ far_clip, emitters that emit nothing, participating media), then every strategy 
 applies to it (``scene.strategy_applicability``; the others are listed with the
 reason), each class of provably identical strategies rendered once
 (``scene.equivalent_strategies``), and Mitsuba's `path` as the reference at more
-samples per pixel. Each strategy and the reference are rendered as ``--splits``
-independent renders (seeds 0.. and 1000..), whose spread gives the standard error
-of the image mean.
+samples per pixel. Each strategy is rendered as ``--splits`` independent renders
+(seeds 0..), whose spread gives the standard error of its image mean. The reference
+comes from the sweep runner's content-addressed reference cache (``--cache``, shared
+with ``mitsuba-lab reference`` and sweeps): rendered once in ``--splits`` independent
+chunks, it keeps its mean image and the per-pixel variance of that mean, and is reused
+by every later check with the same scene, settings and versions.
 
 Resolution: ``--res N`` renders N x N. A scene that declares ``<default name="res" .../>``
 (the shipped ones do) gets it as its ``res`` parameter; any other scene gets its first
@@ -21,8 +24,14 @@ image, a pixel is a firefly when Y > k * max(median of Y over the 5 x 5 pixels a
 it (edges replicated), 0.01 * mean Y of the reference image); k = ``--firefly-k``
 (default 10). The floor keeps black regions from turning every speck into a firefly.
 
-z-score: z = (m - m_ref) / sqrt(s^2 / R + s_ref^2 / R_ref), with m the mean luminance
-over the R splits and s^2 their sample variance. Every lab strategy that applies is
+z-score: z = (m - m_ref) / sqrt(s^2 / R + se_ref^2), with m the mean luminance over
+the R splits, s^2 their sample variance, m_ref the reference's mean luminance and
+se_ref its standard error, from the reference's per-pixel variance of the mean: pixels
+are independent (box filter, as in the shipped scenes; a wider filter shares samples
+between neighbours, and se_ref comes out somewhat small), and a pixel's luminance
+variance is taken as (sum_c w_c sd_c)^2 over its channels c, exact when the channels
+move together (as they do along one light path) and an upper bound otherwise
+(``reference_mean_variance``). Every lab strategy that applies is
 unbiased by design, so |z| > ``--z-max`` is a failure. An estimator whose rare
 events (a tiny light hit by BSDF sampling, an emitter sample inside a near-delta
 lobe) never happen in the budget shows up here too, with zero spread across splits:
@@ -34,7 +43,6 @@ Exit status: 0 when every strategy is finite, non-negative and within the bound;
 from __future__ import annotations
 
 import argparse
-import csv
 import glob
 import html
 import math
@@ -43,9 +51,11 @@ import time
 
 import numpy as np
 
-from .cli import positive_int
+from .commands.args import positive_int
 
+from . import metrics
 from .errors import LabError
+from .reporting import dict_rows, fmt, html_page, html_table, write_csv as write_table, write_text
 
 #: name -> (integrator type, parameters); max_depth comes from --max-depth.
 STRATEGIES = {
@@ -55,7 +65,8 @@ STRATEGIES = {
     "lab_mis_balance": ("lab_mis", {"heuristic": "balance"}),
 }
 REFERENCE = "path"
-REF_SEED0 = 1000
+#: Luminance weights (Rec. 709 primaries) of R, G, B.
+LUMINANCE = (0.2126, 0.7152, 0.0722)
 FIREFLY_WINDOW = 5
 FIREFLY_FLOOR = 0.01
 COLUMNS = ("scene", "strategy", "status", "finite_fraction", "negative_pixels", "max_value",
@@ -88,7 +99,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ref-spp", type=positive_int, default=256,
                         help="samples per pixel of the path reference, over all splits (default: 256)")
     parser.add_argument("--splits", type=positive_int, default=8,
-                        help="independent renders per strategy (seeds 0..) and reference (seeds 1000..), "
+                        help="independent renders per strategy (seeds 0..) and chunks of the reference, "
                              ">= 2; their spread gives the standard error of the mean; --spp and "
                              "--ref-spp must be multiples of it (default: 8)")
     parser.add_argument("--max-depth", type=int, default=8,
@@ -102,6 +113,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default: 10)")
     parser.add_argument("-D", "--define", action="append", metavar="KEY=VALUE",
                         help="scene <default> value for every scene, e.g. -D far_clip=1e4 (repeatable)")
+    parser.add_argument("--cache", help="reference cache folder, shared with `mitsuba-lab reference` and "
+                                        "sweeps (default: $MITSUBA_LAB_CACHE or ~/.cache/mitsuba_lab/references)")
     parser.add_argument("-o", "--output", default=os.path.join("out", "check"),
                         help="output path without extension: writes OUTPUT.csv and OUTPUT.html "
                              "(default: out/check)")
@@ -110,7 +123,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 # -- Measurements (pure numpy) ----------------------------------------------------------------
 
 def luminance(image: np.ndarray) -> np.ndarray:
-    return image[..., 0] * 0.2126 + image[..., 1] * 0.7152 + image[..., 2] * 0.0722
+    return image[..., 0] * LUMINANCE[0] + image[..., 1] * LUMINANCE[1] + image[..., 2] * LUMINANCE[2]
 
 
 def firefly_count(image: np.ndarray, k: float, floor: float) -> int:
@@ -123,17 +136,20 @@ def firefly_count(image: np.ndarray, k: float, floor: float) -> int:
     return int(np.sum(y > k * np.maximum(local, floor)))
 
 
-def z_score(means: np.ndarray, ref_means: np.ndarray) -> float:
-    """(mean - ref mean) / standard error of the difference, from the splits' spread."""
-    diff = float(means.mean() - ref_means.mean())
-    se = math.sqrt(means.var(ddof=1) / len(means) + ref_means.var(ddof=1) / len(ref_means))
-    if se > 0:
-        return diff / se
-    return 0.0 if diff == 0 else math.copysign(math.inf, diff)
+def reference_mean_variance(variance: np.ndarray) -> float:
+    """Variance of a reference's mean luminance, from the per-pixel, per-channel variance of
+    its mean image (H x W x C). Pixels are taken as independent (a box filter: each sample
+    lands in one pixel); a pixel's luminance variance is (sum_c w_c sd_c)^2, the largest the
+    channels' variances allow, reached when they move together, as the channels of one light
+    path do (module doc)."""
+    sd = np.sqrt(np.asarray(variance, dtype=np.float64)[..., :3])
+    pixels = sd.shape[0] * sd.shape[1]
+    return float(np.sum(luminance(sd) ** 2) / pixels ** 2)
 
 
-def measure(stack: np.ndarray, rays: dict, seconds: float, ref: dict | None, k: float) -> dict:
-    """Row values for one strategy's splits (R x H x W x C)."""
+def measure(stack: np.ndarray, rays: dict, seconds: float, ref: dict, k: float) -> dict:
+    """Row values for one strategy's splits (R x H x W x C) against the reference's summary
+    (``reference_summary``)."""
     finite = np.isfinite(stack)
     image = stack.mean(axis=0)
     pixels = image.shape[0] * image.shape[1]
@@ -144,13 +160,31 @@ def measure(stack: np.ndarray, rays: dict, seconds: float, ref: dict | None, k: 
            "mean": float(means.mean()), "time_s": seconds,
            **{f"{kind}_rays_per_pixel": rays.get(kind, 0) / pixels for kind in
               ("camera", "extension", "shadow")}}
-    floor = FIREFLY_FLOOR * (ref["mean"] if ref else float(np.nanmean(luminance(image))))
-    row["fireflies"] = firefly_count(image, k, max(floor, 1e-12))
-    if ref is not None:
-        row["ref_mean"] = ref["mean"]
-        row["z"] = z_score(means, ref["split_means"]) if ref["finite"] else math.nan
-        row["split_means"] = means
+    row["fireflies"] = firefly_count(image, k, max(FIREFLY_FLOOR * ref["mean"], 1e-12))
+    row["ref_mean"] = ref["mean"]
+    row["z"] = (metrics.z_score(means.mean(), means.var(ddof=1), len(means), ref["mean"], ref["mean_variance"], 1)
+                if ref["finite"] else math.nan)
+    row["split_means"] = means
     return row
+
+
+def reference_summary(reference, k: float) -> tuple[dict, dict]:
+    """(summary for ``measure``, the reference's own row values) of a cached reference
+    (``experiment.reference.Reference``): its mean image stands in for the combined image of
+    the splits, so finite fraction, negative pixels, max value and fireflies are those of the
+    mean image."""
+    image, variance = reference.image.astype(np.float64), reference.variance
+    finite = np.isfinite(image)
+    mean = float(luminance(image).mean())
+    summary = {"mean": mean, "mean_variance": reference_mean_variance(variance),
+               "finite": bool(finite.all() and np.isfinite(variance).all())}
+    row = {"finite_fraction": float(finite.mean()), "negative_pixels": int(np.sum(np.any(image < 0, axis=-1))),
+           "max_value": float(image[finite].max()) if finite.any() else math.nan, "mean": mean,
+           "time_s": float(reference.meta.get("seconds", 0.0)),
+           **{f"{kind}_rays_per_pixel": 0.0 for kind in ("camera", "extension", "shadow")}}
+    floor = FIREFLY_FLOOR * float(np.nanmean(luminance(image)))
+    row["fireflies"] = firefly_count(image, k, max(floor, 1e-12))
+    return summary, row
 
 
 # -- Rendering ----------------------------------------------------------------------------------
@@ -170,24 +204,54 @@ def render_splits(scene, integrator, spp_total, splits, seed0):
 
 
 def default_scenes() -> list[str]:
-    from .cli import project_root
+    from .commands.args import project_root
 
     return sorted(glob.glob(os.path.join(project_root(), "scenes", "stiff", "*.xml")))
 
 
-def load_check_scene(path: str, res: int, defines: dict):
-    """The scene at ``res`` x ``res``: through its ``res`` parameter when it declares one
-    (``<default name="res" .../>``, as the shipped scenes do), else by setting the first
-    sensor's film width and height in the XML (``scene_xml.load_scene_variant``), so any
+def scene_settings(path: str, res: int, defines: dict) -> tuple[int | None, dict]:
+    """(film size to set in the XML or None, <default> values) that make the scene
+    ``res`` x ``res``: its ``res`` parameter when it declares one (``<default name="res"
+    .../>``, as the shipped scenes do), else the first sensor's film width and height, so any
     scene works. ``defines`` (-D) fill the scene's other <default> parameters."""
-    from .scene import load_scene
-    from .scene_xml import load_scene_variant, scene_defaults
+    from .scene_xml import scene_defaults
 
     if "res" in scene_defaults(path):
-        return load_scene(path, **{"res": res, **defines})
+        return None, {"res": res, **defines}
     defines = dict(defines)
     res = int(defines.pop("res", res))        # -D res=N means the film size here too
-    return load_scene_variant(path, res, None, defines)
+    return res, defines
+
+
+def load_check_scene(path: str, res: int, defines: dict):
+    """The scene at ``res`` x ``res`` (``scene_settings``)."""
+    from .scene import load_scene
+    from .scene_xml import load_scene_variant
+
+    resolution, defaults = scene_settings(path, res, defines)
+    if resolution is None:
+        return load_scene(path, **defaults)
+    return load_scene_variant(path, resolution, None, defaults)
+
+
+def cache_folder(option: str | None) -> str:
+    """The reference cache: ``--cache``, else $MITSUBA_LAB_CACHE, else the default folder
+    (as ``mitsuba-lab reference``)."""
+    from .experiment.config import DEFAULT_CACHE
+
+    return os.path.abspath(os.path.expanduser(option or os.environ.get("MITSUBA_LAB_CACHE") or DEFAULT_CACHE))
+
+
+def check_reference(path: str, args, defines: dict):
+    """(Reference, was_cached): Mitsuba's path at ``--ref-spp`` in ``--splits`` chunks, from
+    the reference cache or rendered into it."""
+    from .experiment.config import PluginSpec
+    from .experiment.reference import get_reference
+
+    resolution, defaults = scene_settings(path, args.res, defines)
+    spec = PluginSpec("reference", REFERENCE, {"max_depth": args.max_depth})
+    return get_reference(os.path.abspath(path), resolution, defaults, spec, args.ref_spp, args.splits,
+                         cache_folder(args.cache))
 
 
 def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
@@ -200,15 +264,14 @@ def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
     for warning in warnings:
         print(f"  warning: {name}: {warning}", file=out)
     depth = {"max_depth": args.max_depth}
-    stack, rays, seconds = render_splits(scene, make_integrator(REFERENCE, depth), args.ref_spp,
-                                         args.splits, REF_SEED0)
-    ref_row = measure(stack, {}, seconds, None, args.firefly_k)
-    ref = {"mean": ref_row["mean"], "split_means": luminance(stack).mean(axis=(1, 2)),
-           "finite": bool(np.isfinite(stack).all())}
+    reference, cached = check_reference(path, args, defines)
+    ref, ref_row = reference_summary(reference, args.firefly_k)
     if not ref["finite"]:
         warnings.append("the path reference has non-finite pixels: no z-scores")
+    origin = "from the cache" if cached else "rendered into the cache"
     rows = [{"scene": name, "strategy": f"{REFERENCE} (reference)", "status": "reference",
-             **ref_row, "ref_mean": ref["mean"], "z": 0.0, "note": f"{args.ref_spp} spp"}]
+             **ref_row, "ref_mean": ref["mean"], "z": 0.0,
+             "note": f"{args.ref_spp} spp, {origin} ({reference.key})"}]
 
     applicable = {}
     for strategy, (kind, params) in STRATEGIES.items():
@@ -250,11 +313,7 @@ def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
 # -- Output -------------------------------------------------------------------------------------
 
 def _fmt(value, digits=4) -> str:
-    if value is None or value == "":
-        return "-"
-    if isinstance(value, float):
-        return f"{value:.{digits}g}"
-    return str(value)
+    return fmt(value, digits, missing="-")
 
 
 def format_table(rows: list[dict]) -> str:
@@ -273,44 +332,32 @@ def format_table(rows: list[dict]) -> str:
 
 
 def write_csv(path: str, rows: list[dict]) -> None:
-    from .images import atomic_path
+    write_table(path, COLUMNS, dict_rows(rows, COLUMNS))
 
-    with atomic_path(path) as tmp:
-        with open(tmp, "w", newline="") as handle:
-            writer = csv.DictWriter(handle, fieldnames=COLUMNS, extrasaction="ignore")
-            writer.writeheader()
-            for row in rows:
-                writer.writerow({k: row.get(k, "") for k in COLUMNS})
+
+#: Row colours of the HTML table by status.
+ROW_STYLE = "tr.fail td { background: #fcc; } tr.skipped td, tr.same td { color: #777; }"
 
 
 def write_html(path: str, rows: list[dict], warnings: dict[str, list[str]], settings: str) -> None:
-    from .images import atomic_path
-
-    parts = ["<!DOCTYPE html><html><head><meta charset='utf-8'><title>mitsuba-lab check</title>",
-             "<style>body{font-family:sans-serif}table{border-collapse:collapse}"
-             "td,th{border:1px solid #ccc;padding:2px 6px;font-size:13px}.fail{background:#fcc}"
-             ".skipped,.same{color:#777}</style></head><body><h1>mitsuba-lab check</h1>",
-             f"<p>{html.escape(settings)}</p>", f"<pre>{html.escape(__doc__.split(chr(10) * 2, 1)[1])}</pre>"]
+    parts = ["<h1>mitsuba-lab check</h1>", f"<p>{html.escape(settings)}</p>",
+             f"<pre>{html.escape(__doc__.split(chr(10) * 2, 1)[1])}</pre>"]
     if any(warnings.values()):
         parts.append("<h2>Warnings</h2><ul>")
         for scene, notes in warnings.items():
             parts.extend(f"<li>{html.escape(scene)}: {html.escape(n)}</li>" for n in notes)
         parts.append("</ul>")
-    parts.append("<table><tr>" + "".join(f"<th>{c}</th>" for c in COLUMNS) + "</tr>")
+    classes = []
     for row in rows:
         status = row.get("status", "")
-        css = "fail" if status.startswith("FAIL") else status.split(":")[0]
-        parts.append(f"<tr class='{css}'>" + "".join(f"<td>{html.escape(_fmt(row.get(c)))}</td>"
-                                                      for c in COLUMNS) + "</tr>")
-    parts.append("</table></body></html>")
-    with atomic_path(path) as tmp:
-        with open(tmp, "w", encoding="utf-8") as handle:
-            handle.write("\n".join(parts))
+        classes.append("fail" if status.startswith("FAIL") else status.split(":")[0])
+    parts.append(html_table(COLUMNS, [[_fmt(row.get(c)) for c in COLUMNS] for row in rows], classes))
+    write_text(path, html_page("mitsuba-lab check", "\n".join(parts), ROW_STYLE))
 
 
 def run(args, out) -> int:
     """The command: 0 = all good, 1 = some strategy failed (LabError for bad input)."""
-    from .cli import parse_assignments
+    from .commands.args import parse_assignments
 
     if args.splits < 2:
         raise LabError(f"--splits must be >= 2 (the standard error needs a spread), got {args.splits}")

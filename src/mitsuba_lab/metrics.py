@@ -262,8 +262,10 @@ def z_score(mean_a, var_a, n_a, mean_b, var_b, n_b) -> float:
     """Welch z-score of a difference of two independent sample means.
 
     ``z = (mean_a - mean_b) / sqrt(var_a / n_a + var_b / n_b)`` where ``var_*``
-    are the per-sample variances. With zero standard error the score is 0
-    for equal means and ``+-inf`` otherwise.
+    are the per-sample variances (for a side known only by the variance of its
+    mean, pass that variance with ``n = 1``). With zero standard error the score
+    is 0 for equal means and ``+-inf`` otherwise. ``mitsuba-lab check`` scores
+    every strategy's mean against the reference with it.
     """
     diff = float(mean_a) - float(mean_b)
     se = math.sqrt(float(var_a) / n_a + float(var_b) / n_b)

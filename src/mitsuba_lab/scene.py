@@ -10,7 +10,9 @@ import mitsuba as mi
 from .errors import LabError, one_line
 from .plugins.params import lab_plugins, plugin_kind
 
-LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis")   # the path tracers the traits reason about
+#: The lab's path tracers (one path loop, ``plugins/integrators/path.py``).
+LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis")
+#: Every lab integrator; each answers the planner's questions itself (``strategy_applicability``).
 ALL_LAB_INTEGRATORS = tuple(name for name in lab_plugins() if plugin_kind(name) == "integrator")
 #: Mitsuba's own integrators (those present in this build are listed in messages).
 MITSUBA_INTEGRATORS = ("path", "direct", "volpath", "volpathmis", "ptracer", "aov", "depth",
@@ -105,6 +107,49 @@ def film_size(scene: mi.Scene, sensor: int = 0) -> tuple[int, int]:
 _EMISSION_FACTORS = ("radiance", "intensity", "irradiance", "texture")
 
 
+#: Mitsuba class name -> plugin name of the delta emitters (for messages).
+DELTA_EMITTER_PLUGINS = {"PointLight": "point", "SpotLight": "spot",
+                         "DirectionalEmitter": "directional", "Projector": "projector"}
+
+
+def emitter_kind(emitter) -> str:
+    """'delta' (point, spot, directional, projector: no ray can hit it), 'area'
+    (on a shape), 'environment' (at infinity, hit by escaping rays) or 'other'
+    (anything else: treated as both hittable and sampleable)."""
+    flags = int(emitter.flags())
+    if flags & int(mi.EmitterFlags.Delta):
+        return "delta"
+    if flags & int(mi.EmitterFlags.Surface):
+        return "area"
+    if flags & int(mi.EmitterFlags.Infinite):
+        return "environment"
+    return "other"
+
+
+def _bsdf_flags(shape) -> int | None:
+    """The flags of the shape's BSDF, or None where it cannot be inspected (shape-group instances)."""
+    bsdf = shape.bsdf() if shape.class_name() != "Instance" else None
+    return None if bsdf is None else int(bsdf.flags())
+
+
+def bsdf_has_smooth_component(shape) -> bool:
+    """Whether the shape's BSDF has a non-delta lobe (a vertex NEE can connect from).
+
+    Conservative: shapes whose BSDF cannot be inspected (instances of shape groups) count
+    as smooth, so no code is ever left out that they might need.
+    """
+    flags = _bsdf_flags(shape)
+    return flags is None or bool(flags & int(mi.BSDFFlags.Smooth))
+
+
+def bsdf_mixes_delta_and_smooth(shape) -> bool:
+    """Whether the shape's BSDF has both a delta lobe (delta reflection or transmission, or a
+    null pass-through) and a smooth one: ``plastic``, a ``mask`` or ``blendbsdf`` over a smooth
+    BSDF, ``twosided`` of such a BSDF, ``hair``. (Unknown for instances: False.)"""
+    flags = _bsdf_flags(shape)
+    return flags is not None and bool(flags & int(mi.BSDFFlags.Delta)) and bool(flags & int(mi.BSDFFlags.Smooth))
+
+
 def _all_zero(value) -> bool:
     try:
         import numpy as np
@@ -169,15 +214,24 @@ def _far_clip_problems(scene, bbox_min, bbox_max) -> tuple[tuple[str, ...], floa
     return tuple(problems), far, near
 
 
+def _shape_name(shape, index: int) -> str:
+    """A shape's id, else its BSDF's plugin class and index, for messages."""
+    name = shape.id()
+    if name and not name.startswith("_unnamed"):
+        return name
+    bsdf = shape.bsdf()
+    return f"{bsdf.class_name() if bsdf is not None else shape.class_name()} on shape {index}"
+
+
 @dataclass(frozen=True)
 class SceneTraits:
     """What a scene contains, read from the loaded scene without rendering (cheap:
     one pass over its shapes, emitters and sensors).
 
-    The integrators use the same facts (``plugins/integrators/common.KernelTraits``)
-    to leave out code the scene cannot use; the planner uses them to leave out
-    strategies that do not apply (``strategy_applicability``) and to run provably
-    identical ones once (``equivalent_strategies``).
+    The path tracers derive from them which code their kernel needs
+    (``plugins/integrators/path.KernelPlan``); the planner asks each lab integrator
+    whether it applies (``strategy_applicability``) and which strategies are provably
+    identical on the scene (``equivalent_strategies``).
     """
     area_emitters: int                 # emitters on shapes (rays can hit them)
     environment_emitters: int          # emitters at infinity hit by escaping rays (constant, envmap)
@@ -191,13 +245,11 @@ class SceneTraits:
     far_clip: float | None             # of the last perspective-like sensor (None: no such sensor)
     near_clip: float | None
     far_clip_problems: tuple[str, ...]
+    mixed_bsdfs: tuple[str, ...] = ()  # shapes whose BSDF mixes delta and smooth lobes (e.g. plastic)
 
     @staticmethod
     def from_scene(scene: mi.Scene) -> "SceneTraits":
         import numpy as np
-
-        from mitsuba_lab.plugins.integrators.common import (DELTA_EMITTER_PLUGINS,
-                                                            bsdf_has_smooth_component, emitter_kind)
 
         kinds, delta, dark = [], [], []
         for index, emitter in enumerate(scene.emitters()):
@@ -221,7 +273,9 @@ class SceneTraits:
                            dark_emitters=tuple(dark),
                            smooth_bsdf=any(bsdf_has_smooth_component(s) for s in shapes),
                            media=media, bbox_min=lo, bbox_max=hi, far_clip=far, near_clip=near,
-                           far_clip_problems=problems)
+                           far_clip_problems=problems,
+                           mixed_bsdfs=tuple(_shape_name(s, i) for i, s in enumerate(shapes)
+                                             if bsdf_mixes_delta_and_smooth(s)))
 
     # -- Derived facts ----------------------------------------------------------------
     @property
@@ -271,85 +325,40 @@ class SceneTraits:
 # ---------------------------------------------------------------------------
 # Strategies: which apply to a scene, and which are the same estimator on it
 # ---------------------------------------------------------------------------
-#: Parameters that do not change the estimator (only what is counted).
-_NO_EFFECT = {"count_rays"}
+# Each lab integrator answers these questions itself, through its estimator class
+# (``plugins/integrators/estimator.py``); the functions here look it up and ask it.
+
+def _estimator(integrator_type: str):
+    """The estimator class of a lab integrator (``Estimator``), or None for any other plugin."""
+    from .plugins.integrators.estimator import lookup
+
+    return lookup(integrator_type)
 
 
 def strategy_applicability(traits: SceneTraits, integrator_type: str, params: dict) -> tuple[bool, str]:
-    """(True, '') when the strategy renders the scene correctly in expectation, else
-    (False, one-line reason). Integrators other than the lab's are always applicable
-    (their own limits are Mitsuba's business)."""
-    if integrator_type not in LAB_INTEGRATORS:
+    """(True, '') when the strategy renders the scene correctly, else (False, one-line reason),
+    as its estimator says (``Estimator.applicability``). Integrators other than the lab's are
+    always applicable (their own limits are Mitsuba's business)."""
+    estimator = _estimator(integrator_type)
+    if estimator is None:
         return True, ""
-    if traits.media:
-        return False, (f"{integrator_type} does not support participating media (the scene has a "
-                       f"medium): use Mitsuba's volpath")
-    if integrator_type == "lab_naive" and traits.delta_emitters and traits.smooth_bsdf:
-        # With only delta BSDFs no estimator can use a delta light: then naive is not worse.
-        kinds = ", ".join(dict.fromkeys(traits.delta_emitters))
-        if not traits.hittable_emitters:
-            return False, (f"lab_naive cannot reach delta lights ({kinds}): the scene has no other "
-                           f"emitter")
-        return False, f"lab_naive cannot reach delta lights ({kinds}): it would miss their light (biased)"
-    return True, ""
+    from .plugins.params import resolve
+
+    return estimator.applicability(traits, resolve(integrator_type, params or {}))
 
 
-def _estimator_key(traits: SceneTraits, integrator_type: str, params: dict):
-    """A key equal for two strategies only when they are provably the same estimator
-    on a scene with these traits (same expectation, same distribution of each pixel).
+def _equivalence(traits: SceneTraits, integrator_type: str, params: dict) -> tuple[tuple, str]:
+    """(key, reason): equal keys only for provably identical estimators on this scene
+    (``Estimator.equivalence``, with parameters checked and defaults filled in); integrators
+    other than the lab's merge only when type and parameters are identical."""
+    estimator = _estimator(integrator_type)
+    if estimator is None:
+        from .plugins.integrators.estimator import exact_key
 
-    The argument, case by case (lab integrators; see plugins/integrators/common.py):
-
-    * max_depth 0, or no emitter emits: every pixel is exactly 0.
-    * max_depth 1: only emitters seen directly; no vertex samples anything, every
-      estimator returns the emission its camera ray hits, with weight 1.
-    * All BSDFs delta: NEE runs only at vertices with a smooth BSDF component, so
-      lab_nee and lab_mis never sample an emitter (any heuristic, any n_L), and every
-      emitter hit follows a camera ray or a delta bounce, where all three weight it 1.
-      So lab_naive, lab_nee and lab_mis are one estimator, *whatever the emitters*:
-      delta lights contribute nothing to any of them (nor to Mitsuba's path).
-    * No hittable emitter (delta lights only): BSDF-sampled rays find no emission, and
-      every emitter sample is of a delta light, whose MIS weight is 1 for every
-      heuristic. So lab_mis with n_L shadow rays is lab_nee when n_L = 1, and all
-      lab_mis heuristics with the same n_L are one estimator.
-    * lab_mis with power heuristic and beta = 1 is the balance heuristic; beta does
-      not enter balance, max or average.
-    Otherwise the parameters must match (count_rays is ignored: it changes nothing
-    but the counters). Integrators other than the lab's merge only when type and
-    parameters are identical.
-    """
-    if integrator_type not in LAB_INTEGRATORS:
-        return ("exact", integrator_type, tuple(sorted((k, repr(v)) for k, v in params.items())))
+        return exact_key(integrator_type, params), "same parameters (exact)"
     from .plugins.params import resolve   # checked, normalised, every default filled in
 
-    p = {k: v for k, v in resolve(integrator_type, params).items() if k not in _NO_EFFECT}
-    max_depth = p.pop("max_depth")
-    rr_depth = p.pop("rr_depth")
-    hide = p.pop("hide_emitters") and traits.hittable_emitters         # nothing to hide otherwise
-    heuristic, beta = p.pop("heuristic", ""), p.pop("beta", 2.0)
-    n_L = p.pop("emitter_samples", 1)
-    extras = tuple(sorted((k, repr(v)) for k, v in p.items()))          # Mitsuba's own: must match
-    if max_depth == 0 or not traits.emits_light:
-        return ("black", extras)
-    if max_depth == 1:
-        return ("emitters seen directly", hide, extras)
-    shared = (max_depth, rr_depth, hide, extras)
-    if not traits.smooth_bsdf:
-        return ("BSDF sampling only (all BSDFs delta)", shared)
-    if integrator_type == "lab_naive":
-        return ("lab_naive", shared)
-    if integrator_type == "lab_nee":
-        n_L = 1
-    if integrator_type == "lab_nee" or not traits.hittable_emitters:
-        return ("NEE", n_L, shared)
-    if heuristic == "power" and beta == 1.0:
-        heuristic = "balance"
-    if heuristic != "power":
-        beta = None
-    return ("MIS", heuristic, beta, n_L, shared)
-
-
-_RANK = {"lab_naive": 0, "lab_nee": 1, "lab_mis": 2}
+    return estimator.equivalence(traits, resolve(integrator_type, params))
 
 
 def equivalent_strategies(traits: SceneTraits,
@@ -357,13 +366,17 @@ def equivalent_strategies(traits: SceneTraits,
     """Map every strategy name to the canonical name of its class of provably identical
     estimators on this scene (itself when it has no twin).
 
-    The canonical member is the simplest (lab_naive, then lab_nee, then lab_mis;
-    ties by the order of ``strategies``). See ``_estimator_key`` for the argument.
+    The canonical member is the simplest (``Estimator.SIMPLICITY``: lab_naive, then lab_nee,
+    then lab_mis; ties by the order of ``strategies``).
     """
+    from .plugins.integrators.estimator import OTHER_SIMPLICITY
+
     classes: dict = {}
     for order, (name, (kind, params)) in enumerate(strategies.items()):
-        key = _estimator_key(traits, kind, params or {})
-        classes.setdefault(key, []).append((_RANK.get(kind, 3), order, name))
+        key, _ = _equivalence(traits, kind, params or {})
+        estimator = _estimator(kind)
+        rank = estimator.SIMPLICITY if estimator is not None else OTHER_SIMPLICITY
+        classes.setdefault(key, []).append((rank, order, name))
     canonical = {}
     for members in classes.values():
         best = min(members)[2]
@@ -373,17 +386,6 @@ def equivalent_strategies(traits: SceneTraits,
 
 
 def equivalence_reason(traits: SceneTraits, integrator_type: str, params: dict) -> str:
-    """The class of estimators a strategy falls in on this scene (see ``_estimator_key``),
-    e.g. "BSDF sampling only (all BSDFs delta)": the reason two strategies are merged."""
-    kind = str(_estimator_key(traits, integrator_type, params or {})[0])
-    return _REASONS.get(kind, f"same parameters ({kind})")
-
-
-_REASONS = {
-    "black": "every pixel is 0 (max_depth 0, or no emitter emits)",
-    "emitters seen directly": "max_depth 1: every strategy returns the emission its camera ray hits",
-    "BSDF sampling only (all BSDFs delta)": "all BSDFs are delta: no vertex can sample an emitter, so every "
-                                            "strategy is BSDF sampling with weight 1",
-    "NEE": "only delta emitters: BSDF-sampled rays never hit one and every MIS weight is 1, so MIS is NEE",
-    "MIS": "the power heuristic with beta = 1 is the balance heuristic",
-}
+    """Why a strategy is merged with its twins on this scene, e.g. "all BSDFs are delta: no
+    vertex can sample an emitter, so every strategy is BSDF sampling with weight 1"."""
+    return _equivalence(traits, integrator_type, params or {})[1]

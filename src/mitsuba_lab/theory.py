@@ -1,9 +1,9 @@
-"""The seed text's toy Monte Carlo estimators, with their analytic predictions.
+"""Five worked Monte Carlo problems (toy estimators), with their analytic predictions.
 
-Problems 1-5 of the light-transport seed text each predict a number before
-measuring it: an RMSE from a single-sample variance, a variance reduction
-from importance sampling, a zero-variance cosine estimator, MIS weights and
-the MIS gain, and the cost of Russian roulette. This module re-derives the
+Each problem predicts a number before measuring it: (1) an RMSE from a single-sample
+variance and its N^-1/2 law, (2) the variance reduction of importance sampling,
+(3) a zero-variance cosine estimator, (4) MIS weights and the MIS gain (Veach 1997,
+ch. 9), (5) the cost of Russian roulette. This module derives the
 predictions, runs the estimators with numpy (fixed seeds), measures them
 through :mod:`mitsuba_lab.metrics` so the same metric code the renderer
 experiments use is exercised, and reports both side by side::
@@ -14,7 +14,8 @@ experiments use is exercised, and reports both side by side::
 
 Every row carries a tolerance derived from the measurement's own standard
 error (``TOL_SE`` of them) or, for exact identities, from floating-point
-rounding. Pure numpy: no Mitsuba or Dr.Jit import.
+rounding. The MIS weights are the lab's own (``mis_weights``). Pure numpy: no
+Mitsuba or Dr.Jit import.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from collections.abc import Callable
 import numpy as np
 
 from . import metrics
+from .plugins.integrators.mis_weight import mis_weight
 
 __all__ = [
     "mis_weights",
@@ -51,7 +53,7 @@ FP_TOL = 1e-12
 # 4000 x 65536 trial matrix of Problem 1 never needs more than ~100 MB.
 CHUNK_ELEMENTS = 1 << 21
 
-# Trials per problem: the seed's counts by default, ~10x fewer when quick.
+# Trials per problem by default, and ~10x fewer when quick.
 _DEFAULT = dict(p1=4000, p2=4000, p3=100_000, p4=3000, p5=2_000_000, var=1_000_000)
 _QUICK = dict(p1=400, p2=400, p3=100_000, p4=1000, p5=200_000, var=100_000)
 
@@ -63,58 +65,25 @@ def mis_weights(p_a, p_b, heuristic: str = "balance", beta: float = 2.0,
                 n_a: int = 1, n_b: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """MIS weights ``(w_a, w_b)`` for two techniques taking ``n_a``, ``n_b`` samples.
 
-    With ``a = n_a p_a`` and ``b = n_b p_b`` (Veach 1997, ch. 9):
-
-    * ``'balance'``: ``w_a = a / (a + b)``
-    * ``'power'``:   ``w_a = a^beta / (a^beta + b^beta)`` (``beta = 2`` standard)
-    * ``'max'``:     ``w_a = 1`` if ``a > b``, ``0`` if ``a < b``, ``1/2`` on ties
-    * ``'average'``: ``w_a = n_a / (n_a + n_b)``, a constant (naive pooling)
-
-    Powers are taken of the ratio ``min(a,b)/max(a,b) <= 1``, never of the
-    densities, so ``1e30**beta`` cannot overflow. A technique with zero
-    density gets weight 0 (required for unbiasedness); both zero gives
-    ``(0, 0)``; an infinite density against a finite one takes weight 1, and
-    two infinite ones split 1/2. Weights are never NaN and sum to 1
-    wherever either density is positive. Densities must be >= 0 and not NaN.
+    The lab's one MIS weight (``mitsuba_lab.plugins.integrators.mis_weight``, the formula
+    ``lab_mis`` traces into its kernels) applied to ``a = n_a p_a`` and ``b = n_b p_b``
+    (Veach 1997, ch. 9): ``'balance'`` ``a / (a + b)``; ``'power'`` ``a^beta / (a^beta + b^beta)``;
+    ``'max'`` 1 for the larger, 1/2 on ties; ``'average'`` 1/2 each wherever both densities are
+    positive (the plain average of the two estimators, whatever ``n_a`` and ``n_b``). A technique
+    with zero density gets weight 0, the other one 1; both zero gives ``(0, 0)``; weights are
+    never NaN and sum to 1 wherever either density is positive. Densities must be >= 0 and not
+    NaN; both are scaled by ``1 / max(n_a, n_b)``, which keeps their ratio and cannot overflow.
     """
     p_a, p_b = np.broadcast_arrays(np.asarray(p_a, float), np.asarray(p_b, float))
     if np.any(~(p_a >= 0)) or np.any(~(p_b >= 0)):
         raise ValueError("pdfs must be non-negative and not NaN")
-    # Scaling both by 1/max(n) keeps the ratio and cannot overflow.
     n_max = max(n_a, n_b)
     a, b = p_a * (n_a / n_max), p_b * (n_b / n_max)
-    if heuristic in ("balance", "power"):
-        exponent = 1.0 if heuristic == "balance" else float(beta)
-        if not exponent > 0:
-            raise ValueError("beta must be positive")
-        w_a, w_b = _ratio_weight(a, b, exponent), _ratio_weight(b, a, exponent)
-    elif heuristic == "max":
-        w_a = np.where(a > b, 1.0, np.where(a < b, 0.0, 0.5))
-        w_b = 1.0 - w_a
-    elif heuristic == "average":
-        w_a = np.full(a.shape, n_a / (n_a + n_b))
-        w_b = 1.0 - w_a
-    else:
-        raise ValueError(f"unknown MIS heuristic {heuristic!r}")
-    # Zero-density techniques get nothing; the other one takes all of it.
-    w_a, w_b = np.where(a > 0, w_a, 0.0), np.where(b > 0, w_b, 0.0)
-    w_a = np.where((b == 0) & (a > 0), 1.0, w_a)
-    w_b = np.where((a == 0) & (b > 0), 1.0, w_b)
-    return w_a, w_b
-
-
-def _ratio_weight(a: np.ndarray, b: np.ndarray, beta: float) -> np.ndarray:
-    """``a^beta / (a^beta + b^beta)`` via ``r = min/max``; 1/2 for 0/0 and inf/inf."""
-    big, small = np.maximum(a, b), np.minimum(a, b)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = small / big
-    ratio = np.where(np.isnan(ratio), 1.0, ratio)  # 0/0 or inf/inf: a tie
-    r_beta = ratio**beta
-    return np.where(a >= b, 1.0 / (1.0 + r_beta), r_beta / (1.0 + r_beta))
+    return mis_weight(a, b, heuristic, beta), mis_weight(b, a, heuristic, beta)
 
 
 # --------------------------------------------------------------------------
-# Analytic predictions (formulas from the seed text)
+# Analytic predictions
 # --------------------------------------------------------------------------
 def p1_sigma2() -> float:
     """Problem 1: ``Var[e^X]``, X ~ U[0,1]: ``(e^2 - 1)/2 - (e - 1)^2 = 0.24204``."""
@@ -432,7 +401,7 @@ def _problem4(rng, n):
     p_a, p_b = p4_densities_at(1.0)
     for heuristic, beta in (("balance", 1.0), ("power", 2.0)):
         w_a, w_b = mis_weights(p_a, p_b, heuristic)
-        exact_a = p_a**beta / (p_a**beta + p_b**beta)  # the seed's formula, directly
+        exact_a = p_a**beta / (p_a**beta + p_b**beta)  # the textbook formula, directly
         note = "exact up to rounding"
         rows += [_row("P4", f"w_{heuristic}_A(x=1)", exact_a, w_a, FP_TOL, note),
                  _row("P4", f"w_{heuristic}_B(x=1)", 1 - exact_a, w_b, FP_TOL, note)]
@@ -475,8 +444,8 @@ def run_all(seed: int = 0, quick: bool = False) -> list[dict]:
     Each row is ``{"problem", "quantity", "predicted", "measured",
     "tolerance", "note"}``. Each problem draws from its own child of
     ``SeedSequence(seed)``, so rows are reproducible and independent of
-    problem order. ``quick=True`` uses ~10x fewer trials (a few seconds, for
-    CI); the default uses the seed text's trial counts (4000, 4000, 1e5,
+    problem order. ``quick=True`` uses ~10x fewer trials (for
+    CI); the default uses the full trial counts (4000, 4000, 1e5,
     3000, 2e6), processed in chunks to bound memory.
     """
     counts = _QUICK if quick else _DEFAULT

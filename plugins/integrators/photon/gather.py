@@ -26,13 +26,18 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators.common import mis_weight, russian_roulette_probability
+from mitsuba_lab.plugins.integrators import direct
+from mitsuba_lab.plugins.integrators.counters import RayCounters
+from mitsuba_lab.plugins.integrators.mis import MIS
+from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 
 from .grid import NEIGHBOURS, PhotonGrid, cell_of, hash_cell
 
 #: Photons whose geometric normal is more than ~37 degrees off x's are rejected.
 NORMAL_COS = 0.8
 KERNEL_NORM = 2.0 / dr.pi
+#: Direct light in ``direct = nee`` mode: one emitter sample and one BSDF sample, power heuristic.
+DIRECT_MIS = MIS({"heuristic": "power", "beta": 2.0, "emitter_samples": 1})
 
 
 @dr.syntax
@@ -72,7 +77,6 @@ def density_estimate(grid: PhotonGrid, si: mi.SurfaceInteraction3f, bsdf: mi.BSD
     return result * inv_r2
 
 
-
 class CameraPass(mi.SamplingIntegrator):
     """One camera pass of ``lab_photon`` against the current photon map (not a plugin).
 
@@ -88,17 +92,7 @@ class CameraPass(mi.SamplingIntegrator):
         self.settings = settings
         self.grid = None
         self.with_direct = True
-        self.reset_counts()
-
-    def reset_counts(self):
-        self.ray_totals = dr.zeros(mi.UInt64, 2)       # camera-side extension, shadow rays
-
-    def read_counts(self, reset: bool = True) -> tuple[int, int]:
-        dr.eval(self.ray_totals)
-        ext, shadow = (int(v) for v in self.ray_totals.numpy().tolist())
-        if reset:
-            self.reset_counts()
-        return ext, shadow
+        self.counters = RayCounters()                  # camera-side extension and shadow rays
 
     @dr.syntax
     def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,
@@ -146,10 +140,9 @@ class CameraPass(mi.SamplingIntegrator):
             # --------------------- Stopping criterion ----------------------
             beta_max = dr.max(mi.unpolarized_spectrum(beta))
             active_next &= (beta_max > 0) & dr.isfinite(beta_max)
-            q = russian_roulette_probability(beta, eta)
-            rr_active = active_next & (depth >= rr_depth)
-            beta[rr_active] *= dr.rcp(q)
-            active_next &= ~rr_active | (sampler.next_1d() < q)
+            beta, survives = russian_roulette(beta, sampler.next_1d(), active_next & (depth >= rr_depth),
+                                              eta=eta)
+            active_next &= survives
             n_ext += dr.select(active_next, 1, 0)
             active = active_next
 
@@ -162,21 +155,18 @@ class CameraPass(mi.SamplingIntegrator):
         # ------------- Direct light: emitter sampling + BSDF sampling, MIS -------------
         if dr.hint(use_nee & with_direct, mode="scalar"):
             active_em = gather & (depth < max_depth)
-            ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
-            bsdf_val, bsdf_pdf, bs, bsdf_weight = bsdf.eval_pdf_sample(
-                bsdf_ctx, si, si.to_local(ds.d), sampler.next_1d(), sampler.next_2d(), active_em)
-            w_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf))
-            L += dr.select(active_em & (ds.pdf != 0), beta * w_em * bsdf_val * em_weight, 0.0)
+            L, bs, bsdf_weight = direct.emitter_sampling(scene, sampler, bsdf_ctx, si, bsdf, beta, L,
+                                                         DIRECT_MIS.sample_weight, 1, active_em, active_em)
             n_shadow += dr.select(active_em, 1, 0)
 
+            # The emitter the BSDF sample finds, if any (one segment: the photons hold the rest)
             active_b = active_em & (dr.max(mi.unpolarized_spectrum(bsdf_weight)) > 0)
             ray_b = si.spawn_ray(si.to_world(bs.wo))
             si_b = scene.ray_intersect(ray_b, ray_flags=mi.RayFlags.All, coherent=False, active=active_b)
             n_ext += dr.select(active_b, 1, 0)
             ds_b = mi.DirectionSample3f(scene, si=si_b, ref=si)
             b_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-            pdf_em = scene.pdf_emitter_direction(si, ds_b, active_b & ~b_delta)
-            w_b = dr.select(b_delta, 1.0, mis_weight(bs.pdf, pdf_em))
+            w_b = DIRECT_MIS.hit_weight(direct.hit_densities(scene, si, ds_b, bs.pdf, b_delta, 1, active_b))
             L += dr.select(active_b, beta * bsdf_weight * w_b * ds_b.emitter.eval(si_b, active_b), 0.0)
 
         # ------------------------- Density estimate -------------------------
@@ -184,9 +174,8 @@ class CameraPass(mi.SamplingIntegrator):
             max_photon_depth = dr.select(depth < max_depth, max_depth - depth, 0)
             L += beta * density_estimate(grid, si, bsdf, max_photon_depth, gather)
 
-        dr.scatter_reduce(dr.ReduceOp.Add, self.ray_totals, mi.UInt64(n_ext), 0, mode=dr.ReduceMode.Local)
-        dr.scatter_reduce(dr.ReduceOp.Add, self.ray_totals, mi.UInt64(n_shadow), 1,
-                          mode=dr.ReduceMode.Local)
+        self.counters.add("extension", n_ext)
+        self.counters.add("shadow", n_shadow)
         return dr.select(valid_ray, L, 0.0), valid_ray, []
 
     def aov_names(self):

@@ -12,6 +12,7 @@ from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.variant import require_jit_variant
 from mitsuba_lab.plugins.params import DIRECT_MODES, UNBOUNDED  # noqa: F401 (re-exported)
 
+from .estimator import PhotonMapping
 from .gather import CameraPass
 from .grid import PhotonGrid
 from .records import RECORD_BYTES
@@ -158,11 +159,13 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     are either smooth (the path stops there and gathers) or purely delta (mirror,
     glass: camera paths continue through them by BSDF sampling).
     Does not handle: the delta lobes of a BSDF that mixes delta and smooth lobes
-    (e.g. ``plastic``): the camera path gathers there and the delta lobe's light
-    through further bounces is missed in ``photons`` mode (``nee`` keeps its
-    direct part). No participating media, no AOVs, no ``develop=False``, no
-    shading-normal (adjoint) correction for photons, no spectral variants (RGB and
-    mono only). Emitters are not hidden (no ``hide_emitters``).
+    (e.g. ``plastic``, a ``mask`` over a smooth BSDF): the camera path gathers at the
+    smooth lobe, so the light the delta lobe reflects or transmits is missed (all of it
+    in ``photons`` mode; ``nee`` keeps only emitters seen through it). No participating
+    media, no AOVs, no ``develop=False``, no shading-normal (adjoint) correction for
+    photons, no spectral variants (RGB and mono only). Emitters are not hidden (no
+    ``hide_emitters``). The experiment planner leaves lab_photon out of the scenes it
+    cannot render, with the reason (``estimator.PhotonMapping.applicability``).
 
     Statistics of the last render: ``photon_stats()`` (passes, photons traced and
     stored, photon tracing / grid / gather times, photons per second) and
@@ -173,13 +176,15 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         {'type': 'lab_photon', 'photons_per_pass': 200000, 'passes': 32,
          'alpha': 0.66, 'radius': 0.0, 'max_depth': -1, 'direct': 'nee'}
     """
-    plugin_name = "lab_photon"
+    #: The estimator class: what lab_photon knows about scenes and sample counts.
+    ESTIMATOR = PhotonMapping
     #: Declared parameters (``params.LAB_PHOTON``), in the order of the table above.
-    PARAMETERS = params.LAB_PHOTON
+    PARAMETERS = PhotonMapping.PARAMETERS
 
     def __init__(self, props: mi.Properties):
-        require_jit_variant(type(self).plugin_name)
-        values = params.read_properties(type(self).plugin_name, props, type(self).PARAMETERS, "integrator")
+        name = self.ESTIMATOR.plugin_name
+        require_jit_variant(name)
+        values = params.read_properties(name, props, self.PARAMETERS, "integrator")
         super().__init__(props)
         self.settings_ = PhotonSettings(**values)
         self.stats = PhotonStats()
@@ -204,7 +209,7 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         depth = cfg.depth_limit
         min_segments = 2 if cfg.direct == "nee" else 1
         stats = PhotonStats(stored_flux=[0.0] * (1 if mi.is_monochromatic else 3))
-        self._camera.reset_counts()
+        self._camera.counters.reset()
         size = sensor.film().crop_size()
         self._camera_rays = int(size[0]) * int(size[1]) * spp * cfg.passes
 
@@ -301,9 +306,8 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
 
     def ray_counts(self, reset: bool = True) -> dict[str, int]:
         """Rays of the last render: camera, camera-side extension, shadow and photon segments."""
-        ext, shadow = self._camera.read_counts(reset)
-        return {"camera": self._camera_rays, "extension": ext, "shadow": shadow,
-                "photon": self.stats.photon_segments}
+        counts = self._camera.counters.read(reset)    # extension and shadow rays, every batch
+        return {**counts, "camera": self._camera_rays, "photon": self.stats.photon_segments}
 
     def settings(self) -> dict:
         return asdict(self.settings_)

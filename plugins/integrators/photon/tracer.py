@@ -8,8 +8,9 @@ is Phi_e per sample for that emitter. Its flux is
 
 for N photons emitted in the pass, so that E[sum of first-hit flux] = total emitted
 power (minus what escapes). It is then traced with BSDF sampling in importance
-(adjoint) transport mode and Russian roulette, and stored at every interaction whose
-BSDF has a smooth (non-delta) component. Every photon has its own PCG32 stream,
+(adjoint) transport mode and Russian roulette relative to its emitted flux
+(``roulette``), and stored at every interaction whose BSDF has a smooth (non-delta)
+component. Every photon has its own PCG32 stream,
 seeded from (pass seed, global photon index), so a batch split in two reproduces
 exactly the photons of the unsplit batch.
 """
@@ -18,7 +19,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators.common import RR_MAX_SURVIVAL
+from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 
 from .records import PhotonRecords
 
@@ -142,10 +143,8 @@ class PhotonTracer:
             # ------------------- Stopping criterion -----------------
             beta_max = dr.max(mi.unpolarized_spectrum(beta))
             active &= (beta_max > 0) & dr.isfinite(beta_max)
-            q = dr.minimum(beta_max / beta_max0, RR_MAX_SURVIVAL)
-            rr_active = depth >= rr_depth
-            beta[rr_active] *= dr.rcp(q)
-            active &= ~rr_active | (rng.next_float32() < q)
+            beta, survives = russian_roulette(beta, rng.next_float32(), depth >= rr_depth, start=beta_max0)
+            active &= survives
 
         dr.scatter_reduce(dr.ReduceOp.Add, segments, n_seg, 0, mode=dr.ReduceMode.Local)
         return records, stores, segments

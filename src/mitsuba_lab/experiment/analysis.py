@@ -160,7 +160,7 @@ def slope(times, errors) -> float:
 
 
 def veach_bound(balance: dict, other: dict, n_emitter: int, spp: int) -> dict:
-    """Veach's bound on the balance heuristic (seed text, "Veach's variance bound"):
+    """Veach's bound on the balance heuristic (Veach 1997, Theorem 9.2):
 
         Var[F_balance] <= Var[F_other] + (1/min n_i - 1/sum n_i) I^2
 

@@ -8,18 +8,41 @@ from __future__ import annotations
 
 import os
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from ..errors import LabError
 
 OPTIONAL_METRICS = ("flip", "ciede2000")
-#: Integrators that a sweep scales by passes instead of samples per pixel: a point's sample
-#: count N renders N passes of one camera sample per pixel each (so N camera samples per pixel
-#: in all, as for every other strategy), each pass with its own photon map, like SPPM's one eye
-#: ray per pixel per pass (Hachisuka & Jensen 2009). More time then buys more photon maps and a
-#: smaller final radius, which is what makes the estimator converge; more camera samples over
-#: one fixed set of passes would only average the same maps' bias and noise.
-PASS_PARAMETER = {"lab_photon": "passes"}
+
+
+class _PassParameters(Mapping):
+    """{integrator type: the parameter a sweep's sample count sets} for the integrators that a
+    sweep scales by passes instead of samples per pixel: a point's sample count N renders N
+    passes of one camera sample per pixel each (so N camera samples per pixel in all, as for
+    every other strategy). Each lab integrator says so itself (``SAMPLE_COUNT_PARAMETER`` of
+    its estimator class, e.g. lab_photon's ``passes``); read on first use, without a Mitsuba
+    variant."""
+
+    def _table(self) -> dict[str, str]:
+        from ..plugins.integrators.estimator import sample_count_parameters
+
+        return sample_count_parameters()
+
+    def __getitem__(self, plugin_type: str) -> str:
+        return self._table()[plugin_type]
+
+    def __iter__(self):
+        return iter(self._table())
+
+    def __len__(self) -> int:
+        return len(self._table())
+
+    def __repr__(self) -> str:
+        return repr(self._table())
+
+
+PASS_PARAMETER = _PassParameters()
 DEFAULT_CACHE = os.path.join("~", ".cache", "mitsuba_lab", "references")
 
 

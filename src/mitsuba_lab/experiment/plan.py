@@ -2,8 +2,9 @@
 
 Strategies that cannot work on a scene are left out with their reason, and
 strategies that are provably the same estimator on a scene are run once and
-reported as aliases of the one that runs (both from the scene's traits, see
-``mitsuba_lab.scene``). Point ids are stable strings, so a resumed sweep and a
+reported as aliases of the one that runs: each lab integrator's estimator class
+answers both from the scene's traits (``mitsuba_lab.scene.strategy_applicability``,
+``equivalent_strategies``; ``plugins/integrators/estimator.py``). Point ids are stable strings, so a resumed sweep and a
 report find the same points again.
 """
 from __future__ import annotations

@@ -25,6 +25,8 @@ import os
 
 import numpy as np
 
+from ..reporting import markdown_table, pyplot, save_figure
+
 
 def _luminance_error(err: np.ndarray) -> np.ndarray:
     err = np.asarray(err, dtype=np.float64)
@@ -147,12 +149,11 @@ def slope_table(groups, label) -> list[str]:
         rows.append((slope, label(key), f"{pts[0].spp}-{pts[-1].spp}", len(pts)))
     if not rows:
         return []
-    lines = ["", "### MSE against spp", "",
-             "Slope of log MSE (reference floor subtracted) against log spp: -1 for independent "
-             "samples; steeper where stratification or QMC helps.", "",
-             "| strategy / sampler | slope | spp range | points |", "|---|---|---|---|"]
-    lines += [f"| {name} | {slope:.2f} | {rng} | {n} |" for slope, name, rng, n in sorted(rows)]
-    return lines
+    return ["", "### MSE against spp", "",
+            "Slope of log MSE (reference floor subtracted) against log spp: -1 for independent "
+            "samples; steeper where stratification or QMC helps.", "",
+            *markdown_table(["strategy / sampler", "slope", "spp range", "points"],
+                            [[name, f"{slope:.2f}", rng, n] for slope, name, rng, n in sorted(rows)])]
 
 
 def plot_error_spectra(groups, label, reference: np.ndarray, folder: str, path: str,
@@ -183,14 +184,7 @@ def plot_error_spectra(groups, label, reference: np.ndarray, folder: str, path: 
         curves.append((label(key), p.spp, freq, power, low))
     if not curves:
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..images import atomic_path
-
-    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
+    fig, ax = pyplot().subplots(figsize=(6.4, 4.2), dpi=100)
     for name, spp, freq, power, low in curves:
         ax.plot(freq, power, label=f"{name} ({spp} spp, low-freq. share {low:.3f})")
     ax.set_yscale("log")
@@ -200,7 +194,4 @@ def plot_error_spectra(groups, label, reference: np.ndarray, folder: str, path: 
     ax.set_title(f"radially averaged power spectrum of the error (mean over seeds; {where})", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", bbox_inches="tight")
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -1,0 +1,350 @@
+"""The lab's unidirectional path tracers: one path loop, three estimators, three plugins.
+
+``LabPathIntegrator.sample`` is the one path loop, written in the sections that Mitsuba's
+``path.cpp`` and ``prb.py`` use (Configure loop state, Direct emission, Emitter sampling,
+BSDF sampling, Update loop variables, Stopping criterion). At every vertex it has the
+densities of both techniques (``estimator.Densities``: p_B and n_L p_L in solid angle, and
+whether the sample came from a delta component); the estimators differ only in the weights
+they give an emitter hit and an emitter sample (``naive.Naive``, ``nee.NEE``, ``mis.MIS``;
+Veach 1997, ch. 9). The shared pieces: ``direct`` (emitter sampling and emitter hits),
+``roulette`` (Russian roulette), ``counters`` (ray counts).
+
+The plugins ``lab_naive``, ``lab_nee`` and ``lab_mis`` are the subclasses at the end, each
+naming its estimator (``ESTIMATOR``), which also answers the experiment planner's questions
+(``estimator.Estimator``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+
+from mitsuba_lab.plugins import params
+from mitsuba_lab.plugins.integrators import direct
+from mitsuba_lab.plugins.integrators.counters import RayCounters
+from mitsuba_lab.plugins.integrators.estimator import PathEstimator
+from mitsuba_lab.plugins.integrators.mis import MIS
+from mitsuba_lab.plugins.integrators.naive import Naive
+from mitsuba_lab.plugins.integrators.nee import NEE
+from mitsuba_lab.plugins.integrators.roulette import russian_roulette
+from mitsuba_lab.plugins.params import UNBOUNDED
+from mitsuba_lab.plugins.variant import require_jit_variant
+from mitsuba_lab.scene import SceneTraits
+
+#: max_depth = -1 (unbounded) as the path loop holds it: 2^32 - 1 segments.
+DEPTH_UNBOUNDED = 0xFFFFFFFF
+
+
+@dataclass(frozen=True)
+class KernelPlan:
+    """Which sections the path loop compiles for a scene, from its ``SceneTraits``.
+
+    Each switch leaves out only code whose contribution is provably zero or whose value is
+    provably constant, so the estimator is unchanged:
+
+    * ``emitter_hits`` off: no emitter can be hit (delta lights only, or none): no *Direct
+      emission* section;
+    * ``emitter_sampling`` off: the estimator does not sample emitters, or the scene has no
+      emitter, or no BSDF has a smooth component (NEE is done only at smooth vertices): no
+      *Emitter sampling* section, no shadow rays;
+    * ``hits_are_delta``: every BSDF is delta, so every emitter hit follows a camera ray or a
+      delta bounce, which only BSDF sampling can produce: its weight is 1 for every unbiased
+      estimator (``PathEstimator``), and no emitter pdf lookup or previous-vertex state is needed.
+    """
+    emitter_hits: bool
+    emitter_sampling: bool
+    hits_are_delta: bool
+
+    @classmethod
+    def of(cls, traits: SceneTraits, estimator: PathEstimator) -> "KernelPlan":
+        return cls(emitter_hits=traits.hittable_emitters,
+                   emitter_sampling=estimator.samples_emitters and traits.emitters > 0 and traits.smooth_bsdf,
+                   hits_are_delta=not traits.smooth_bsdf)
+
+    @property
+    def tracks_previous_vertex(self) -> bool:
+        """Emitter-hit weights need the previous vertex and its BSDF pdf."""
+        return self.emitter_hits and not self.hits_are_delta
+
+
+class LabPathIntegrator(mi.SamplingIntegrator):
+    """Base class of the lab's path tracers: the path loop over an estimator (``ESTIMATOR``).
+
+    Parameters (declared in ``plugins/params.py``, ``params.PATH_TRACER``, and read from the
+    plugin's properties by ``params.read_properties``; an estimator may add its own):
+
+    ============= ====== ==========================================================
+    max_depth     int    Longest path, in segments: 1 = only emitters seen
+                         directly, 2 = direct lighting, 0 = nothing (black),
+                         -1 = unbounded (Default: -1)
+    rr_depth      int    Depth at which Russian roulette starts, >= 1 (Default: 5)
+    hide_emitters bool   Mitsuba's meaning: camera rays pass through area
+                         emitters to what lies behind them, and where they
+                         see only the environment the pixel is invalid
+                         (black, alpha 0). (Default: false)
+    count_rays    bool   Count camera, extension and shadow rays; read them with
+                         ``ray_counts()``. Costs one atomic add per sample.
+                         (Default: true)
+    ============= ====== ==========================================================
+    """
+    #: The estimator class (weights, own parameters, what it knows about scenes).
+    ESTIMATOR: type[PathEstimator] = PathEstimator
+    #: Declared parameters (``plugins/params.py``), those of the estimator.
+    PARAMETERS = params.PATH_TRACER
+
+    def __init__(self, props: mi.Properties):
+        name = self.ESTIMATOR.plugin_name
+        # Checked before the C++ base reads hide_emitters, so its type errors never come first.
+        require_jit_variant(name)
+        values = params.read_properties(name, props, self.PARAMETERS, "integrator")
+        super().__init__(props)
+        self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
+        self.rr_depth = values["rr_depth"]
+        self.hide_emitters = values["hide_emitters"]
+        self.count_rays = values["count_rays"]
+        self.estimator = self.ESTIMATOR(values)
+        self.counters = RayCounters()
+        self._plan = None                      # (scene, KernelPlan) while render() runs
+
+    @property
+    def emitter_samples(self) -> int:
+        """Shadow rays per vertex, n_L."""
+        return self.estimator.emitter_samples
+
+    # -- The kernel's specialisation ------------------------------------------------------
+
+    def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
+               evaluate: bool = True):
+        # The plan is made here, before the kernel is traced: reading the scene's traits
+        # evaluates scene data (emitter areas, sensor transforms), which inside the trace
+        # would split the render into several kernels.
+        self._plan = (scene, KernelPlan.of(SceneTraits.from_scene(scene), self.estimator))
+        try:
+            return mi.SamplingIntegrator.render(self, scene, sensor, seed, spp, develop, evaluate)
+        finally:
+            self._plan = None
+
+    def kernel_plan(self, scene: mi.Scene) -> KernelPlan:
+        """The plan for ``scene`` (made by ``render``, else here)."""
+        if self._plan is not None and self._plan[0] is scene:
+            return self._plan[1]
+        return KernelPlan.of(SceneTraits.from_scene(scene), self.estimator)
+
+    # -- The path loop ------------------------------------------------------------
+
+    @dr.syntax
+    def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,
+               medium: mi.Medium = None, active: mi.Bool = True):
+        bsdf_ctx = mi.BSDFContext()
+        plan = self.kernel_plan(scene)            # decided once per trace, in Python
+        # (as plain bools: the symbolic loop would treat the dataclass as loop state)
+        emitter_hits, emitter_sampling = plan.emitter_hits, plan.emitter_sampling
+        hits_are_delta, track_prev = plan.hits_are_delta, plan.tracks_previous_vertex
+        estimator = self.estimator
+        n_L = estimator.emitter_samples
+
+        # --------------------- Configure loop state ----------------------
+        ray = mi.Ray3f(ray)
+        active = mi.Bool(active) & (self.max_depth > 0)
+        depth = mi.UInt32(0)
+        L = mi.Spectrum(0)
+        beta = mi.Spectrum(1)                  # path throughput
+        eta = mi.Float(1)                      # relative IOR along the path
+        prev_it = dr.zeros(mi.Interaction3f)   # previous vertex, for emitter pdfs
+        prev_bsdf_pdf = mi.Float(1)
+        prev_bsdf_delta = mi.Bool(True)        # camera rays count as "delta": no NEE could reach them
+        valid_ray = mi.Bool(False)
+        if dr.hint(not self.hide_emitters, mode="scalar"):
+            valid_ray = mi.Bool(scene.environment() is not None) & active
+        n_ext = mi.UInt32(0)
+        n_shadow = mi.UInt32(0)
+        camera_lanes = active & dr.full(mi.Bool, True, dr.width(ray))  # `active` may arrive as a scalar
+        pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
+        if dr.hint(self.hide_emitters and emitter_hits, mode="scalar"):
+            # Mitsuba's meaning: camera rays pass through area emitters to what lies behind them
+            ray, pi = self.skip_directly_visible_emitters(scene, ray, pi, active)
+
+        while dr.hint(active, max_iterations=-1, label=f"{estimator.plugin_name} path loop"):
+            si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
+
+            # ----------------------- Direct emission -----------------------
+            # L += beta w_B L_e, w_B from the densities of the BSDF sample that found the emitter
+            if dr.hint(emitter_hits, mode="scalar"):
+                ds = mi.DirectionSample3f(scene, si=si, ref=prev_it)
+                if dr.hint(hits_are_delta, mode="scalar"):
+                    w_hit = mi.Float(1.0)
+                else:
+                    w_hit = estimator.hit_weight(direct.hit_densities(
+                        scene, prev_it, ds, prev_bsdf_pdf, prev_bsdf_delta, n_L))
+                emission_on = active & (w_hit > 0)   # (a new array: `&=` on an alias would change `active`)
+                if dr.hint(self.hide_emitters, mode="scalar"):
+                    emission_on = emission_on & (depth > 0)
+                L += beta * w_hit * ds.emitter.eval(si, emission_on)   # beta is finite (checked below)
+
+            active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
+            bsdf = si.bsdf(ray)
+
+            # ----------------- Emitter sampling + BSDF sampling -----------------
+            # L += beta w_L f L_e G / (n_L p_L) for n_L emitter samples; one BSDF sample continues
+            if dr.hint(emitter_sampling, mode="scalar"):
+                active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+                L, bsdf_sample, bsdf_weight = direct.emitter_sampling(
+                    scene, sampler, bsdf_ctx, si, bsdf, beta, L, estimator.sample_weight, n_L, active_em,
+                    active_next)
+                n_shadow += dr.select(active_em, n_L, 0)
+            else:
+                bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(),
+                                                       active_next)
+
+            # ------------------- Update loop variables ---------------------
+            ray = si.spawn_ray(si.to_world(bsdf_sample.wo))
+            beta *= bsdf_weight
+            eta *= bsdf_sample.eta
+            valid_ray |= active & si.is_valid() & ~mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Null)
+            if dr.hint(track_prev, mode="scalar"):
+                prev_it = dr.zeros(mi.Interaction3f)
+                prev_it.p, prev_it.n, prev_it.t, prev_it.time = si.p, si.n, si.t, si.time
+                prev_it.wavelengths = si.wavelengths
+                prev_bsdf_pdf = bsdf_sample.pdf
+            prev_bsdf_delta = mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Delta)
+
+            # --------------------- Stopping criterion ----------------------
+            depth[si.is_valid()] += 1
+            beta_max = dr.max(mi.unpolarized_spectrum(beta))
+            active_next &= (beta_max != 0) & dr.isfinite(beta_max)
+            beta, survives = russian_roulette(beta, sampler.next_1d(), depth >= self.rr_depth, eta=eta)
+            active_next &= survives
+
+            pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
+            n_ext += dr.select(active_next, 1, 0)
+            active = active_next
+
+        if dr.hint(self.count_rays, mode="scalar"):
+            self.counters.add("camera", mi.UInt32(1), camera_lanes)
+            self.counters.add("extension", n_ext, camera_lanes)
+            if dr.hint(emitter_sampling, mode="scalar"):
+                self.counters.add("shadow", n_shadow, camera_lanes)
+        return dr.select(valid_ray, L, 0), valid_ray, []
+
+    def skip_directly_visible_emitters(self, scene, ray, pi, active):
+        """(ray, first intersection) with area emitters hit by camera rays skipped."""
+        skip = active & pi.is_valid() & (pi.shape.emitter() != None)  # noqa: E711 (Dr.Jit pointer test)
+        si_skip = pi.compute_surface_interaction(ray, mi.RayFlags.Minimal, skip)
+        ray_skip = si_skip.spawn_ray(ray.d)
+        pi_skip = self.skip_area_emitters(scene, ray_skip, True, skip)
+        return dr.select(skip, ray_skip, ray), dr.select(skip, pi_skip, pi)
+
+    # -- Reporting --------------------------------------------------------------------
+
+    def ray_counts(self, reset: bool = True) -> dict[str, int]:
+        """Rays traced since the last reset, by kind (all zero when count_rays is off)."""
+        return self.counters.read(reset)
+
+    def settings(self) -> dict:
+        """The parameters in force, as plain values, every declared one in declaration order
+        (equal to ``params.resolve(plugin_name, given)``; for file metadata and messages)."""
+        values = {"max_depth": UNBOUNDED if self.max_depth == DEPTH_UNBOUNDED else self.max_depth,
+                  "rr_depth": self.rr_depth, "hide_emitters": self.hide_emitters,
+                  "count_rays": self.count_rays, **self.estimator.settings()}
+        return {p.name: values[p.name] for p in self.PARAMETERS}
+
+    def to_string(self):
+        fields = ", ".join(f"{k}={v}" for k, v in self.settings().items())
+        return f"{type(self).__name__}[{fields}]"
+
+    def aov_names(self):
+        return []
+
+
+# ---------------------------------------------------------------------------
+# The plugins
+# ---------------------------------------------------------------------------
+class LabNaiveIntegrator(LabPathIntegrator):
+    r"""Naive path tracer (:monosp:`lab_naive`)
+
+    Each vertex samples one direction from the BSDF; emitted radiance is added, with weight 1,
+    wherever a path happens to hit an emitter: the plain Neumann-series estimator of the
+    rendering equation (Kajiya 1986). Unbiased for every emitter a BSDF-sampled ray can hit,
+    and very noisy when emitters are small. It never samples emitters, so it **cannot reach
+    delta lights** (point, spot, directional): in scenes lit by them its image lacks that
+    light (biased).
+
+    Parameters: ``max_depth`` (default -1, unbounded), ``rr_depth`` (5), ``hide_emitters``
+    (false), ``count_rays`` (true); see ``LabPathIntegrator``. Estimator: ``naive.Naive``.
+
+    .. code-block:: python
+
+        {'type': 'lab_naive', 'max_depth': 8}
+    """
+    ESTIMATOR = Naive
+    PARAMETERS = Naive.PARAMETERS
+
+
+class LabNEEIntegrator(LabPathIntegrator):
+    r"""Next-event estimation (:monosp:`lab_nee`)
+
+    At every vertex whose BSDF has a non-delta (smooth) component, sample a point on an
+    emitter and trace a shadow ray (the direct term of the three-point form). BSDF sampling
+    only extends the path: emission it finds counts for camera rays and after delta
+    (specular) bounces, which NEE cannot produce, and nowhere else, so no light is counted
+    twice. Unbiased for area, environment and delta emitters. Near-specular reflections of
+    large emitters are noisy here (a point sampled on the emitter rarely falls in a sharp
+    BSDF lobe): that is what ``lab_mis`` fixes.
+
+    Parameters: ``max_depth`` (default -1, unbounded), ``rr_depth`` (5), ``hide_emitters``
+    (false), ``count_rays`` (true); see ``LabPathIntegrator``. Estimator: ``nee.NEE``.
+
+    .. code-block:: python
+
+        {'type': 'lab_nee', 'max_depth': 8}
+    """
+    ESTIMATOR = NEE
+    PARAMETERS = NEE.PARAMETERS
+
+
+class LabMISIntegrator(LabPathIntegrator):
+    r"""Multiple importance sampling path tracer (:monosp:`lab_mis`)
+
+    Every vertex with a smooth BSDF component takes ``emitter_samples`` (n_L) emitter samples
+    and one BSDF sample; each sample that reaches an emitter is weighted by Veach's
+    multi-sample MIS estimator (Veach & Guibas 1995; Veach 1997, sec. 9.2):
+
+        w_B(x) = h(p_B(x), n_L p_L(x)),  w_L(x) = h(n_L p_L(x), p_B(x)),
+
+    with both densities in solid angle and the emitter-sample contributions divided by n_L.
+    Delta emitters (only NEE reaches them) and delta BSDF lobes (only BSDF sampling reaches
+    their emitters) get weight 1, which keeps the estimator unbiased.
+
+    =============== ====== =====================================================
+    heuristic       string ``balance`` | ``power`` | ``max`` | ``average``
+                           (Default: ``power``). ``average`` weights 1/2 each
+                           wherever both techniques can sample x: the plain
+                           average of the two estimators, Veach's cautionary
+                           example, kept for study (``mis_weight.mis_weight``).
+    beta            float  Exponent of the power heuristic, > 0; 1 = balance.
+                           (Default: 2)
+    emitter_samples int    Shadow rays per vertex, n_L >= 1. The kernel holds
+                           n_L copies of the emitter-sampling code. (Default: 1)
+    max_depth       int    Longest path in segments, -1 = unbounded, >= 0
+                           otherwise (0 renders black) (Default: -1)
+    rr_depth        int    Depth at which Russian roulette starts, >= 1 (Default: 5)
+    hide_emitters   bool   Camera rays pass through area emitters; the bare
+                           environment is invalid (Default: false)
+    count_rays      bool   Count camera / extension / shadow rays (Default: true)
+    =============== ====== =====================================================
+
+    All weights are computed from pdf ratios (``mis_weight.mis_weight``), so pdfs of 0, 1e-30,
+    1e30 or inf give the right limit and never NaN. Estimator: ``mis.MIS``.
+
+    .. code-block:: python
+
+        {'type': 'lab_mis', 'heuristic': 'power', 'beta': 2.0, 'emitter_samples': 1}
+    """
+    ESTIMATOR = MIS
+    PARAMETERS = MIS.PARAMETERS
+
+
+mi.register_integrator("lab_naive", lambda props: LabNaiveIntegrator(props))
+mi.register_integrator("lab_nee", lambda props: LabNEEIntegrator(props))
+mi.register_integrator("lab_mis", lambda props: LabMISIntegrator(props))

@@ -1,0 +1,42 @@
+"""What ``lab_photon`` knows about itself without a Mitsuba variant (``estimator.Estimator``)."""
+from __future__ import annotations
+
+from mitsuba_lab.plugins import params as declarations
+from mitsuba_lab.plugins.integrators.estimator import Estimator
+
+
+class PhotonMapping(Estimator):
+    """lab_photon's estimator: progressive photon mapping (Knaus & Zwicker 2011), averaged over
+    passes, each with its own photon map (see ``integrator.LabPhotonIntegrator``)."""
+    plugin_name = "lab_photon"
+    PARAMETERS = declarations.LAB_PHOTON
+    #: A sweep's sample count N renders N passes of one camera sample per pixel each, like
+    #: SPPM's one eye ray per pixel per pass (Hachisuka & Jensen 2009): more time buys more
+    #: photon maps and a smaller final radius, which is what makes the estimator converge;
+    #: more camera samples over one fixed set of passes would only average the same maps'
+    #: bias and noise.
+    SAMPLE_COUNT_PARAMETER = "passes"
+
+    @classmethod
+    def applicability(cls, traits, params: dict) -> tuple[bool, str]:
+        """Left out (in either ``direct`` mode) on scenes whose light it cannot estimate:
+
+        * participating media (photons and camera paths ignore them);
+        * no emitter (no photon to trace);
+        * a BSDF mixing delta and smooth lobes (``plastic``, ``mask`` over a smooth BSDF,
+          ``blendbsdf``, ...): the camera path stops at its first smooth vertex and gathers
+          there, and the density estimate evaluates only smooth lobes, so the light its delta
+          lobe reflects or transmits is missed (``direct = nee`` recovers only the part coming
+          straight from emitters), however many passes are averaged.
+        """
+        problem = cls.media_problem(traits)
+        if problem:
+            return False, problem
+        if traits.emitters == 0:
+            return False, "lab_photon needs an emitter to trace photons from, and the scene has none"
+        if traits.mixed_bsdfs:
+            names = ", ".join(traits.mixed_bsdfs[:3]) + (", ..." if len(traits.mixed_bsdfs) > 3 else "")
+            return False, (f"lab_photon cannot render BSDFs that mix delta and smooth lobes ({names}): it "
+                           f"gathers at their smooth lobe and misses the light their delta lobe reflects "
+                           f"or transmits")
+        return True, ""

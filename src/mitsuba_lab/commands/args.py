@@ -1,0 +1,63 @@
+"""Argument types and helpers shared by the commands (and by ``check``): no Mitsuba, no numpy."""
+from __future__ import annotations
+
+import argparse
+import os
+
+EXIT_USAGE = 2
+
+
+def parse_value(text: str):
+    """'8' -> 8, '0.5' -> 0.5, 'true' -> True, anything else stays a string."""
+    lowered = text.lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def parse_assignments(items: list[str] | None, option: str) -> dict:
+    params = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ValueError(f"{option} expects KEY=VALUE, got '{item}'")
+        params[key.strip()] = parse_value(value.strip())
+    return params
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got '{text}'") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def seed_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer in [0, 2^32), got '{text}'") from None
+    if not 0 <= value < 2 ** 32:
+        raise argparse.ArgumentTypeError(f"must be an integer in [0, 2^32), got {text}")
+    return value
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """Usage errors as one line (plus where to look), exit status 2."""
+
+    def error(self, message):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def project_root() -> str:
+    """The source checkout holding scenes/ (the package is installed editable from it)."""
+    here = os.path.dirname(os.path.abspath(__file__))           # src/mitsuba_lab/commands
+    return os.path.dirname(os.path.dirname(os.path.dirname(here)))

@@ -1,0 +1,34 @@
+"""``mitsuba-lab reference SCENE``: build (or find) one cached high-spp reference."""
+from __future__ import annotations
+
+from .args import parse_assignments, positive_int
+
+
+def add_arguments(parser) -> None:
+    parser.description = ("Render SCENE's reference in independent chunks, cache it (content-addressed) "
+                          "and print its key and noise floor.")
+    parser.add_argument("scene", help="Mitsuba XML scene file")
+    parser.add_argument("--integrator", default="path", help="reference integrator (default: path)")
+    parser.add_argument("--max-depth", type=int, help="max_depth of the integrator")
+    parser.add_argument("--param", action="append", metavar="KEY=VALUE",
+                        help="other integrator parameter (repeatable)")
+    parser.add_argument("--spp", type=positive_int, default=4096, help="total samples per pixel "
+                                                                        "(default: 4096)")
+    parser.add_argument("--chunks", type=positive_int, default=8,
+                        help="independent chunks (>= 2, dividing --spp) for the noise floor (default: 8)")
+    parser.add_argument("--res", type=positive_int, help="square film resolution override")
+    parser.add_argument("--define", "-D", action="append", metavar="KEY=VALUE",
+                        help="scene <default> value (repeatable)")
+    parser.add_argument("--cache", help="cache folder (default: $MITSUBA_LAB_CACHE or "
+                                        "~/.cache/mitsuba_lab/references)")
+    parser.add_argument("-o", "--output", help="also write the reference image here (.exr, + .png)")
+
+
+def run(args, out) -> int:
+    from ..experiment import sweep
+
+    params = parse_assignments(args.param, "--param")
+    if args.max_depth is not None:
+        params["max_depth"] = args.max_depth
+    return sweep.reference_command(args.scene, args.integrator, params, args.spp, args.chunks, args.res,
+                                   parse_assignments(args.define, "--define"), args.cache, args.output, out)

@@ -1,0 +1,233 @@
+"""The tables of a scene's section in the sweep report, as Markdown lines.
+
+``SectionTables`` is mixed into ``report.Report``, whose loaded state the tables read:
+``folder`` (the sweep's output folder), ``out`` (its report folder, for plots),
+``store`` (the ``ResultStore``), ``references`` ({scene: Reference}) and ``plot_passes``.
+Every table takes the scene's groups {(strategy, sampler): [PointStats]} and ``label``,
+the name a group is shown by.
+"""
+from __future__ import annotations
+
+import math
+import os
+from collections import defaultdict
+
+from .. import metrics
+from ..plugins.params import resolve as resolve_params
+from ..reporting import fmt, markdown_table
+from .analysis import (PointStats, bias_by_passes, curve, equal_time_budgets, region_at_budgets, region_floor,
+                       region_stack_stats, slope, veach_bound)
+from .config import PASS_PARAMETER
+
+
+class SectionTables:
+    def efficiency_table(self, groups, label) -> list[str]:
+        rows = []
+        for key, points in groups.items():
+            top = max(points, key=lambda p: p.time_s)
+            times, errors = curve(points, "mse_corrected")
+            rows.append((top.efficiency if not math.isnan(top.efficiency) else -1, key, top, slope(times, errors)))
+        rows.sort(key=lambda r: r[0], reverse=True)
+        header = ["rank", "strategy", "spp", "time s", "MSE", "corrected MSE", "relMSE (+- seed std)", "efficiency",
+                  "slope log MSE / log t", "FLIP", "CIEDE2000", "rays / sample (ext, shadow)"]
+        body = [[rank, label(key), p.spp, fmt(p.time_s), fmt(p.mse), fmt(p.mse_corrected),
+                 f"{fmt(p.rel_mse)} +- {fmt(p.rel_mse_std, 2)}", fmt(p.efficiency), fmt(s), fmt(p.flip),
+                 fmt(p.ciede2000),
+                 f"{fmt(p.rays_per_sample.get('extension'))}, {fmt(p.rays_per_sample.get('shadow'))}"]
+                for rank, (_, key, p, s) in enumerate(rows, 1)]
+        return ["", "### Efficiency (largest sample count), ranked", "", *markdown_table(header, body)]
+
+    def equal_time_table(self, groups, label) -> list[str]:
+        curves = {key: curve(points) for key, points in groups.items()}
+        budgets = equal_time_budgets(curves)
+        if not budgets:
+            return ["", "### Equal time", "", "The strategies' time ranges do not overlap: no equal-time "
+                    "comparison (add spp levels or time budgets)."]
+        body = []
+        for key, (times, errors) in curves.items():
+            values = [metrics.interpolate_at_time(times, errors, b) if len(times) >= 2 else math.nan
+                      for b in budgets]
+            body.append([label(key), *(fmt(v) for v in values)])
+        return ["", "### Corrected relMSE at equal time (log-log interpolation)", "",
+                *markdown_table(["strategy", *(f"{b:.3g} s" for b in budgets)], body)]
+
+    def bias_table(self, stats) -> list[str]:
+        header = ["point", "seeds", "variance", "bias^2 (+- se)", "relative variance", "relative bias^2 (+- se)",
+                  "relMSE floor-corrected"]
+        body = [[s.point, s.seeds, fmt(s.variance), f"{fmt(s.bias2)} +- {fmt(s.bias2_se, 2)}", fmt(s.rel_variance),
+                 f"{fmt(s.rel_bias2)} +- {fmt(s.rel_bias2_se, 2)}", fmt(s.rel_mse_corrected)] for s in stats]
+        return ["", "### Bias and variance per point", "",
+                "Relative: the same in relMSE's units (pixels weighted by 1 / (ref^2 + 0.01)).", "",
+                *markdown_table(header, body)]
+
+    def region_tables(self, scene, groups, label) -> list[str]:
+        names = sorted({n for points in groups.values() for p in points for n in p.regions})
+        if not names:
+            return []
+        ref = self.references[scene]
+        rects = self._regions(scene, ref.image.shape[1], ref.image.shape[0])
+        floors = {n: float(metrics.region(ref.variance, rects[n]).mean()) if n in rects else 0.0 for n in names}
+        header = ["strategy"] + [f"{n} {what}" for n in names for what in ("relMSE", "efficiency", "1/(relMSE x t)")]
+        body, best = [], {}
+        for key, points in groups.items():
+            top = max(points, key=lambda p: p.time_s)
+            cells = []
+            for n in names:
+                r = top.regions[n]
+                corrected = r["mse"] - floors[n]
+                eff = 1.0 / (corrected * top.time_s) if corrected > 0 else math.nan
+                best.setdefault(n, []).append((eff, label(key)))
+                rel_eff = 1.0 / (r["rel_mse"] * top.time_s) if r["rel_mse"] > 0 else math.inf
+                cells += [fmt(r["rel_mse"]), fmt(eff), fmt(rel_eff)]
+            body.append([label(key), *cells])
+        md = ["", "### Regions of interest (largest sample count): relMSE and efficiency "
+                  "(efficiency from the region MSE minus the region's reference floor; the relative "
+                  "version weighs dim and bright pixels alike)", "", *markdown_table(header, body)]
+        md += ["", "Reference noise floor per region (what a perfect render would measure there): " + "; ".join(
+            f"{n}: relMSE {fmt(f['rel_mse'])}, MSE {fmt(f['mse'])}, relative standard error of the region "
+            f"mean {fmt(100 * f['mean_rel_se'], 2)}%" for n, f in
+            ((n, region_floor(ref, rects[n])) for n in names if n in rects)) + "."]
+        md += ["", "Most efficient per region: " + "; ".join(
+            f"{n}: {max((e, k) for e, k in v if not math.isnan(e))[1]}" for n, v in best.items()
+            if any(not math.isnan(e) for e, _ in v)) + "."]
+        return md
+
+    def region_budget_tables(self, scene, stats, label) -> list[str]:
+        """Per region, every strategy at each time budget: the equal-time comparison where it
+        matters (a caustic, a light), with the region's own reference floor subtracted."""
+        ref = self.references[scene]
+        rects = self._regions(scene, ref.image.shape[1], ref.image.shape[0])
+        md = []
+        for name, rect in rects.items():
+            floor = region_floor(ref, rect)
+            table = region_at_budgets(stats, lambda p: label((p.strategy, p.sampler)), name, floor["rel_mse"])
+            if not table:
+                continue
+            names = sorted({n for cells in table.values() for n in cells})
+            body = [[f"{budget:g} s", *(f"{fmt(c['rel_mse_corrected'])} ({fmt(c['time_s'], 2)} s, "
+                                        f"{fmt(c['x_best'], 3)}x)" if (c := cells.get(n)) else "n/a" for n in names)]
+                    for budget, cells in table.items()]
+            md += ["", f"### Region `{name}` at each time budget", "",
+                   f"Cells: relMSE minus the region's reference floor ({fmt(floor['rel_mse'])}), median time "
+                   f"of one render, and (corrected relMSE x time) / the best strategy's at that budget: "
+                   f"the equal-time relMSE ratio to the best.", "", *markdown_table(["budget", *names], body)]
+        return md
+
+    def passes_section(self, scene, groups, label) -> list[str]:
+        """Bias^2 and variance against passes for pass-scaled strategies (lab_photon): a biased,
+        consistent estimator should show bias^2 falling as passes grow."""
+        md, curves = [], {}
+        rel_floor = self.references[scene].rel_mse_floor()
+        for key, points in groups.items():
+            unit = PASS_PARAMETER.get(self._integrator(points[0]))
+            if unit is None or len(points) < 2:
+                continue
+            result = bias_by_passes(points, lambda p: int(self._param(p, unit, p.spp)))
+            curves[label(key)] = result
+            header = [unit, "seeds", "time s", "relMSE", "variance", "bias^2 (+- se)", "resolved", "bias^2 / relMSE"]
+            body = [[r["passes"], r["seeds"], fmt(r["time_s"]), fmt(r["rel_mse"]), fmt(r["variance"]),
+                     f"{fmt(r['bias2'])} +- {fmt(r['bias2_se'], 2)}", "yes" if r["resolved"] else "no",
+                     fmt(r["bias2"] / r["rel_mse"] if r["rel_mse"] > 0 else math.nan, 2)] for r in result["rows"]]
+            md += ["", f"### {label(key)}: bias^2 and variance against {unit}", "",
+                   f"In relMSE's units (pixels weighted by 1 / (ref^2 + 0.01), so the light's edge pixels do "
+                   f"not swamp the rest): relMSE = bias^2 + variance + reference floor ({fmt(rel_floor)}); "
+                   f"bias^2 +- one standard error, resolved when more than two above zero. Log-log slope "
+                   f"of the resolved bias^2 against {unit}: {fmt(result['slope'])}.", "",
+                   *markdown_table(header, body)]
+        if curves:
+            md += ["", f"![bias^2 and variance against passes]({os.path.basename(self.plot_passes(scene, curves))})"]
+        return md
+
+    def _mis_setting(self, stats: PointStats) -> tuple[str, int, tuple]:
+        """(weighting, emitter_samples, the rest of the estimator's parameters) of a lab_mis point,
+        with lab_mis's defaults filled in, so a stored row that spells a default out and one that
+        leaves it implicit mean the same. Weighting: 'balance' (also power with beta 1, the same
+        weights), 'power (beta B)', 'max' or 'average'."""
+        stored = self._run_row(stats).get("params", {})
+        try:
+            params = resolve_params("lab_mis", stored)
+        except ValueError:                  # a value resolve rejects (an older row): read as stored
+            params = dict(stored)
+        params.pop("count_rays", None)      # changes only what is counted
+        from ..plugins.integrators.mis import MIS
+
+        heuristic, beta = MIS.weighting(str(params.pop("heuristic", "power")), float(params.pop("beta", 2.0)))
+        n_l = int(params.pop("emitter_samples", 1))
+        weighting = heuristic if beta is None else f"power (beta {beta:g})"
+        rest = tuple(sorted((k, repr(v)) for k, v in params.items()))
+        return weighting, n_l, rest
+
+    def veach_table(self, scene, groups) -> list[str]:
+        """Veach's bound: the balance heuristic against each other lab_mis weighting (power, max,
+        average) run with the same sampler, the same emitter_samples and otherwise the same
+        parameters (max_depth, rr_depth, ...), at equal spp; one group of rows per (sampler,
+        emitter_samples). Never across samplers or emitter counts: the bound compares
+        weightings of one set of samples."""
+        blocks = defaultdict(dict)          # (sampler, n_L, other parameters) -> {strategy: (weighting, points)}
+        for (strategy, sampler), points in groups.items():
+            if points and self._integrator(points[0]) == "lab_mis":
+                weighting, n_l, rest = self._mis_setting(points[0])
+                blocks[(sampler, n_l, rest)][strategy] = (weighting, points)
+        if not any(w == "balance" for block in blocks.values() for w, _ in block.values()):
+            return []
+        ref = self.references[scene]
+        height, width = ref.image.shape[:2]
+        regions = self._regions(scene, width, height) or {"image": (0, 0, width, height)}
+        rows, unmatched = [], []
+        for (sampler, n_l, _), block in sorted(blocks.items(), key=lambda item: (item[0][0], item[0][1])):
+            balance = [s for s, (w, _) in block.items() if w == "balance"]
+            others = [s for s, (w, _) in block.items() if w != "balance"]
+            where = f"sampler {sampler}, emitter_samples {n_l}"
+            if not balance:
+                unmatched += [f"{s} ({where}): no balance weighting with this sampler, emitter_samples "
+                              f"and other parameters" for s in others]
+            for bname in balance:
+                bpoints = block[bname][1]
+                for oname in others:
+                    weighting, opoints = block[oname]
+                    pairs = [(bp, op) for bp in sorted(bpoints, key=lambda p: p.spp)
+                             for op in [next((p for p in opoints if p.spp == bp.spp), None)] if op is not None]
+                    if not pairs:
+                        unmatched.append(f"{oname} ({where}): no spp in common with {bname}")
+                    for bp, op in pairs:
+                        for name, rect in regions.items():
+                            b = region_stack_stats(bp, self.folder, ref, rect)
+                            o = region_stack_stats(op, self.folder, ref, rect)
+                            v = veach_bound(b, o, n_l, bp.spp)
+                            rows.append([sampler, n_l, bname, oname, weighting, bp.spp, name, fmt(v["lhs"]),
+                                         fmt(v["rhs"]), fmt(v["se"], 2), v["verdict"]])
+        md = ["", "### Veach's bound: Var[balance] <= Var[other] + (1/min n_i - 1/sum n_i) I^2", "",
+              "Each weighting against the balance heuristic on the same sampler with the same emitter_samples "
+              "(n_L shadow rays and 1 BSDF sample per vertex, so min n_i = 1 and sum n_i = n_L + 1) and "
+              "otherwise the same parameters, at equal spp."]
+        if rows:
+            md += ["", *markdown_table(["sampler", "emitter_samples", "balance", "other", "weighting", "spp", "region",
+                                        "Var balance", "Var other + slack", "standard error", "verdict"], rows)]
+        for line in unmatched:
+            md += ["", f"Not compared: {line}."]
+        if not rows and not unmatched:
+            md += ["", "Nothing to compare: no other lab_mis weighting shares a sampler and emitter_samples "
+                       "with a balance one."]
+        md.append("")
+        md.append("Variances are sample variances over the seeds (jackknife standard errors); "
+                  "'within noise' means the excess is under two standard errors. The bound is exact for "
+                  "direct lighting (max_depth 2); with longer paths it is indicative only.")
+        return md
+
+    def _run_row(self, stats: PointStats) -> dict:
+        """A run row of the point (rows in force only; the store does not change while the
+        report is built, so the point -> row map is made once)."""
+        if not hasattr(self, "_row_of_point"):
+            self._row_of_point = {}
+            for row in self.store.current_runs():
+                self._row_of_point.setdefault(row["point"], row)
+        return self._row_of_point[stats.point]
+
+    def _integrator(self, stats: PointStats) -> str:
+        return self._run_row(stats).get("integrator", "")
+
+    def _param(self, stats: PointStats, name: str, default):
+        return self._run_row(stats).get("params", {}).get(name, default)
+
+    def _regions(self, scene, width, height) -> dict:
+        return {n: tuple(r) for n, r in self.references[scene].meta.get("regions", {}).items()}

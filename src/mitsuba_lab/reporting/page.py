@@ -1,0 +1,100 @@
+"""Self-contained HTML pages: the small Markdown subset the reports are written in, turned
+into HTML with every image embedded as a data URI, so a page opens offline and can be
+mailed or archived as one file.
+
+A report is written twice from the same Markdown: ``summary.md`` (readable as text, images
+as links to the PNGs beside it) and ``index.html`` (``write_markdown_page``).
+"""
+from __future__ import annotations
+
+import base64
+import html
+import os
+import re
+from collections.abc import Iterable, Sequence
+
+from ..images import atomic_path
+
+STYLE = """body { font-family: sans-serif; margin: 2em; max-width: 1400px; }
+table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.85em; }
+th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: right; }
+th { background: #eee; } td:first-child, th:first-child { text-align: left; }
+img { max-width: 100%; }"""
+
+_BOLD = re.compile(r"\*\*(.+?)\*\*")
+
+
+def _inline(text: str) -> str:
+    """One line of paragraph text: escaped, ``**bold**`` as <strong>, code backticks dropped."""
+    return _BOLD.sub(r"<strong>\1</strong>", html.escape(text)).replace("`", "")
+
+
+def md_to_html(text: str, embed_from: str | None = None) -> str:
+    """The Markdown subset of the reports as HTML: ``#`` headings, ``|`` tables (first row the
+    header, ``|---|`` rules skipped), ``![alt](file.png)`` images and paragraphs of one line.
+    Images are read from the folder ``embed_from`` and embedded as data URIs (without it an
+    image line stays text)."""
+    out, table = [], []
+
+    def flush_table():
+        if table:
+            rows = [r.strip().strip("|").split("|") for r in table if not set(r.strip()) <= set("|-")]
+            out.append(html_table(rows[0], rows[1:]))
+            table.clear()
+
+    for line in text.splitlines():
+        if line.startswith("|"):
+            table.append(line)
+            continue
+        flush_table()
+        if line.startswith("#"):
+            level = len(line) - len(line.lstrip("#"))
+            out.append(f"<h{level}>{html.escape(line.lstrip('#').strip())}</h{level}>")
+        elif line.startswith("![") and embed_from:
+            alt, src = line[2:].split("](", 1)
+            out.append(f'<p>{embedded_image(os.path.join(embed_from, src.rstrip(")")), alt)}</p>')
+        elif line.strip():
+            out.append(f"<p>{_inline(line)}</p>")
+    flush_table()
+    return "\n".join(out)
+
+
+def html_table(header: Sequence, rows: Iterable[Sequence], row_classes: Sequence[str] | None = None) -> str:
+    """A <table> of escaped, stripped cells; ``row_classes`` gives each body row a CSS class."""
+    cell = lambda tag, c: f"<{tag}>{html.escape(str(c).strip())}</{tag}>"   # noqa: E731
+    body = []
+    for i, row in enumerate(rows):
+        css = f" class='{html.escape(row_classes[i])}'" if row_classes and row_classes[i] else ""
+        body.append(f"<tr{css}>" + "".join(cell("td", c) for c in row) + "</tr>")
+    return "<table><tr>" + "".join(cell("th", c) for c in header) + "</tr>" + "".join(body) + "</table>"
+
+
+def embedded_image(path: str, alt: str = "") -> str:
+    """An <img> whose source is the PNG file at ``path`` as a base64 data URI."""
+    with open(path, "rb") as f:
+        data = base64.b64encode(f.read()).decode()
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
+
+
+def html_page(title: str, body: str, style: str = "") -> str:
+    """A complete HTML document: ``title`` (escaped here), the shared stylesheet plus
+    ``style``, and ``body`` (HTML, inserted as is)."""
+    css = STYLE + ("\n" + style if style else "")
+    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>\n'
+            f"<style>\n{css}\n</style></head><body>\n{body}\n</body></html>\n")
+
+
+def write_text(path: str, text: str) -> str:
+    """Write ``text`` (UTF-8) to ``path`` atomically; returns ``path``."""
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        f.write(text)
+    return path
+
+
+def write_markdown_page(folder: str, title: str, md: str) -> dict[str, str]:
+    """``folder/summary.md`` (``md``) and ``folder/index.html`` (the same Markdown as a
+    self-contained page, images embedded from ``folder``); returns {"md": ..., "html": ...}."""
+    paths = {"md": os.path.join(folder, "summary.md"), "html": os.path.join(folder, "index.html")}
+    write_text(paths["md"], md + "\n")
+    write_text(paths["html"], html_page(title, md_to_html(md, embed_from=folder)))
+    return paths
