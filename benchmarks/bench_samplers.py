@@ -1,28 +1,33 @@
 """Render MSE, render time and blue-noise spectra of the lab samplers vs Mitsuba's.
 
-    .venv/bin/python benchmarks/bench_samplers.py                 # issue size: 128^2, ref 16384 spp
+    .venv/bin/python benchmarks/bench_samplers.py                 # 128^2, reference 16384 spp
     .venv/bin/python benchmarks/bench_samplers.py --res 64        # reduced
     .venv/bin/python benchmarks/bench_samplers.py --spp --blue-spp --samplers   # blue-noise study only
+    .venv/bin/python benchmarks/bench_samplers.py --timing-only --spp 64 256 --seeds 10   # times only
 
-Cornell box, C++ ``path`` integrator, max_depth 6. The reference is rendered
-with ``path`` + ``--ref-sampler`` (default ``ldsampler``: a randomised QMC
-reference has a far lower noise floor than an independent one of equal spp) in
-``--ref-chunks`` independently seeded chunks; its noise floor (per-pixel
-variance of the chunk mean, averaged over the image) is subtracted from every
-MSE. Each timed render comes after a warm-up render of the same configuration
+Cornell box, C++ ``path`` integrator, max_depth 6. The reference comes from the
+experiment runner's content-addressed reference cache
+(``mitsuba_lab.experiment.reference.get_reference``; ``--ref-cache``, default
+``$MITSUBA_LAB_CACHE`` or ``~/.cache/mitsuba_lab/references``, as ``mitsuba-lab
+reference``): ``path`` on the Cornell box with its sampler replaced by
+``--ref-sampler`` (default ``ldsampler``: a randomised QMC reference has a far
+lower noise floor than an independent one of equal spp; the variant scene is
+written under out/bench_samplers/ and its bytes are part of the key), in
+``--ref-chunks`` independently seeded chunks. Its noise floor (per-pixel variance
+of the chunk mean, averaged over the image) is subtracted from every MSE. Each
+timed render comes after a warm-up render of the same configuration
 (compilation) and ends with dr.eval + dr.sync_thread.
 
 MSE is given with its standard error over the seeds, over the whole image and
 without the pixels that see the light directly (reference luminance above
-``--emitter-threshold``, grown by one pixel): on this scene ~99% of a QMC
+``--emitter-threshold``, grown by one pixel): on this scene much of a QMC
 sampler's MSE sits on the light's edge, a 2D anti-aliasing problem on which every
-(0,2)-net sampler behaves alike. The blue-noise spectra are likewise given on the
+(0,2)-net sampler behaves alike (README, Speed). The blue-noise spectra are likewise given on the
 whole image and on the rows below the light (``spectrum.rows_below_bright``).
 """
 from __future__ import annotations
 
 import argparse
-import hashlib
 import os
 import statistics
 import time
@@ -34,12 +39,16 @@ import numpy as np
 import mitsuba_lab  # noqa: F401
 import drjit as dr
 import mitsuba as mi
+from mitsuba_lab.experiment.config import DEFAULT_CACHE, PluginSpec
+from mitsuba_lab.experiment.reference import get_reference
 from mitsuba_lab.experiment.spectrum import bright_mask, low_frequency_fraction, rows_below_bright
 from mitsuba_lab.pixel_integrals import exact_owen_pair, first_pair, integrand_families, pixel_integral_mse
 from mitsuba_lab.plugins.samplers.common import log2_ceil
+from mitsuba_lab.scene_xml import edited_xml, plugin_spec
 
 CORNELL = Path(__file__).resolve().parents[1] / "scenes" / "cornell_box.xml"
-CACHE = Path(__file__).resolve().parents[1] / "out" / "bench_samplers"
+#: Where the Cornell box with another sampler is written for the reference cache.
+VARIANTS = Path(__file__).resolve().parents[1] / "out" / "bench_samplers"
 MITSUBA = ("independent", "stratified", "multijitter", "ldsampler", "orthogonal")
 LAB = ("lab_independent", "lab_stratified", "lab_halton", "lab_sobol", "lab_zsobol")
 
@@ -57,25 +66,30 @@ def render(sc, seed: int) -> tuple[np.ndarray, float]:
     return np.array(img, dtype=np.float64), time.perf_counter() - t0
 
 
+def reference_scene(sampler: str) -> Path:
+    """The Cornell box rendered by ``sampler``: the scene file itself for its own sampler,
+    else a copy with the sampler replaced (rewritten only when its text changes)."""
+    if plugin_spec(str(CORNELL), "sampler")[0] == sampler:
+        return CORNELL
+    text = edited_xml(str(CORNELL), None, {"type": sampler})
+    path = VARIANTS / f"{CORNELL.stem}.{sampler}.xml"
+    if not path.exists() or path.read_text() != text:
+        VARIANTS.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(text)
+        os.replace(tmp, path)          # never a half-written scene
+    return path
+
+
 def reference(args) -> tuple[np.ndarray, np.ndarray]:
     """Mean of the chunks and its per-pixel noise floor (variance of the chunk mean,
-    channels averaged), so a floor can be taken over any set of pixels. Cached under
-    out/bench_samplers/, keyed by the scene's bytes, the settings and Mitsuba's version."""
-    key = hashlib.sha1(CORNELL.read_bytes() + repr((args.res, args.ref_spp, args.ref_chunks, args.ref_sampler,
-                                                     args.max_depth, mi.__version__)).encode()).hexdigest()[:12]
-    path = CACHE / f"reference_{key}.npz"
-    if path.exists():
-        cached = np.load(path)
-        return cached["ref"], cached["floor"]
-    per_chunk = args.ref_spp // args.ref_chunks
-    sc = scene(args.ref_sampler, args.res, per_chunk, args.max_depth)
-    chunks = np.stack([render(sc, 100_000 + i)[0] for i in range(args.ref_chunks)])
-    ref, floor = chunks.mean(axis=0), (chunks.var(axis=0, ddof=1) / args.ref_chunks).mean(axis=-1)
-    CACHE.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, ref=ref, floor=floor)
-    os.replace(tmp, path)              # never a half-written cache entry
-    return ref, floor
+    channels averaged), so a floor can be taken over any set of pixels; built or
+    found in the runner's reference cache."""
+    cache = os.path.abspath(os.path.expanduser(args.ref_cache))
+    integrator = PluginSpec("reference", "path", {"max_depth": args.max_depth})
+    ref, _ = get_reference(str(reference_scene(args.ref_sampler)), args.res, {}, integrator,
+                           args.ref_spp, args.ref_chunks, cache)
+    return ref.image.astype(np.float64), ref.variance.astype(np.float64).mean(axis=-1)
 
 
 def low_fractions(errors, row0: int) -> tuple[list[float], list[float]]:
@@ -130,6 +144,32 @@ def paired_ratio(times, reference_times) -> float:
     return statistics.median(t / r for t, r in zip(times, reference_times))
 
 
+def timing_study(args):
+    """Render time of every sampler against Mitsuba's ``independent``, nothing else (no
+    reference, no MSE): warm-up renders, then ``--seeds`` rounds in which every sampler
+    renders once, in an order rotated by one each round (no sampler always follows the
+    same one); the paired ratio is the median over rounds of time / independent's time."""
+    names = ["independent"] + [n for n in args.samplers if n != "independent"]
+    print(f"render time against independent: Cornell box {args.res}^2, path max_depth {args.max_depth}, "
+          f"{args.seeds} rounds (paired: median of per-round ratios)")
+    print(f"{'sampler':18s} {'spp':>5s} {'min ms':>8s} {'/indep':>7s} {'paired /indep':>14s} {'IQR':>13s}")
+    for spp in args.spp:
+        scenes = {name: scene(name, args.res, spp, args.max_depth) for name in names}
+        for name in names:
+            render(scenes[name], 999)                        # warm-up: compile
+        times = {name: [] for name in names}
+        for seed in range(args.seeds):
+            shift = seed % len(names)
+            for name in names[shift:] + names[:shift]:
+                times[name].append(render(scenes[name], seed)[1])
+        t_ind = min(times["independent"])
+        for name in names:
+            ratios = sorted(t / r for t, r in zip(times[name], times["independent"]))
+            q1, q3 = np.percentile(ratios, [25, 75])
+            print(f"{name:18s} {spp:5d} {1e3 * min(times[name]):8.1f} {min(times[name]) / t_ind:7.3f} "
+                  f"{paired_ratio(times[name], times['independent']):14.3f}   {q1:.3f}..{q3:.3f}")
+
+
 def integrand_study(args):
     """Pixel-integral MSE of each sampler's first dimension pair on smooth and
     discontinuous 2D integrands, against multijitter: where Owen-scrambled nets win."""
@@ -170,17 +210,20 @@ def main():
     ap.add_argument("--res", type=int, default=128)
     ap.add_argument("--spp", type=int, nargs="*", default=[64, 256], help="none: skip the main table")
     ap.add_argument("--seeds", type=int, default=8,
-                    help="renders (rounds) per sampler and spp, each timed (the issue asks >= 4)")
+                    help="renders (rounds) per sampler and spp, each timed")
     ap.add_argument("--blue-spp", type=int, nargs="*", default=[4, 16],
                     help="extra sample counts for the blue-noise comparison (lab_sobol, lab_zsobol only)")
     ap.add_argument("--ref-spp", type=int, default=16384)
     ap.add_argument("--ref-chunks", type=int, default=16)
     ap.add_argument("--ref-sampler", default="ldsampler",
                     help="sampler of the reference renders (its spp per chunk must suit it)")
+    ap.add_argument("--ref-cache", default=os.environ.get("MITSUBA_LAB_CACHE") or DEFAULT_CACHE,
+                    help=f"reference cache folder (default: $MITSUBA_LAB_CACHE, else {DEFAULT_CACHE})")
     ap.add_argument("--max-depth", type=int, default=6)
     ap.add_argument("--emitter-threshold", type=float, default=5.0,
                     help="reference luminance above which a pixel sees the light directly")
-    ap.add_argument("--samplers", nargs="+", default=list(MITSUBA + LAB))
+    ap.add_argument("--samplers", nargs="+", default=None,
+                    help="default: every Mitsuba and lab sampler (with --timing-only: the lab samplers)")
     ap.add_argument("--blue-depths", type=int, nargs="*", default=[2, 6],
                     help="max_depth values of the low-spp blue-noise study (2 = direct lighting); none: skip it")
     ap.add_argument("--blue-study-spp", dest="blue_spp_study", type=int, nargs="+", default=[1, 2, 4, 16])
@@ -190,7 +233,18 @@ def main():
                     help="sample counts of the 2D pixel-integral study (none: skip it)")
     ap.add_argument("--integrand-pixels", type=int, default=4096, help="random integrands per family")
     ap.add_argument("--integrand-seeds", type=int, default=8)
+    ap.add_argument("--timing-only", action="store_true",
+                    help="only the render-time table of --samplers (default: the lab samplers) against "
+                         "independent at each --spp, --seeds rounds; no reference, MSE or studies")
     args = ap.parse_args()
+    if args.samplers is None:
+        args.samplers = list(LAB if args.timing_only else MITSUBA + LAB)
+    for spp in {args.ref_spp, args.blue_ref_spp}:
+        if args.ref_chunks < 2 or spp % args.ref_chunks:
+            ap.error(f"--ref-chunks ({args.ref_chunks}) must be >= 2 and divide the reference spp ({spp})")
+    if args.timing_only:
+        timing_study(args)
+        return
     if args.integrand_spp and "multijitter" not in args.samplers:
         ap.error("the 2D pixel-integral study compares with multijitter: add it to --samplers or pass --integrand-spp")
 

@@ -83,7 +83,7 @@ def import_graph(modules: dict[str, str], deferred: bool = False) -> dict[str, s
     from mitsuba_lab import cli
 
     for module, _ in cli.COMMANDS.values():
-        graph["mitsuba_lab.cli"].add(f"mitsuba_lab.commands.{module}")
+        graph["mitsuba_lab.cli"].add(f"mitsuba_lab.{module}")
     return graph
 
 
@@ -127,7 +127,7 @@ def test_no_import_cycle():
     from mitsuba_lab import cli
 
     graph = import_graph(module_files())
-    commands = {f"mitsuba_lab.commands.{module}" for module, _ in cli.COMMANDS.values()}
+    commands = {f"mitsuba_lab.{module}" for module, _ in cli.COMMANDS.values()}
     assert graph["mitsuba_lab.cli"] == {"mitsuba_lab.commands.args"} | commands
     assert graph["mitsuba_lab.check"] >= {"mitsuba_lab.commands.args", "mitsuba_lab.errors"}
     assert set(graph) >= set().union(*graph.values())          # every edge names a module

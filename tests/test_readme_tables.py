@@ -16,6 +16,7 @@ import re
 
 import pytest
 
+from mitsuba_lab.commands.args import parse_value
 from mitsuba_lab.plugins import params
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -59,20 +60,13 @@ def parameter_tables(text: str) -> list[tuple[str, list[list[str]]]]:
 def readme_value(text: str):
     """A default as the README writes it: `power`, false, 2/3, 2^21, -1, 0.5."""
     text = text.strip().strip("`").strip()
-    if text in ("true", "false"):
-        return text == "true"
     if re.fullmatch(r"-?\d+/\d+", text):
         num, den = text.split("/")
         return int(num) / int(den)
     if re.fullmatch(r"\d+\^\d+", text):
         base, exp = text.split("^")
         return int(base) ** int(exp)
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
+    return parse_value(text)             # true/false, ints, floats, strings: as on the command line
 
 
 def agrees(stated, param) -> bool:

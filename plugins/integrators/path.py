@@ -29,7 +29,7 @@ from mitsuba_lab.plugins.integrators.naive import Naive
 from mitsuba_lab.plugins.integrators.nee import NEE
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 from mitsuba_lab.plugins.params import UNBOUNDED
-from mitsuba_lab.plugins.variant import require_jit_variant
+from mitsuba_lab.plugins.variant import plugin_settings
 from mitsuba_lab.scene import SceneTraits
 
 #: max_depth = -1 (unbounded) as the path loop holds it: 2^32 - 1 segments.
@@ -96,8 +96,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
     def __init__(self, props: mi.Properties):
         name = self.ESTIMATOR.plugin_name
         # Checked before the C++ base reads hide_emitters, so its type errors never come first.
-        require_jit_variant(name)
-        values = params.read_properties(name, props, self.PARAMETERS, "integrator")
+        values = plugin_settings(name, props, self.PARAMETERS, "integrator")
         super().__init__(props)
         self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
         self.rr_depth = values["rr_depth"]

@@ -1,5 +1,5 @@
-"""Pieces shared by the lab's samplers: the base class, seeding, hashing,
-Owen scrambling, the (0,2)-sequence and the wavefront index math.
+"""Pieces shared by the lab's samplers: the base class, the one key scheme,
+hashing, Owen scrambling, the (0,2)-sequence and the wavefront index math.
 
 How a Python sampler lives inside ``mi.render``
 -----------------------------------------------
@@ -17,6 +17,20 @@ Dr.Jit array stored on ``self`` as loop state. Two rules follow:
 
 Python ints (``spp``, bit counts, the image width) are baked into the kernel:
 changing them compiles a new kernel, as Mitsuba's own samplers do.
+
+Keys
+----
+Every random choice of every lab sampler comes from one scheme, in two steps:
+
+1. ``unit_key(seed, unit)``, once per render: the key of a *unit* (a pixel, a
+   wavefront lane, or ``IMAGE`` for a sequence shared by the whole image) is
+   TEA of (render seed, unit index), as Mitsuba seeds its own samplers;
+2. ``sample_key(unit_key, dim, pass_index, purpose)``, per request: the key of
+   one decision about that unit at one dimension of one pass, for one
+   ``purpose`` (the index shuffle, the x or y scramble, a jitter, ...).
+
+TEA is strong but costs about 80 integer operations; step 2 costs one or two
+MurmurHash3 finalisers, and the unit keys are kept as sampler state.
 """
 from __future__ import annotations
 
@@ -27,18 +41,16 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import params
-from mitsuba_lab.plugins.variant import require_jit_variant
+from mitsuba_lab.plugins.variant import plugin_settings
 
 #: 2^-32: maps a uint32 to [0, 1).
 INV_2_32 = 2.0 ** -32
 #: Largest float32 below 1.
 ONE_MINUS_EPS = float.fromhex("0x1.fffffep-1")
-#: Salts that separate the hash streams of one (pixel, dimension) pair.
-SALT_PERMUTE, SALT_X, SALT_Y, SALT_JITTER = 0x9E3779B9, 0x85EBCA6B, 0xC2B2AE35, 0x27D4EB2F
 
 
 # ----------------------------------------------------------------------------
-# Hashing
+# Hashing and keys
 # ----------------------------------------------------------------------------
 
 def mix32(x):
@@ -52,26 +64,51 @@ def mix32(x):
     return x
 
 
-def hash2(a, b):
-    """Hash of two uint32 values (order matters)."""
-    return mix32(mi.UInt32(a) ^ mix32(mi.UInt32(b) + 0x9E3779B9))
+#: The unit of keys shared by every pixel (a sequence that spans the image, as
+#: lab_zsobol's): apart from every pixel and lane index of a 32-bit wavefront.
+IMAGE = 0xFFFFFFFF
+
+#: Purposes of ``sample_key``: which decision about a (unit, dimension, pass) a
+#: key randomises. A sampler that keys pixels and lanes alike uses distinct
+#: purposes on the two (a pixel's and a lane's keys share their TEA input).
+PERMUTE = 0x9E3779B9      # the shuffle of the sample indices (padding)
+SCRAMBLE_X = 0x85EBCA6B   # Owen scrambling of the first coordinate
+SCRAMBLE_Y = 0xC2B2AE35   # ... and of the second
+JITTER_X = 0x27D4EB2F     # a uniform offset in a stratum, first coordinate
+JITTER_Y = 0x165667B1     # ... and second
+BLOCKS = 0xD3A2646C       # lab_zsobol's order of the pixel blocks, shared by all dimensions
 
 
-def hash3(a, b, c):
-    """Hash of three uint32 values."""
-    return hash2(hash2(a, b), c)
+def unit_keys(seed_value, unit):
+    """Both 32-bit words of TEA (4 rounds; Zafar et al. 2010) of (render seed, unit).
+
+    Mitsuba's C++ samplers seed lane i's PCG32 with exactly these two words of
+    (seed, i); ``lab_independent`` does the same and so renders identical images.
+    (Feeding the lane index to PCG32 as its stream would be a mistake: streams
+    with consecutive increments are correlated.)
+    """
+    return mi.sample_tea_32(mi.UInt32(seed_value), mi.UInt32(unit))
 
 
-def dim_key(seed, dim, pass_index):
-    """One hash per (seed, dimension, pass) in a single mix32 round (hash3 takes four).
+def unit_key(seed_value, unit):
+    """The key of a unit (pixel, lane or ``IMAGE``) for one render: the first TEA word."""
+    return unit_keys(seed_value, unit)[0]
+
+
+def sample_key(key, dim, pass_index, purpose: int | None = None):
+    """The key of one decision: unit (by its key, ``unit_key``), dimension, pass, purpose.
 
     ``w = dim | pass << 24`` is injective for dimensions < 2^24 and passes < 2^8,
-    and ``seed + w * odd`` followed by the bijective mix32 keeps distinct
-    (dimension, pass) of one seed distinct; ``seed`` must already be a hash
-    (``pixel_seeds``, or mix32 of the render seed).
+    and ``unit_key + w * odd`` followed by the bijective ``mix32`` keeps distinct
+    (dimension, pass) of one unit distinct; the unit key is already a hash, so one
+    round suffices. A ``purpose`` (``PERMUTE``, ``SCRAMBLE_X``, ...) is mixed in by a
+    second round, so the keys of one (unit, dimension, pass) for different purposes
+    are unrelated. Dr.Jit merges repeated calls with equal arguments, so asking
+    for several purposes hashes the (unit, dimension, pass) once.
     """
     word = mi.UInt32(dim) | (mi.UInt32(pass_index) << 24)
-    return mix32(mi.UInt32(seed) + word * 0x9E3779B1)
+    key = mix32(mi.UInt32(key) + word * 0x9E3779B1)
+    return key if purpose is None else mix32(key ^ purpose)
 
 
 def to_unit_float(x):
@@ -130,10 +167,7 @@ def owen_scramble_2(v, seed):
     scramble. It keeps the (t,m,s)-net structure and makes each point uniform
     on [0, 1). The constants are Vegdahl's improved hash (also pbrt-v4's
     FastOwenScrambler), which scrambles the low bits better than Burley's
-    original four xor-multiply steps. On the Cornell box (64 spp, 64x64, two
-    disjoint sets of 32 seeds) it lowered lab_sobol's MSE away from the
-    light's edge by 4% each time; at 128x128 (8 seeds) the two hashes are
-    within +-2%.
+    original four xor-multiply steps.
     """
     return _owen_reversed(dr.brev(mi.UInt32(v)), seed)
 
@@ -170,13 +204,37 @@ def sobol_02_owen(index, n_bits: int, seed_x, seed_y=None):
 def padded_index(sample_index, n_samples: int, seed):
     """Random permutation of the sample indices 0..n-1, one per ``seed``.
 
-    Kensler 2013 ("Correlated Multi-Jittered Sampling") through Mitsuba's
+    Kensler 2013 ("Correlated Multi-Jittered Sampling"), the numbers of Mitsuba's
     ``mi.permute_kensler``: any n, and independent seeds give independent
-    shuffles, which decorrelates dimension pairs of a padded sampler.
+    shuffles, which decorrelates dimension pairs of a padded sampler. For a power
+    of two n the hash maps [0, n) into itself, so Mitsuba's cycle-walking loop
+    always stops after one round; that round is inlined here (no loop in the
+    kernel, same numbers). Other counts call Mitsuba's, loop included.
     """
     if n_samples == 1:
         return mi.UInt32(0) * mi.UInt32(sample_index)
-    return mi.permute_kensler(mi.UInt32(sample_index), n_samples, mi.UInt32(seed))
+    if not is_power_of_two(n_samples):
+        return mi.permute_kensler(mi.UInt32(sample_index), n_samples, mi.UInt32(seed))
+    w, seed = n_samples - 1, mi.UInt32(seed)
+    i = mi.UInt32(sample_index) ^ seed
+    i *= 0xE170893D
+    i ^= seed >> 16
+    i ^= (i & w) >> 4
+    i ^= seed >> 8
+    i *= 0x0929EB3F
+    i ^= seed >> 23
+    i ^= (i & w) >> 1
+    i *= 1 | seed >> 27
+    i *= 0x6935FA69
+    i ^= (i & w) >> 11
+    i *= 0x74DCB303
+    i ^= (i & w) >> 2
+    i *= 0x9E501CC3
+    i ^= (i & w) >> 2
+    i *= 0xC860A3DF
+    i &= w
+    i ^= i >> 5
+    return (i + seed) & w
 
 
 def morton_2d(x, y, n_bits: int):
@@ -225,10 +283,9 @@ class LabSampler(mi.Sampler):
 
     def __init__(self, props: mi.Properties):
         cls = type(self)
-        require_jit_variant(cls.plugin_name)
         # Checked first: the C++ base reads sample_count and seed itself, and its own type
         # errors must not come first (nor refuse an integral float such as 8.0).
-        values = params.read_properties(cls.plugin_name, props, cls.PARAMETERS, "sampler")
+        values = plugin_settings(cls.plugin_name, props, cls.PARAMETERS, "sampler")
         # A copy with the normalised values: the Properties passed to the constructor die with
         # mi.load_dict, and clone() builds a twin from it later (a stored reference dangles).
         own = mi.Properties(props)
@@ -380,7 +437,6 @@ class LabSampler(mi.Sampler):
         raise NotImplementedError
 
 
-
 class Base2PairSampler(LabSampler):
     """A lab sampler whose requests come from ``_scrambled(dim, two_d)``: a pair of
     scrambled base-2 uint32 coordinates (the second None for a 1D request)."""
@@ -394,10 +450,6 @@ class Base2PairSampler(LabSampler):
     def _sample_2d(self, dim):
         x, y = self._scrambled(dim, True)
         return mi.Point2f(to_unit_float(x), to_unit_float(y))
-
-def pixel_seeds(seed_value, pixel_index):
-    """One scramble key per pixel: TEA of (render seed, pixel), as Mitsuba seeds its RNGs."""
-    return mi.sample_tea_32(mi.UInt32(seed_value), mi.UInt32(pixel_index))[0]
 
 
 def isqrt_exact(n: int) -> int | None:

@@ -1,8 +1,6 @@
 """``lab_halton``: randomised Halton points per pixel."""
 from __future__ import annotations
 
-import functools
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -10,7 +8,7 @@ import numpy as np
 from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.params import RANDOMIZATIONS  # noqa: F401 (re-exported)
 from mitsuba_lab.plugins.samplers.common import (
-    ONE_MINUS_EPS, LabSampler, dim_key, mix32, pixel_seeds, to_float, to_unit_float)
+    ONE_MINUS_EPS, LabSampler, mix32, sample_key, to_float, to_unit_float, unit_key)
 
 
 def first_primes(n: int) -> list[int]:
@@ -42,25 +40,9 @@ def n_digits(spp: int, base: int) -> int:
     return k
 
 
-def digit_constants(base, inv_base, k_b):
-    """What the digit steps of one coordinate use: (b, 1/b, 1/(2b), b 2^-23, K_b)."""
-    return base, inv_base, 0.5 * inv_base, base * 2.0 ** -23, k_b
-
-
-@functools.lru_cache(maxsize=None)
-def digit_thresholds(spp: int) -> tuple[int, ...]:
-    """r_j, the least integer with r_j^j >= spp, for every j >= 1 with 2^j < spp
-    (larger j cannot count: no base is below 2)."""
-    out, j = [], 1
-    while 2 ** j < spp:
-        r = max(2, round(spp ** (1.0 / j)))
-        while r ** j < spp:
-            r += 1
-        while r > 2 and (r - 1) ** j >= spp:
-            r -= 1
-        out.append(r)
-        j += 1
-    return tuple(out)
+def digit_constants(base, inv_base):
+    """What the digit steps of one coordinate use: (b, 1/b, 1/(2b), b 2^-23, b - 1)."""
+    return base, inv_base, 0.5 * inv_base, base * 2.0 ** -23, base - 1.0
 
 
 class LabHaltonSampler(LabSampler):
@@ -96,23 +78,23 @@ class LabHaltonSampler(LabSampler):
 
     Cost: inside the integrator's path loop the dimension index is a loop
     variable. The base of the next dimension is carried from request to request
-    as sampler state (the next prime is the current one plus a 4-bit gap read
-    from eight 32-bit constants through a 3-level select tree; a gather from a
-    64-entry table instead made the whole sampler 1.8x slower on this project's
-    AVX2 machines, though every lane reads the same entry), K_b is a few
-    comparisons with thresholds fixed by spp, the first digit is unrolled and
-    the rest run in one symbolic loop shared by both coordinates of a 2D
-    request. Where the dimension is known at trace time (the pixel position,
-    requested before the loop) the bases are constants and all digits are
-    unrolled, with the same numbers as the loop. There is no integer division
-    in the kernel: digits and ``(a d + c) mod b`` are float32 ``floor((n + 1/2)
-    / b)`` on integers below 2^21 (exact). The affine map takes one uniform ``u
-    = b (h >> 9) / 2^23`` from the digit's hash: ``c = floor(u)`` (uniform up
-    to b 2^-23) and ``a = 1 + floor((b - 1) frac(u))`` (frac(u) keeps at least
-    14 bits, and given c it is still about uniform). A uniformly random affine
-    map over GF(b) is sharply 2-transitive (a pair of distinct digits goes to a
-    uniform pair of distinct digits), which is all that Owen's variance
-    analysis asks of the nested permutations.
+    as sampler state: the next prime is the current one plus a 4-bit gap read
+    from eight 32-bit constants through a 3-level select tree (a gather from a
+    64-entry table is slower on CPUs, though every lane reads the same entry).
+    The first digit is unrolled and the rest run in one symbolic loop shared by
+    both coordinates of a 2D request, for max K_b = K of the smaller base
+    trips: the loop carries b_min^k and stops once it reaches spp, so K_b is
+    never computed. Where the dimension is known at trace time (the pixel
+    position, requested before the loop) the bases are constants and all
+    digits are unrolled, with the same numbers as the loop. There is no
+    integer division in the kernel: digits and ``(a d + c) mod b`` are float32
+    ``floor((n + 1/2) / b)`` on integers below 2^21 (exact). The affine map
+    takes one uniform ``u = b (h >> 9) / 2^23`` from the digit's hash: ``c =
+    floor(u)`` (uniform up to b 2^-23) and ``a = 1 + floor((b - 1) frac(u))``
+    (frac(u) keeps at least 14 bits, and given c it is still about uniform). A
+    uniformly random affine map over GF(b) is sharply 2-transitive (a pair of
+    distinct digits goes to a uniform pair of distinct digits), which is all
+    that Owen's variance analysis asks of the nested permutations.
 
     .. code-block:: python
 
@@ -126,7 +108,7 @@ class LabHaltonSampler(LabSampler):
     def __init__(self, props: mi.Properties):
         super().__init__(props)
         self.randomization = self._values["randomization"]
-        self.pixel_seed = mi.UInt32(0)
+        self.pixel_key = mi.UInt32(0)
         self.sample_index = mi.UInt32(0)
         self.base = mi.UInt32(PRIMES[0])   # base of the next dimension to be drawn
 
@@ -137,18 +119,12 @@ class LabHaltonSampler(LabSampler):
     def _seed_state(self, seed_value, wavefront_size, spp):
         self._check_spp(spp)
         pixel, sample = self.wavefront_layout(wavefront_size, spp)
-        self.pixel_seed = pixel_seeds(seed_value, pixel)
+        self.pixel_key = unit_key(seed_value, pixel)
         self.sample_index = sample
 
     def _restart_dims(self):
         super()._restart_dims()
         self.base = mi.UInt32(PRIMES[0])
-
-    def _static_base(self, dim: int):
-        """Digit constants of a dimension known at trace time: Python numbers."""
-        base = PRIMES[dim % len(PRIMES)]
-        inv = float(np.float32(1.0 / base))   # what dr.rcp gives (correctly rounded)
-        return digit_constants(float(base), inv, n_digits(self.spp, base))
 
     def _next_base(self, base, dim):
         """PRIMES[(dim + 1) mod 64] given base = PRIMES[dim mod 64], without a gather."""
@@ -160,23 +136,22 @@ class LabHaltonSampler(LabSampler):
         gap = (words[0] >> ((d & 7) << 2)) & 15
         return dr.select(d == len(PRIMES) - 1, mi.UInt32(PRIMES[0]), base + gap)
 
-    def _digit_count(self, base):
-        """K_b = 1 + #{j >= 1 : b^j < spp}, with b^j < spp iff b < r_j (``digit_thresholds``)."""
-        count = mi.UInt32(1 if self.spp > 1 else 0)
-        for r_j in digit_thresholds(self.spp):
-            count += dr.select(base < r_j, mi.UInt32(1), mi.UInt32(0))
-        return count
-
-    def _carried_bases(self, dims):
-        """Digit constants per dimension from the carried base, which then moves past
-        ``dims`` (consecutive dimensions)."""
-        coords, base = [], self.base
+    def _bases(self, dims):
+        """The bases of the consecutive dimensions ``dims`` and the request's digit count
+        (max K_b): Python numbers where the dimensions are known at trace time, else
+        Float arrays from the carried base and None. Moves the carried base past them."""
+        if all(isinstance(dim, int) for dim in dims):
+            bases = [PRIMES[dim % len(PRIMES)] for dim in dims]
+            self.base = mi.UInt32(PRIMES[(dims[-1] + 1) % len(PRIMES)])
+            # float32(1/b) is what dr.rcp gives (correctly rounded)
+            return [(float(b), float(np.float32(1.0 / b))) for b in bases], max(n_digits(self.spp, b) for b in bases)
+        out, base = [], self.base
         for dim in dims:
             b = to_float(base)
-            coords.append(digit_constants(b, dr.rcp(b), self._digit_count(base)))
+            out.append((b, dr.rcp(b)))
             base = self._next_base(base, dim)
         self.base = base
-        return coords
+        return out, None
 
     def _radical_inverses(self, dims):
         """Randomised radical inverses of the sample index for the dimensions ``dims``.
@@ -187,24 +162,20 @@ class LabHaltonSampler(LabSampler):
         uniform tail, so no coordinate needs a mask.
         """
         owen = self.randomization == "owen"
-        static = all(isinstance(dim, int) for dim in dims)
-        if static:
-            coords = [self._static_base(dim) for dim in dims]
-            self.base = mi.UInt32(PRIMES[(dims[-1] + 1) % len(PRIMES)])
-        else:
-            coords = self._carried_bases(dims)
+        bases, trips = self._bases(dims)
+        coords = [digit_constants(b, inv) for b, inv in bases]
 
         def digit_step(c, rest, h, value, scale):
             """Digit k of ``rest`` permuted by d -> (a d + c) mod b; (a, c) from the hash h
             of the prefix (owen) or of the level (permute_digits). Float arithmetic on
             integers < 2^24 (exact); floor((n + 1/2) / b) cannot round across an
             integer for n < 2^21, b <= 311 (the margin 1/(2b) beats the rounding)."""
-            base, inv_base, half_inv, u_scale, _ = coords[c]
+            base, inv_base, half_inv, u_scale, base_minus_1 = coords[c]
             q = dr.floor(dr.fma(rest, inv_base, half_inv))
             digit = dr.fma(-q, base, rest)
             u = to_float(h >> 9) * u_scale
             c_shift = dr.floor(u)
-            a = dr.floor(dr.fma(u - c_shift, base - 1.0, 1.0))
+            a = dr.floor(dr.fma(u - c_shift, base_minus_1, 1.0))
             t = dr.fma(a, digit, c_shift)
             permuted = dr.fma(-dr.floor(dr.fma(t, inv_base, half_inv)), base, t)
             scale = scale * inv_base
@@ -213,28 +184,30 @@ class LabHaltonSampler(LabSampler):
             return q, h, value, scale
 
         index = to_float(self.sample_index)
-        state = []
-        for c, dim in enumerate(dims):
-            st = (index, dim_key(self.pixel_seed, dim, self.pass_index), mi.Float(0), mi.Float(1))
-            state.append(digit_step(c, *st) if self.spp > 1 else st)   # K_b >= 1 once spp >= 2
+        state = [(index, sample_key(self.pixel_key, dim, self.pass_index), mi.Float(0), mi.Float(1))
+                 for dim in dims]
+        if self.spp > 1:   # K_b >= 1 once spp >= 2
+            state = [digit_step(c, *st) for c, st in enumerate(state)]
 
-        if static:
+        if trips is not None:
             # The loop's trip count, max K_b over the request, unrolled: same numbers.
-            for _ in range(max(co[4] for co in coords) - 1):
+            for _ in range(trips - 1):
                 state = [digit_step(c, *st) for c, st in enumerate(state)]
         elif self.spp > 2:   # K_b > 1 happens for base 2 at spp >= 3 only
-            trips = coords[0][4]
-            for co in coords[1:]:
-                trips = dr.maximum(trips, co[4])
+            # max K_b is K of the smallest base; with b_min^k carried (k digits done) the
+            # loop runs while b_min^k < spp. Float products are exact below 2^24, and the
+            # last one, at least spp, cannot round below it.
+            b_min = bases[0][0] if len(bases) == 1 else dr.minimum(bases[0][0], bases[1][0])
+            spp = float(self.spp)
 
-            def body(k, *flat):
+            def body(reach, *flat):
                 out = []
                 for c in range(len(dims)):
                     out += digit_step(c, *flat[4 * c: 4 * c + 4])
-                return (k + 1, *out)
+                return (reach * b_min, *out)
 
             flat = [v for st in state for v in st]
-            out = dr.while_loop((mi.UInt32(1), *flat), lambda k, *_: k < trips, body,
+            out = dr.while_loop((b_min, *flat), lambda reach, *_: reach < spp, body,
                                 label="lab_halton_digits")
             state = [out[1 + 4 * c: 5 + 4 * c] for c in range(len(dims))]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.samplers.common import LabSampler
+from mitsuba_lab.plugins.samplers.common import LabSampler, unit_keys
 
 
 class LabIndependentSampler(LabSampler):
@@ -20,13 +20,12 @@ class LabIndependentSampler(LabSampler):
     seed            int    Base seed, added to the render seed (Default: 0)
     =============== ====== =====================================================
 
-    Seeding: state and stream of lane i are ``sample_tea_32(seed, i)`` (the Tiny
-    Encryption Algorithm, Zafar et al. 2010), exactly as Mitsuba's C++
-    ``PCG32Sampler`` does, so for equal seeds the two produce the same numbers.
-    Feeding the lane index as the PCG32 stream directly would be a mistake:
-    streams with consecutive increments are correlated, and in this lab that
-    rendered the Cornell box with 26% *lower* MSE than Mitsuba's independent
-    (a false win).
+    Seeding: state and stream of lane i are the two words of its unit key
+    (``common.unit_keys``: TEA of the render seed and i), exactly as Mitsuba's
+    C++ ``PCG32Sampler`` does, so for equal seeds the two produce the same
+    numbers. Feeding the lane index as the PCG32 stream directly would be a
+    mistake: streams with consecutive increments are correlated, and the
+    render's error would be wrong (lower than Mitsuba's independent: a false win).
 
     Handles any sample count; no stratification of any kind.
 
@@ -41,7 +40,7 @@ class LabIndependentSampler(LabSampler):
         self.rng = mi.PCG32()
 
     def _seed_state(self, seed_value, wavefront_size, spp):
-        v0, v1 = mi.sample_tea_32(seed_value, dr.arange(mi.UInt32, wavefront_size))
+        v0, v1 = unit_keys(seed_value, dr.arange(mi.UInt32, wavefront_size))
         self.rng = mi.PCG32(wavefront_size)
         self.rng.seed(mi.UInt64(v0), mi.UInt64(v1))
 

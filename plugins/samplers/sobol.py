@@ -4,8 +4,8 @@ from __future__ import annotations
 import mitsuba as mi
 
 from mitsuba_lab.plugins.samplers.common import (
-    SALT_PERMUTE, SALT_X, SALT_Y, Base2PairSampler, hash3, hash2, log2_ceil,
-    padded_index, pixel_seeds, sobol_02_owen)
+    PERMUTE, SCRAMBLE_X, SCRAMBLE_Y, Base2PairSampler, log2_ceil, padded_index, sample_key,
+    sobol_02_owen, unit_key)
 
 
 class LabSobolSampler(Base2PairSampler):
@@ -17,7 +17,7 @@ class LabSobolSampler(Base2PairSampler):
     ``PaddedSobolSampler``):
 
     * the sample index is shuffled by a random permutation of 0..spp-1 drawn
-      per (pixel, dimension pair) (Kensler 2013, ``mi.permute_kensler``), so
+      per (pixel, dimension pair) (Kensler 2013, ``common.padded_index``), so
       different pairs are decorrelated;
     * each coordinate gets nested uniform (Owen) scrambling by hashing, with
       its own seed per (pixel, dimension, axis) (Burley 2020, "Practical
@@ -46,21 +46,21 @@ class LabSobolSampler(Base2PairSampler):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        self.pixel_seed = mi.UInt32(0)
+        self.pixel_key = mi.UInt32(0)
         self.sample_index = mi.UInt32(0)
         self.n_bits = 0
 
     def _seed_state(self, seed_value, wavefront_size, spp):
         pixel, sample = self.wavefront_layout(wavefront_size, spp)
-        self.pixel_seed = pixel_seeds(seed_value, pixel)
+        self.pixel_key = unit_key(seed_value, pixel)
         self.sample_index = sample
         self.n_bits = log2_ceil(spp)
 
     def _scrambled(self, dim, two_d: bool):
-        key = hash3(self.pixel_seed, dim, self.pass_index)
-        index = padded_index(self.sample_index, self.spp, hash2(key, SALT_PERMUTE))
-        return sobol_02_owen(index, self.n_bits, hash2(key, SALT_X),
-                             hash2(key, SALT_Y) if two_d else None)
+        def key(purpose):
+            return sample_key(self.pixel_key, dim, self.pass_index, purpose)
+        index = padded_index(self.sample_index, self.spp, key(PERMUTE))
+        return sobol_02_owen(index, self.n_bits, key(SCRAMBLE_X), key(SCRAMBLE_Y) if two_d else None)
 
 
 mi.register_sampler("lab_sobol", lambda props: LabSobolSampler(props))

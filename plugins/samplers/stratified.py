@@ -3,11 +3,12 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.samplers.common import (
-    SALT_JITTER, SALT_PERMUTE, LabSampler, hash2, hash3, padded_index, pixel_seeds, to_unit_float)
+    JITTER_X, JITTER_Y, PERMUTE, LabSampler, padded_index, sample_key, to_unit_float, unit_key)
 
 
 class LabStratifiedSampler(LabSampler):
@@ -16,9 +17,9 @@ class LabStratifiedSampler(LabSampler):
     A 1D request splits [0,1) into ``spp`` strata; a 2D request splits the
     square into a grid of ``nx x ny`` cells. Sample i of a pixel goes to cell
     ``pi(i)``, where ``pi`` is a random permutation drawn independently per
-    (pixel, dimension) (Kensler 2013, ``mi.permute_kensler``): "padding", so
+    (pixel, dimension) (Kensler 2013, ``common.padded_index``): "padding", so
     different dimension pairs are not correlated. Inside its cell the sample
-    is uniform (jitter, from a hash of pixel, dimension and sample).
+    is uniform (jitter, keyed by the sample's lane and the dimension).
 
     =============== ====== =====================================================
     sample_count    int    Samples per pixel, >= 1 (Default: 4)
@@ -45,34 +46,36 @@ class LabStratifiedSampler(LabSampler):
     def __init__(self, props: mi.Properties):
         super().__init__(props)
         self.jitter = self._values["jitter"]
-        self.pixel_seed = mi.UInt32(0)
+        self.pixel_key = mi.UInt32(0)
+        self.lane_key = mi.UInt32(0)
         self.sample_index = mi.UInt32(0)
         self.nx = self.ny = 1
 
     def _seed_state(self, seed_value, wavefront_size, spp):
         pixel, sample = self.wavefront_layout(wavefront_size, spp)
-        self.pixel_seed = pixel_seeds(seed_value, pixel)
+        self.pixel_key = unit_key(seed_value, pixel)
+        # The jitter is per sample: keyed by the lane (only when there is one).
+        self.lane_key = unit_key(seed_value, dr.arange(mi.UInt32, wavefront_size)) if self.jitter else mi.UInt32(0)
         self.sample_index = sample
         self.nx = max(1, math.isqrt(spp))
         self.ny = -(-spp // self.nx)
 
-    def _offsets(self, key):
+    def _cell(self, dim, n_cells: int):
+        """The stratum of this sample: its index shuffled per (pixel, dimension)."""
+        return padded_index(self.sample_index, n_cells, sample_key(self.pixel_key, dim, self.pass_index, PERMUTE))
+
+    def _offset(self, dim, purpose):
         if not self.jitter:
-            return mi.Float(0.5), mi.Float(0.5)
-        u, v = mi.sample_tea_32(hash2(key, SALT_JITTER), self.sample_index)
-        return to_unit_float(u), to_unit_float(v)
+            return mi.Float(0.5)
+        return to_unit_float(sample_key(self.lane_key, dim, self.pass_index, purpose))
 
     def _sample_1d(self, dim):
-        key = hash3(self.pixel_seed, dim, self.pass_index)
-        cell = padded_index(self.sample_index, self.spp, hash2(key, SALT_PERMUTE))
-        u, _ = self._offsets(key)
-        return (mi.Float(cell) + u) * (1.0 / self.spp)
+        cell = self._cell(dim, self.spp)
+        return (mi.Float(cell) + self._offset(dim, JITTER_X)) * (1.0 / self.spp)
 
     def _sample_2d(self, dim):
-        key = hash3(self.pixel_seed, dim, self.pass_index)
-        n_cells = self.nx * self.ny
-        cell = padded_index(self.sample_index, n_cells, hash2(key, SALT_PERMUTE))
-        u, v = self._offsets(key)
+        cell = self._cell(dim, self.nx * self.ny)
+        u, v = self._offset(dim, JITTER_X), self._offset(dim, JITTER_Y)
         cx, cy = cell % self.nx, cell // self.nx
         return mi.Point2f((mi.Float(cx) + u) * (1.0 / self.nx), (mi.Float(cy) + v) * (1.0 / self.ny))
 

@@ -24,17 +24,18 @@ from .commands.args import (  # noqa: F401 (re-exported: cli.parse_assignments, 
 EXIT_INTERRUPTED = 130        # 128 + SIGINT, as shells report Ctrl-C
 EXIT_PIPE = 141               # 128 + SIGPIPE, as for any command whose reader closed the pipe
 
-#: verb -> (module in mitsuba_lab.commands, help line), in --help order.
+#: verb -> (module under mitsuba_lab, help line), in --help order. Each module has
+#: ``add_arguments(parser)`` and ``run(args, out)``; check and invert live with their library.
 COMMANDS = {
-    "render": ("render", "render one scene with one integrator"),
-    "demo": ("demo", "render the Cornell box with every lab integrator"),
-    "sweep": ("sweep", "run a strategy sweep and write its report"),
-    "reference": ("reference", "build (or find) one cached high-spp reference"),
-    "report": ("report", "rebuild a sweep's report from its stored results"),
+    "render": ("commands.render", "render one scene with one integrator"),
+    "demo": ("commands.demo", "render the Cornell box with every lab integrator"),
+    "sweep": ("commands.sweep", "run a strategy sweep and write its report"),
+    "reference": ("commands.reference", "build (or find) one cached high-spp reference"),
+    "report": ("commands.report", "rebuild a sweep's report from its stored results"),
     "check": ("check", "render the stiff scenes with every applicable lab strategy against path"),
-    "invert": ("invert", "prb inverse-rendering demos and gradient variance against time"),
-    "theory": ("theory", "reproduce the seed text's Problems 1-5"),
-    "plugins": ("plugins", "list the lab's plugins, or one plugin's declared parameters"),
+    "invert": ("inverse", "prb inverse-rendering demos and gradient variance against time"),
+    "theory": ("commands.theory", "reproduce five worked Monte Carlo problems (P1-P5)"),
+    "plugins": ("commands.plugins", "list the lab's plugins, or one plugin's declared parameters"),
 }
 #: Commands that never render, so never select a Mitsuba variant (``activate``).
 NO_VARIANT = frozenset({"theory", "report", "plugins"})
@@ -42,7 +43,7 @@ NO_VARIANT = frozenset({"theory", "report", "plugins"})
 
 def command_module(verb: str):
     """The module implementing ``verb`` (imported on first use)."""
-    return importlib.import_module(f"{__package__}.commands.{COMMANDS[verb][0]}")
+    return importlib.import_module(f"{__package__}.{COMMANDS[verb][0]}")
 
 
 class CommandParser(OneLineParser):

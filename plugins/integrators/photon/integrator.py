@@ -9,7 +9,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import params
-from mitsuba_lab.plugins.variant import require_jit_variant
+from mitsuba_lab.plugins.variant import plugin_settings
 from mitsuba_lab.plugins.params import DIRECT_MODES, UNBOUNDED  # noqa: F401 (re-exported)
 
 from .estimator import PhotonMapping
@@ -183,8 +183,7 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
 
     def __init__(self, props: mi.Properties):
         name = self.ESTIMATOR.plugin_name
-        require_jit_variant(name)
-        values = params.read_properties(name, props, self.PARAMETERS, "integrator")
+        values = plugin_settings(name, props, self.PARAMETERS, "integrator")
         super().__init__(props)
         self.settings_ = PhotonSettings(**values)
         self.stats = PhotonStats()

@@ -1,9 +1,9 @@
-"""``mitsuba-lab theory``: the seed text's Problems 1-5, predicted against measured (no variant)."""
+"""``mitsuba-lab theory``: five worked Monte Carlo problems (P1-P5), predicted against measured (no variant)."""
 from __future__ import annotations
 
 
 def add_arguments(parser) -> None:
-    parser.description = ("Run the seed text's toy estimators (uniform MC, importance sampling, cosine "
+    parser.description = ("Run five toy estimators (uniform MC, importance sampling, cosine "
                           "sampling, MIS weights and MIS, Russian roulette) and print predicted "
                           "against measured values. Exit status 1 when a measurement misses its "
                           "stated tolerance.")

@@ -1,5 +1,5 @@
 """``mitsuba-lab invert CONFIG``: the command's arguments and its run (``add_arguments``,
-``run``), wired into the command line by ``mitsuba_lab.commands.invert``."""
+``run``), wired into the command line by ``mitsuba_lab.cli``."""
 from __future__ import annotations
 
 import os

@@ -11,7 +11,7 @@ from mitsuba_lab.experiment import identity
 from mitsuba_lab.experiment.identity import describe_changes
 from mitsuba_lab.experiment.store import ResultStore
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 CONFIG = """
 [experiment]

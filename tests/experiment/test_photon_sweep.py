@@ -12,7 +12,7 @@ from mitsuba_lab.experiment.config import ConfigError, PluginSpec, parse_config,
 from mitsuba_lab.experiment.plan import Point
 from mitsuba_lab.experiment.worker import calibrate
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CORNELL = os.path.join(ROOT, "scenes", "cornell_box.xml")
 
 

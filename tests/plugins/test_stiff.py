@@ -30,7 +30,7 @@ from agreement import renders, z_scores
 from mitsuba_lab.render import render
 from mitsuba_lab.scene import SceneTraits, load_scene, make_integrator, strategy_applicability
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 STIFF = sorted(os.path.basename(p) for p in glob.glob(os.path.join(ROOT, "scenes", "stiff", "*.xml")))
 RES = 24
 Z_MAX = 4.5

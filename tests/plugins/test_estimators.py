@@ -16,7 +16,7 @@ from mitsuba_lab.experiment.plan import build_plan
 from mitsuba_lab.plugins.integrators.estimator import lookup
 from mitsuba_lab.scene import ALL_LAB_INTEGRATORS, SceneTraits, strategy_applicability
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 PLASTIC_XML = """<scene version="3.0.0">
     <sensor type="perspective">

@@ -10,7 +10,7 @@ import pytest
 
 from mitsuba_lab import cli, images
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CORNELL = os.path.join(ROOT, "scenes", "cornell_box.xml")
 
 
@@ -119,7 +119,7 @@ def test_theory_json_rows():
 
 
 def test_every_command_is_a_module_with_help():
-    """Each verb of the registry: a module of mitsuba_lab.commands with add_arguments and run,
+    """Each verb of the registry: a module of mitsuba_lab with add_arguments and run,
     and a --help page (exit 0)."""
     import importlib
 
@@ -127,7 +127,7 @@ def test_every_command_is_a_module_with_help():
                                   "theory", "plugins"]
     assert cli.NO_VARIANT == {"theory", "report", "plugins"}
     for verb, (module, help_line) in cli.COMMANDS.items():
-        command = importlib.import_module(f"mitsuba_lab.commands.{module}")
+        command = importlib.import_module(f"mitsuba_lab.{module}")
         assert callable(command.add_arguments) and callable(command.run) and help_line
         code, out, _ = run([verb, "--help"])
         assert code == 0 and out.startswith(f"usage: mitsuba-lab {verb}"), verb

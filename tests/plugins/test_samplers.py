@@ -22,7 +22,7 @@ LAB = ("lab_independent", "lab_stratified", "lab_halton", "lab_sobol", "lab_zsob
 QMC = ("lab_halton", "lab_sobol", "lab_zsobol")
 #: Per-test significance of the chi-square uniformity tests.
 ALPHA = 1e-3
-CORNELL = Path(__file__).resolve().parents[1] / "scenes" / "cornell_box.xml"
+CORNELL = Path(__file__).resolve().parents[2] / "scenes" / "cornell_box.xml"
 
 
 def make(kind: str, spp: int, **params) -> mi.Sampler:
@@ -415,3 +415,48 @@ def test_zsobol_index_is_a_block_preserving_bijection(spp):
             blocks = {}
             for a, b in zip(m >> bits, idx >> bits):
                 assert blocks.setdefault(a, b) == b
+
+
+# ---------------------------------------------------------------------------
+# Keys, the inlined Kensler shuffle, lab_zsobol's padding
+# ---------------------------------------------------------------------------
+
+def test_sample_keys_are_distinct_and_balanced():
+    """One unit's keys for different dimensions, passes and purposes are all different,
+    and every bit of every key is 1 for about half of 4096 units: within 5 standard
+    errors (60 keys x 32 bits; family-wise false alarm ~1e-3)."""
+    from mitsuba_lab.plugins.samplers.common import (
+        JITTER_X, JITTER_Y, PERMUTE, SCRAMBLE_X, SCRAMBLE_Y, sample_key, unit_key)
+    n = 4096
+    units = unit_key(dr.opaque(mi.UInt32, 17), dr.arange(mi.UInt32, n))
+    keys = [sample_key(units, dim, pass_index, purpose)
+            for dim in (0, 1, 2, 63, 64) for pass_index in (0, 1)
+            for purpose in (None, PERMUTE, SCRAMBLE_X, SCRAMBLE_Y, JITTER_X, JITTER_Y)]
+    table = np.stack([np.array(k) for k in keys])                 # (keys, units)
+    assert all(len(set(table[:, u])) == len(keys) for u in range(n))
+    bits = (table[..., None] >> np.arange(32, dtype=np.uint32)) & 1
+    assert np.all(np.abs(bits.mean(axis=1) - 0.5) < 5 * 0.5 / np.sqrt(n))
+
+
+@pytest.mark.parametrize("n", (2, 4, 16, 64, 256, 1024))
+def test_padded_index_is_mitsubas_kensler_permutation(n):
+    """The inlined round for power-of-two counts gives mi.permute_kensler's numbers."""
+    from mitsuba_lab.plugins.samplers.common import padded_index
+    lane = dr.arange(mi.UInt32, n * 256)
+    index, seed = lane % n, mi.sample_tea_32(lane // n, mi.UInt32(3))[0]
+    assert np.array_equal(np.array(padded_index(index, n, seed)),
+                          np.array(mi.permute_kensler(index, n, seed)))
+
+
+def test_zsobol_dimensions_get_their_own_blocks_and_pairings():
+    """Dimension pairs of lab_zsobol are shuffled apart: pixels rarely hold the same block
+    of the sequence in dimension 0 and in dimension 2 or 7 (one shared pixel order would
+    make neighbours complementary in every dimension at once, a less blue error), and
+    the pairing of a pixel's samples across dimensions differs from pixel to pixel."""
+    s = make("lab_zsobol", 16, width=8)
+    s.seed(3, 64 * 16)
+    idx = {d: np.array(s._sobol_index(mi.UInt32(d))).reshape(64, 16) for d in (0, 2, 7)}
+    for d in (2, 7):
+        assert np.mean(idx[d][:, 0] >> 4 == idx[0][:, 0] >> 4) < 0.25
+        pairing = {tuple(idx[d][p][np.argsort(idx[0][p] & 15)] & 15) for p in range(64)}
+        assert len(pairing) > 48

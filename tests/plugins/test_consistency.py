@@ -1,7 +1,6 @@
 """Every unbiased lab estimator agrees with Mitsuba's own `path` (and `direct`) in expectation.
 
-Tolerance: |z| <= ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-Z_MAX = 4.5 for every 8x8 block mean and every whole-image
+Tolerance: |z| <= Z_MAX = 4.5 for every 8x8 block mean and every whole-image
 channel mean (about 50 z-scores per case). For a standard normal,
 P(|z| > 4.5) = 6.8e-6, so a correct estimator fails a case with probability
 < 4e-4; seeds are fixed, so a run is deterministic. Power: the whole-image mean
@@ -15,7 +14,7 @@ import pytest
 from agreement import renders, z_scores
 from mitsuba_lab.scene import load_scene, make_integrator
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 Z_MAX = 4.5
 RES = 32
 SEEDS = 16

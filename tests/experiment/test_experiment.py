@@ -15,7 +15,7 @@ from mitsuba_lab.experiment.plan import build_plan
 from mitsuba_lab.experiment.reference import get_reference, reference_key
 from mitsuba_lab.experiment.store import ResultStore
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 TINY = """
 [experiment]
