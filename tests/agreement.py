@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mitsuba_lab.metrics import z_score
 from mitsuba_lab.render import render
 
 BLOCK = 8
@@ -45,9 +46,8 @@ def z_scores(stack_a: np.ndarray, stack_b: np.ndarray) -> Agreement:
     def z(reducer):
         mean_a, var_a = stats(stack_a, reducer)
         mean_b, var_b = stats(stack_b, reducer)
-        se = np.sqrt(var_a + var_b)
         # identical constant blocks (e.g. black background) have no spread: z = 0
-        return np.where(se > 0, (mean_a - mean_b) / np.where(se > 0, se, 1), 0.0), mean_a, mean_b
+        return z_score(mean_a, var_a, 1, mean_b, var_b, 1), mean_a, mean_b
 
     block_z, _, _ = z(block_means)
     image_z, mean_a, mean_b = z(lambda img: img.mean(axis=(0, 1)))

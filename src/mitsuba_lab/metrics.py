@@ -258,20 +258,21 @@ def fraction_rect_to_pixels(rect_frac, width: int, height: int) -> tuple[int, in
 # --------------------------------------------------------------------------
 # Statistics on independent trials and samples
 # --------------------------------------------------------------------------
-def z_score(mean_a, var_a, n_a, mean_b, var_b, n_b) -> float:
+def z_score(mean_a, var_a, n_a, mean_b, var_b, n_b):
     """Welch z-score of a difference of two independent sample means.
 
     ``z = (mean_a - mean_b) / sqrt(var_a / n_a + var_b / n_b)`` where ``var_*``
     are the per-sample variances (for a side known only by the variance of its
     mean, pass that variance with ``n = 1``). With zero standard error the score
-    is 0 for equal means and ``+-inf`` otherwise. ``mitsuba-lab check`` scores
-    every strategy's mean against the reference with it.
+    is 0 for equal means and ``+-inf`` otherwise. Works elementwise on arrays (a
+    float for scalars). ``mitsuba-lab check`` scores every strategy's mean against
+    the reference with it, and the tests score pixel blocks with it.
     """
-    diff = float(mean_a) - float(mean_b)
-    se = math.sqrt(float(var_a) / n_a + float(var_b) / n_b)
-    if se == 0:
-        return 0.0 if diff == 0 else math.copysign(math.inf, diff)
-    return diff / se
+    diff = np.asarray(mean_a, dtype=np.float64) - np.asarray(mean_b, dtype=np.float64)
+    se = np.sqrt(np.asarray(var_a, dtype=np.float64) / n_a + np.asarray(var_b, dtype=np.float64) / n_b)
+    safe = np.where(se > 0, se, 1.0)
+    z = np.where(se > 0, diff / safe, np.where(diff == 0, 0.0, np.copysign(np.inf, diff)))
+    return float(z) if z.ndim == 0 else z
 
 
 def rmse_from_trials(estimates, truth) -> float:

@@ -5,7 +5,7 @@ A render's pixel integrals are mostly of two kinds: smooth (shading, soft
 lighting) and discontinuous (edges, the border of a light). Owen-scrambled nets
 win by a wide margin on the first kind and not on the second; these functions
 measure both on their own, away from everything else a render mixes in
-(``benchmarks/bench_samplers.py``, ``tests/plugins/test_samplers.py``). ``exact_owen_pair``
+(``bench_samplers.py`` beside it, ``tests/plugins/test_samplers.py``). ``exact_owen_pair``
 is a slow numpy reference of exactly nested uniform scrambling, to check a
 hash-based scramble against. Needs scipy (the ``dev`` extra).
 """
