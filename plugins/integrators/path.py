@@ -118,7 +118,11 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         # The plan is made here, before the kernel is traced: reading the scene's traits
         # evaluates scene data (emitter areas, sensor transforms), which inside the trace
         # would split the render into several kernels.
-        self._plan = (scene, KernelPlan.of(SceneTraits.from_scene(scene), self.estimator))
+        traits = SceneTraits.from_scene(scene)
+        problem = self.estimator.media_problem(traits)
+        if problem:                       # never an image as if the medium were not there
+            raise ValueError(problem)
+        self._plan = (scene, KernelPlan.of(traits, self.estimator))
         try:
             return mi.SamplingIntegrator.render(self, scene, sensor, seed, spp, develop, evaluate)
         finally:

@@ -317,8 +317,8 @@ class SceneTraits:
         if not self.emits_light:
             notes.append("no emitter emits light: every image is black")
         if self.media:
-            notes.append("the scene has participating media, which the lab integrators do not "
-                         "support (they ignore them): render it with Mitsuba's volpath instead")
+            notes.append("the scene has participating media, which the lab integrators refuse and "
+                         "Mitsuba's path ignores: render it with Mitsuba's volpath")
         return notes
 
 

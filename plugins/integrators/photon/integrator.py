@@ -10,6 +10,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.variant import plugin_settings
+from mitsuba_lab.scene import SceneTraits
 from mitsuba_lab.plugins.params import DIRECT_MODES, UNBOUNDED  # noqa: F401 (re-exported)
 
 from .estimator import PhotonMapping
@@ -200,6 +201,9 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         if mi.is_spectral:
             raise ValueError("lab_photon: spectral variants are not supported (a photon's wavelengths "
                              "would have to match the camera path's); use an RGB or mono variant")
+        problem = self.ESTIMATOR.media_problem(SceneTraits.from_scene(scene))
+        if problem:                       # never an image as if the medium were not there
+            raise ValueError(problem)
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
         seed = int(seed[0]) if hasattr(seed, "__len__") and not isinstance(seed, int) else int(seed)
@@ -294,7 +298,15 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     # -- Camera pass ---------------------------------------------------------------
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
-        """The camera-side estimate with the current photon map (used inside ``render``)."""
+        """The camera-side estimate with the current photon map (used inside ``render``).
+
+        lab_photon builds a photon map per pass in ``render``; an integrator that calls
+        ``sample`` itself (Mitsuba's ``aov`` or ``moment`` wrapping lab_photon) would get
+        estimates without photons, so that is refused."""
+        if self._camera.grid is None:
+            raise ValueError("lab_photon: cannot be nested inside another integrator (such as aov or "
+                             "moment) that calls its sample(): its photon maps are built per pass by "
+                             "its own render(); render the scene with lab_photon directly")
         return self._camera.sample(scene, sampler, ray, medium, active)
 
     # -- Reporting --------------------------------------------------------------------

@@ -173,9 +173,11 @@ def run(args, out) -> int:
 def render_warnings(scene, kind: str, params: dict) -> list[str]:
     """What the user should know before trusting this render: the scene's own problems and
     the planner's reason when the estimator cannot render the scene's light correctly."""
-    from ..scene import SceneTraits, strategy_applicability
+    from ..scene import ALL_LAB_INTEGRATORS, SceneTraits, strategy_applicability
 
     traits = SceneTraits.from_scene(scene)
+    if traits.media and kind in ALL_LAB_INTEGRATORS:
+        return []                      # the plugin refuses the scene itself, in one line
     notes = traits.warnings()
     ok, reason = strategy_applicability(traits, kind, params)
     if not ok and reason not in notes:
