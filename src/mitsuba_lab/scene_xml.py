@@ -104,7 +104,10 @@ _PARSERS = {"integer": int, "float": float, "string": str,
 
 def scene_defaults(path: str) -> dict[str, str]:
     """The scene's top-level ``<default name=... value=...>`` values, as written."""
-    root = _parse(path).getroot()
+    return _defaults(_parse(path).getroot())
+
+
+def _defaults(root: ET.Element) -> dict[str, str]:
     return {e.get("name"): e.get("value", "") for e in root.findall("default")}
 
 
@@ -126,9 +129,8 @@ def plugin_spec(path: str, tag: str, defines: dict | None = None) -> tuple[str, 
     ``<sampler>`` (tag='sampler'), with ``$name`` references resolved from the scene's
     defaults and ``defines``; None when the scene has none. Raises LabError for a plugin with
     nested plugins or values that are not plain numbers, booleans or strings."""
-    tree = _parse(path)
-    root = tree.getroot()
-    values = {**scene_defaults(path), **{k: str(v) for k, v in (defines or {}).items()}}
+    root = _parse(path).getroot()
+    values = {**_defaults(root), **{k: str(v) for k, v in (defines or {}).items()}}
     if tag == "sampler":
         sensor = root.find("sensor")
         element = sensor.find("sampler") if sensor is not None else None

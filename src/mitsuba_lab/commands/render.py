@@ -106,9 +106,8 @@ def chosen_plugin(scene_spec, cli_type: str | None, overrides: dict, fallback: s
 
 def render_plan(args, defines: dict):
     """What ``render`` will run: integrator and sampler (type, parameters), the scene's
-    parameters that do not apply, and the camera samples per pixel in all."""
+    parameters that do not apply."""
     from ..errors import LabError
-    from ..experiment.config import PASS_PARAMETER
     from ..scene_xml import plugin_spec
 
     if not os.path.isfile(args.scene):
@@ -119,19 +118,19 @@ def render_plan(args, defines: dict):
     sampler_overrides = parse_assignments(args.sampler_param, "--sampler-param")
     sampler = chosen_plugin(plugin_spec(args.scene, "sampler", defines), args.sampler,
                             sampler_overrides, "independent", SAMPLER_SHARED)
-    return integrator, sampler, PASS_PARAMETER.get(integrator[0])
+    return integrator, sampler
 
 
 def run(args, out) -> int:
     from .. import images, scene as scenes
-    from ..errors import LabError
+    from ..experiment.config import PluginSpec, sample_count_plugin
     from ..plugins.params import resolve
     from ..render import render
     from ..runtime import versions
     from ..scene_xml import load_scene_variant
 
     defines = parse_assignments(args.define, "--define")
-    (kind, params, dropped), (sampler_type, sampler_params, _), pass_name = render_plan(args, defines)
+    (kind, params, dropped), (sampler_type, sampler_params, _) = render_plan(args, defines)
     output = args.output or default_output(args.scene, kind)
     if not output.lower().endswith(".exr"):
         raise ValueError(f"output must be an .exr path, got '{output}'")
@@ -142,13 +141,9 @@ def run(args, out) -> int:
     else:
         scene = scenes.load_scene(args.scene, **defines)
     samples = args.spp or scene.sensors()[0].sampler().sample_count()    # per pixel, in all
-    spp = samples
-    if pass_name:                # pass-scaled (lab_photon): N camera samples = passes x spp per pass
-        passes = params.setdefault(pass_name, samples)
-        if samples % passes:
-            raise LabError(f"{kind}: {samples} camera samples per pixel (--spp or the scene's "
-                           f"sample_count) is not a multiple of {pass_name} = {passes}")
-        spp = samples // passes
+    # lab_photon: N camera samples = passes x spp per pass, as in a sweep
+    spec, spp = sample_count_plugin(PluginSpec(kind, kind, params), samples)
+    params = spec.params
     integrator = scenes.make_integrator(kind, params)
     for note in render_warnings(scene, kind, params):
         print(f"mitsuba-lab: warning: {note}", file=sys.stderr)

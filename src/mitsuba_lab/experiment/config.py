@@ -159,11 +159,16 @@ def _check_pass_parameters(reader: TableReader, specs: tuple[PluginSpec, ...]) -
 
 def sample_count_plugin(spec: PluginSpec, count: int) -> tuple[PluginSpec, int]:
     """(plugin, render spp) that give ``count`` camera samples per pixel: ``count`` spp, or for
-    a pass-scaled integrator ``count`` passes of 1 spp (PASS_PARAMETER)."""
+    a pass-scaled integrator (PASS_PARAMETER) ``count`` passes of 1 spp, or, when the plugin
+    sets its pass count P itself (``render`` allows it, sweeps do not), P passes of count / P."""
     name = PASS_PARAMETER.get(spec.type)
     if name is None:
         return spec, count
-    return PluginSpec(spec.name, spec.type, {**spec.params, name: count}), 1
+    passes = spec.params.get(name, count)
+    if not isinstance(passes, int) or isinstance(passes, bool) or passes < 1 or count % passes:
+        raise LabError(f"{spec.type}: {count} camera samples per pixel is not a multiple of "
+                       f"{name} = {passes!r}")
+    return PluginSpec(spec.name, spec.type, {**spec.params, name: passes}), count // passes
 
 
 def _positive_ints(reader: TableReader, name: str, default) -> tuple[int, ...]:

@@ -20,6 +20,7 @@ class ResultStore:
         self.path = os.path.join(folder, "results.jsonl")
         os.makedirs(folder, exist_ok=True)
         self.rows = self._load()
+        self._current: tuple[int, list[dict]] | None = None    # current_runs() for len(rows)
         self._remove_stale_temporaries()
 
     def _remove_stale_temporaries(self) -> None:
@@ -68,6 +69,8 @@ class ResultStore:
         """Run rows in force: the latest row of each (point, seed), unless a later
         ``superseded`` row retired it (its identity no longer matched the sweep's).
         Superseded rows stay in the file; reports and resumes read only these."""
+        if self._current is not None and self._current[0] == len(self.rows):
+            return list(self._current[1])          # rows only grow: same length, same answer
         current: dict[tuple[str, int], dict] = {}
         for row in self.rows:
             kind = row.get("kind")
@@ -77,7 +80,8 @@ class ResultStore:
                 held = current.get((row["point"], row["seed"]))
                 if held is not None and held.get("identity_hash") == row.get("identity_hash"):
                     del current[(row["point"], row["seed"])]
-        return list(current.values())
+        self._current = (len(self.rows), list(current.values()))
+        return list(self._current[1])
 
     def done_runs(self) -> dict[tuple[str, int], str | None]:
         """(point, seed) -> identity hash of the run in force (None for rows stored before
