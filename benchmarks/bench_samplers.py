@@ -23,7 +23,10 @@ without the pixels that see the light directly (reference luminance above
 ``--emitter-threshold``, grown by one pixel): on this scene much of a QMC
 sampler's MSE sits on the light's edge, a 2D anti-aliasing problem on which every
 (0,2)-net sampler behaves alike (README, Speed). The blue-noise spectra are likewise given on the
-whole image and on the rows below the light (``spectrum.rows_below_bright``).
+whole image and on the rows below the light (``spectrum.rows_below_bright``); the
+low-spp blue-noise study repeats them on non-square pixel blocks (a crop window and a
+res x res/2 film) and with a deliberately wrong layout. Every render binds the film to its
+sampler first (``bind_film_layout``), as the lab's own renders do.
 """
 from __future__ import annotations
 
@@ -44,6 +47,7 @@ from mitsuba_lab.experiment.reference import get_reference
 from mitsuba_lab.experiment.spectrum import bright_mask, low_frequency_fraction, rows_below_bright
 from pixel_integrals import exact_owen_pair, first_pair, integrand_families, pixel_integral_mse
 from mitsuba_lab.plugins.samplers.common import log2_ceil
+from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.scene_xml import edited_xml, plugin_spec
 
 CORNELL = Path(__file__).resolve().parents[1] / "scenes" / "cornell_box.xml"
@@ -53,12 +57,29 @@ MITSUBA = ("independent", "stratified", "multijitter", "ldsampler", "orthogonal"
 LAB = ("lab_independent", "lab_stratified", "lab_halton", "lab_sobol", "lab_zsobol")
 
 
-def scene(sampler: str, res: int, spp: int, max_depth: int):
-    xml = CORNELL.read_text().replace('<sampler type="independent">', f'<sampler type="{sampler}">')
+def scene(sampler: str, res: int, spp: int, max_depth: int, film: str = "", sampler_params: str = ""):
+    """The Cornell box with another sampler; ``film``: XML text added to the film (a crop
+    window) or ``wide``: the box's wide film (``wide_film_xml``)."""
+    xml = wide_film_xml(res) if film == "wide" else CORNELL.read_text()
+    xml = xml.replace('<sampler type="independent">', f'<sampler type="{sampler}">{sampler_params}')
+    if film and film != "wide":
+        xml = xml.replace('<rfilter type="box"/>', f'<rfilter type="box"/>{film}')
     return mi.load_string(xml, res=res, spp=spp, max_depth=max_depth)
 
 
-def render(sc, seed: int) -> tuple[np.ndarray, float]:
+def wide_film_xml(res: int) -> str:
+    """The Cornell box on a res x res/2 film, its field of view on the wider axis (the view
+    stays inside the box; the light is above it): the blue-noise study's non-square film."""
+    return (CORNELL.read_text()
+            .replace('<integer name="height" value="$res"/>', f'<integer name="height" value="{res // 2}"/>')
+            .replace('<string name="fov_axis" value="smaller"/>', '<string name="fov_axis" value="larger"/>'))
+
+
+def render(sc, seed: int, bind: bool = True) -> tuple[np.ndarray, float]:
+    """One timed render; the film is bound to the sampler first (lab_zsobol learns the
+    film's layout; ``bind=False``: plain ``mi.render``, as a user outside the lab)."""
+    if bind:
+        bind_film_layout(sc)
     t0 = time.perf_counter()
     img = mi.render(sc, seed=seed)
     dr.eval(img)
@@ -66,13 +87,18 @@ def render(sc, seed: int) -> tuple[np.ndarray, float]:
     return np.array(img, dtype=np.float64), time.perf_counter() - t0
 
 
-def reference_scene(sampler: str) -> Path:
+def reference_scene(sampler: str, wide_res: int = 0) -> Path:
     """The Cornell box rendered by ``sampler``: the scene file itself for its own sampler,
-    else a copy with the sampler replaced (rewritten only when its text changes)."""
-    if plugin_spec(str(CORNELL), "sampler")[0] == sampler:
+    else a copy with the sampler replaced (rewritten only when its text changes);
+    ``wide_res``: on the wide film (``wide_film_xml``)."""
+    if wide_res:
+        text = wide_film_xml(wide_res).replace('<sampler type="independent">', f'<sampler type="{sampler}">')
+        path = VARIANTS / f"{CORNELL.stem}.{sampler}.wide{wide_res}.xml"
+    elif plugin_spec(str(CORNELL), "sampler")[0] == sampler:
         return CORNELL
-    text = edited_xml(str(CORNELL), None, {"type": sampler})
-    path = VARIANTS / f"{CORNELL.stem}.{sampler}.xml"
+    else:
+        text = edited_xml(str(CORNELL), None, {"type": sampler})
+        path = VARIANTS / f"{CORNELL.stem}.{sampler}.xml"
     if not path.exists() or path.read_text() != text:
         VARIANTS.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(".tmp")
@@ -81,14 +107,15 @@ def reference_scene(sampler: str) -> Path:
     return path
 
 
-def reference(args) -> tuple[np.ndarray, np.ndarray]:
+def reference(args, wide: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Mean of the chunks and its per-pixel noise floor (variance of the chunk mean,
     channels averaged), so a floor can be taken over any set of pixels; built or
-    found in the runner's reference cache."""
+    found in the runner's reference cache. ``wide``: of the wide film."""
     cache = os.path.abspath(os.path.expanduser(args.ref_cache))
     integrator = PluginSpec("reference", "path", {"max_depth": args.max_depth})
-    ref, _ = get_reference(str(reference_scene(args.ref_sampler)), args.res, {}, integrator,
-                           args.ref_spp, args.ref_chunks, cache)
+    path = reference_scene(args.ref_sampler, args.res if wide else 0)
+    ref, _ = get_reference(str(path), None if wide else args.res, {"res": args.res} if wide else {},
+                           integrator, args.ref_spp, args.ref_chunks, cache)
     return ref.image.astype(np.float64), ref.variance.astype(np.float64).mean(axis=-1)
 
 
@@ -117,22 +144,51 @@ def print_blue_noise(label: str, errors: dict, mse: dict, row0: int):
 def blue_noise_study(args):
     """Low-frequency share of the error power (lowest quarter of radial frequencies):
     lab_zsobol against lab_sobol at low spp, per max_depth (2 = direct lighting only),
-    each seed's error image apart."""
+    each seed's error image apart; on the square film, on a non-square crop window of it
+    (its lower half: same pixels and reference, a res x res/2 block), on a non-square
+    res x res/2 film (``wide_film_xml``), and on that film with a deliberately wrong
+    layout (lab_zsobol given width res/2 + 1 in a plain mi.render: the measure's power)."""
     print("\nblue noise: share of error power below 1/4 Nyquist (white noise: 0.0625), "
           "mean over seeds; ratio zsobol/sobol (< 1: bluer)")
     names = ("lab_sobol", "lab_zsobol")
+    res, half = args.res, args.res // 2
+    crop = (f'<integer name="crop_offset_y" value="{half}"/><integer name="crop_height" value="{half}"/>'
+            f'<integer name="crop_width" value="{res}"/>')
     for depth in args.blue_depths:
         ref_args = argparse.Namespace(**{**vars(args), "max_depth": depth, "ref_spp": args.blue_ref_spp})
         ref, floor_map = reference(ref_args)
-        floor = float(floor_map.mean())
-        row0 = rows_below_bright(ref, args.emitter_threshold)
+        wide_ref, wide_floor = reference(ref_args, wide=True)
+        cases = (  # label, film, reference, its noise floor map
+            (f"square {res}x{res}", "", ref, floor_map),
+            (f"crop {res}x{half} (lower half)", crop, ref[half:], floor_map[half:]),
+            (f"film {res}x{half}", "wide", wide_ref, wide_floor))
+        wrong_width = f'<integer name="width" value="{half + 1}"/>'
         for spp in args.blue_spp:
-            scenes = {n: scene(n, args.res, spp, depth) for n in names}
-            for n in names:
-                render(scenes[n], 999)
-            errors = {n: [render(scenes[n], seed)[0] - ref for seed in range(args.blue_seeds)] for n in names}
-            mse = {n: statistics.mean(float(np.mean(e ** 2)) for e in errors[n]) - floor for n in names}
-            print_blue_noise(f"max_depth {depth} spp {spp:4d}", errors, mse, row0)
+            for label, film, case_ref, case_floor in cases:
+                row0 = rows_below_bright(case_ref, args.emitter_threshold)
+                scenes = {n: scene(n, res, spp, depth, film) for n in names}
+                errors, mse = blue_errors(scenes, case_ref, case_floor, args.blue_seeds)
+                print_blue_noise(f"max_depth {depth} spp {spp:4d} {label:24s}", errors, mse, row0)
+                if not film:     # the square film's errors on the crop's rows, for comparison
+                    print_blue_noise(f"max_depth {depth} spp {spp:4d} {'square, rows of the crop':24s}",
+                                     errors, mse, half)
+            # the wide film (the last case; its lab_sobol errors kept), lab_zsobol in a wrong layout
+            wrong = {"lab_zsobol": scene("lab_zsobol", res, spp, depth, "wide", wrong_width)}
+            wrong_errors, wrong_mse = blue_errors(wrong, wide_ref, wide_floor, args.blue_seeds, bind=False)
+            print_blue_noise(f"max_depth {depth} spp {spp:4d} {'film, width ' + str(half + 1) + ' (wrong)':24s}",
+                             {**errors, **wrong_errors}, {**mse, **wrong_mse}, row0)
+
+
+def blue_errors(scenes: dict, ref: np.ndarray, floor_map: np.ndarray, seeds: int, bind: bool = True):
+    """Error images of each scene's renders (after a warm-up render), seeds 0..seeds-1, and
+    each scene's mean MSE less the reference's noise floor."""
+    errors = {}
+    for n, sc in scenes.items():
+        render(sc, 999, bind)
+        errors[n] = [render(sc, seed, bind)[0] - ref for seed in range(seeds)]
+    mse = {n: statistics.mean(float(np.mean(e ** 2)) for e in errs) - float(floor_map.mean())
+           for n, errs in errors.items()}
+    return errors, mse
 
 
 def paired_ratio(times, reference_times) -> float:

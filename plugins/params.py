@@ -158,6 +158,7 @@ LAB_PHOTON = (
           choices=DIRECT_MODES),
     Param("max_records", int, 1 << 21, "most photon records held at once (a pass is split to fit)",
           **_int_at_least(PHOTON_MIN_RECORDS)),
+    PATH_TRACER[2],                                   # hide_emitters, Mitsuba's meaning
 )
 
 #: Shared by every lab sampler (``LabSampler``).
@@ -178,7 +179,8 @@ LAB_HALTON = _override(SAMPLER, Param(
 )
 
 LAB_ZSOBOL = SAMPLER + (
-    Param("width", int, 0, "width of the rendered pixel block; 0 = infer from a square block",
+    Param("width", int, 0, "width of the rendered pixel block (film or crop window); 0 = take it from "
+          "the film, which the lab binds before each render (else: one warning, a guess)",
           **_int_at_least(0)),
 )
 
@@ -196,8 +198,7 @@ _DECLARED: dict[str, tuple[Param, ...]] = {
 
 #: Parameters that Mitsuba's own C++ base classes read (``mi.SamplingIntegrator``:
 #: timeout, samples_per_pass, block_size): accepted, not listed, left to Mitsuba.
-#: (hide_emitters, which the base also reads, is declared by the path tracers; lab_photon
-#: does not support it, so there it is an unknown parameter.)
+#: (hide_emitters, which the base also reads, is declared by the lab's integrators.)
 MITSUBA_BASE_PARAMETERS = {
     "integrator": ("timeout", "samples_per_pass", "block_size"),
     "sampler": (),

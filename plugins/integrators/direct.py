@@ -9,6 +9,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators.estimator import Densities
+from mitsuba_lab.plugins.integrators.spawn import sample_visible_emitter
 
 
 def finite_or_zero(value):
@@ -34,7 +35,7 @@ def emitter_sample_contribution(beta, ds, em_weight, bsdf_val, w, active):
 
 
 def emitter_sampling(scene, sampler, ctx, si, bsdf, beta, L, sample_weight, n_L: int, active_em,
-                     active_bsdf):
+                     active_bsdf, offset_floor: float = 1.0):
     """Next-event estimation at ``si`` with n_L emitter samples, and the vertex's BSDF sample.
 
     Adds to ``L`` the n_L emitter samples' contributions, each weighted by
@@ -42,11 +43,13 @@ def emitter_sampling(scene, sampler, ctx, si, bsdf, beta, L, sample_weight, n_L:
     (the vertex has a smooth BSDF component). The first sample's BSDF evaluation and the BSDF
     sample for the path's next direction (where ``active_bsdf``) are one call, as in Mitsuba's
     ``path.cpp``. Returns (L, BSDF sample, its weight f cos / p_B). Sampler dimensions, in this
-    order: 2 (emitter), 1 + 2 (BSDF), then 2 for each further emitter sample.
+    order: 2 (emitter), 1 + 2 (BSDF), then 2 for each further emitter sample. Shadow rays start
+    at the scale-robust offset for a scene of coordinate scale ``offset_floor``
+    (``spawn.offset_floor``; 1 gives Mitsuba's offsets).
     """
     bs = bsdf_weight = None
     for k in range(n_L):
-        ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
+        ds, em_weight = sample_visible_emitter(scene, si, sampler.next_2d(), offset_floor, active_em)
         wo = si.to_local(ds.d)
         if k == 0:
             bsdf_val, bsdf_pdf, bs, bsdf_weight = bsdf.eval_pdf_sample(

@@ -21,14 +21,16 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import params
-from mitsuba_lab.plugins.integrators import direct
+from mitsuba_lab.plugins.integrators import direct, spawn
 from mitsuba_lab.plugins.integrators.counters import RayCounters
 from mitsuba_lab.plugins.integrators.estimator import PathEstimator
 from mitsuba_lab.plugins.integrators.mis import MIS
 from mitsuba_lab.plugins.integrators.naive import Naive
 from mitsuba_lab.plugins.integrators.nee import NEE
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
+from mitsuba_lab.plugins.integrators.support import warn_if_unsupported
 from mitsuba_lab.plugins.params import UNBOUNDED
+from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
 from mitsuba_lab.scene import SceneTraits
 
@@ -51,16 +53,20 @@ class KernelPlan:
     * ``hits_are_delta``: every BSDF is delta, so every emitter hit follows a camera ray or a
       delta bounce, which only BSDF sampling can produce: its weight is 1 for every unbiased
       estimator (``PathEstimator``), and no emitter pdf lookup or previous-vertex state is needed.
+
+    ``offset_floor`` is the scene's coordinate scale for ray offsets (``spawn.offset_floor``).
     """
     emitter_hits: bool
     emitter_sampling: bool
     hits_are_delta: bool
+    offset_floor: float = 1.0
 
     @classmethod
     def of(cls, traits: SceneTraits, estimator: PathEstimator) -> "KernelPlan":
         return cls(emitter_hits=traits.hittable_emitters,
                    emitter_sampling=estimator.samples_emitters and traits.emitters > 0 and traits.smooth_bsdf,
-                   hits_are_delta=not traits.smooth_bsdf)
+                   hits_are_delta=not traits.smooth_bsdf,
+                   offset_floor=spawn.offset_floor(traits))
 
     @property
     def tracks_previous_vertex(self) -> bool:
@@ -115,13 +121,15 @@ class LabPathIntegrator(mi.SamplingIntegrator):
 
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
+        if self._plan is not None and self._plan[0] is scene:
+            # Mitsuba's render(sensor index) calls render(sensor object) back: planned already
+            return mi.SamplingIntegrator.render(self, scene, sensor, seed, spp, develop, evaluate)
         # The plan is made here, before the kernel is traced: reading the scene's traits
         # evaluates scene data (emitter areas, sensor transforms), which inside the trace
         # would split the render into several kernels.
         traits = SceneTraits.from_scene(scene)
-        problem = self.estimator.media_problem(traits)
-        if problem:                       # never an image as if the medium were not there
-            raise ValueError(problem)
+        warn_if_unsupported(self, traits)         # never an image silently missing light
+        bind_film_layout(scene, sensor)           # samplers that order pixels learn the film's shape
         self._plan = (scene, KernelPlan.of(traits, self.estimator))
         try:
             return mi.SamplingIntegrator.render(self, scene, sensor, seed, spp, develop, evaluate)
@@ -144,6 +152,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         # (as plain bools: the symbolic loop would treat the dataclass as loop state)
         emitter_hits, emitter_sampling = plan.emitter_hits, plan.emitter_sampling
         hits_are_delta, track_prev = plan.hits_are_delta, plan.tracks_previous_vertex
+        floor = plan.offset_floor
         estimator = self.estimator
         n_L = estimator.emitter_samples
 
@@ -166,7 +175,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
         if dr.hint(self.hide_emitters and emitter_hits, mode="scalar"):
             # Mitsuba's meaning: camera rays pass through area emitters to what lies behind them
-            ray, pi = self.skip_directly_visible_emitters(scene, ray, pi, active)
+            ray, pi = spawn.pass_through_emitters(scene, ray, pi, active, floor)
 
         while dr.hint(active, max_iterations=-1, label=f"{estimator.plugin_name} path loop"):
             si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
@@ -194,14 +203,14 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                 active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
                 L, bsdf_sample, bsdf_weight = direct.emitter_sampling(
                     scene, sampler, bsdf_ctx, si, bsdf, beta, L, estimator.sample_weight, n_L, active_em,
-                    active_next)
+                    active_next, floor)
                 n_shadow += dr.select(active_em, n_L, 0)
             else:
                 bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(),
                                                        active_next)
 
             # ------------------- Update loop variables ---------------------
-            ray = si.spawn_ray(si.to_world(bsdf_sample.wo))
+            ray = spawn.spawn_ray(si, si.to_world(bsdf_sample.wo), floor)
             beta *= bsdf_weight
             eta *= bsdf_sample.eta
             valid_ray |= active & si.is_valid() & ~mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Null)
@@ -229,14 +238,6 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             if dr.hint(emitter_sampling, mode="scalar"):
                 self.counters.add("shadow", n_shadow, camera_lanes)
         return dr.select(valid_ray, L, 0), valid_ray, []
-
-    def skip_directly_visible_emitters(self, scene, ray, pi, active):
-        """(ray, first intersection) with area emitters hit by camera rays skipped."""
-        skip = active & pi.is_valid() & (pi.shape.emitter() != None)  # noqa: E711 (Dr.Jit pointer test)
-        si_skip = pi.compute_surface_interaction(ray, mi.RayFlags.Minimal, skip)
-        ray_skip = si_skip.spawn_ray(ray.d)
-        pi_skip = self.skip_area_emitters(scene, ray_skip, True, skip)
-        return dr.select(skip, ray_skip, ray), dr.select(skip, pi_skip, pi)
 
     # -- Reporting --------------------------------------------------------------------
 

@@ -1,6 +1,8 @@
 """``lab_zsobol``: one global Sobol sequence in Morton order (blue-noise error)."""
 from __future__ import annotations
 
+from functools import partial
+
 import drjit as dr
 import mitsuba as mi
 
@@ -8,10 +10,26 @@ from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.samplers.common import (
     BLOCKS, IMAGE, PERMUTE, SCRAMBLE_X, SCRAMBLE_Y, Base2PairSampler, isqrt_exact, log2_ceil,
     mix32, morton_2d, owen_scramble_2, sample_key, sobol_02_owen, unit_key)
+from mitsuba_lab.plugins.samplers.layout import film_block_size
 
 #: Multiplication in GF(4) = {0, 1, a, a^2 = a + 1} coded 0..3: entry (x, y) at bits 2 (4x + y).
 GF4_MUL = [[0, 0, 0, 0], [0, 1, 2, 3], [0, 2, 3, 1], [0, 3, 1, 2]]
 GF4_MUL_BITS = sum(GF4_MUL[x][y] << (2 * (4 * x + y)) for x in range(4) for y in range(4))
+
+
+def z_order(x, y, x_bits: int, y_bits: int):
+    """Z-order (Morton) code of pixel (x, y) of a 2^x_bits x 2^y_bits grid: the low
+    min(x_bits, y_bits) bits of x and y interleaved (x on the even bits), the rest
+    of the longer axis above them. Every aligned 2^j x 2^j square (j up to the
+    shorter axis's bits) is a run of consecutive codes; on a square grid this is
+    ``morton_2d``, and a thin film (1 x n) keeps its pixels in order."""
+    k = min(x_bits, y_bits)
+    code = morton_2d(x, y, k)
+    if x_bits > k:
+        code |= (mi.UInt32(x) >> k) << (2 * k)
+    elif y_bits > k:
+        code |= (mi.UInt32(y) >> k) << (2 * k)
+    return code
 
 
 def _gf4_permute(digit, h):
@@ -93,19 +111,31 @@ class LabZSobolSampler(Base2PairSampler):
     sample_count    int    Samples per pixel, >= 1; powers of two keep each
                            pixel a full net (a warning otherwise) (Default: 4)
     width           int    Width of the rendered pixel block (the film, or its
-                           crop window). 0 = infer it from a square block; a
-                           non-square block needs it (Default: 0)
+                           crop window). 0 = take the shape from the film
+                           (nothing to set: see below) (Default: 0)
     seed            int    Base seed, added to the render seed (Default: 0)
     =============== ====== =====================================================
 
-    Limits: 2 log2(max(width, height)) + m <= 32 bits of index (e.g. 4096^2
-    pixels at 256 spp); only Sobol dimensions 0 and 1 are used (padded). A
-    wrong ``width`` keeps the estimate unbiased but loses the blue-noise
-    arrangement. Multi-pass rendering rescrambles each pass.
+    Any film works: square or not, crop windows, odd sizes (33x17, 1x64).
+    Mitsuba tells a sampler only how many lanes it renders, so the film is bound
+    to its sampler before the render (``layout.bind_film_layout``): every render
+    through the lab does this (``mitsuba_lab.render.render``, the command line,
+    the runner, and the lab integrators' own ``render``), whatever the integrator,
+    Mitsuba's ``path`` included. A non-square block uses the Z-order of its
+    enclosing 2^a x 2^b grid (``z_order``). Outside the lab, call
+    ``bind_film_layout(scene)`` before ``mi.render`` or set ``width``; without
+    either, the sampler logs one warning and takes the pixels as a square block
+    (a square pixel count) or one row: the image is still unbiased, every pixel
+    with its own points, but the error is blue noise only if the guess is the
+    film's shape. A bound film wins over a different ``width`` (one warning).
+
+    Limits: log2 of the enclosing grid + m <= 32 bits of index (e.g. 4096^2
+    pixels at 256 spp); only Sobol dimensions 0 and 1 are used (padded).
+    Multi-pass rendering rescrambles each pass.
 
     .. code-block:: python
 
-        {'type': 'lab_zsobol', 'sample_count': 16, 'width': 128}
+        {'type': 'lab_zsobol', 'sample_count': 16}
     """
     plugin_name = "lab_zsobol"
     prefers_power_of_two = True
@@ -119,26 +149,78 @@ class LabZSobolSampler(Base2PairSampler):
         self.pixel_block = mi.UInt32(0)
         self.image_key = mi.UInt32(0)
         self.n_bits = self.log2_spp = 0
+        #: The pixel block of the last seed: (width, height, how it was found).
+        self.layout = None
+        # Zero-argument reader of the bound film's block size (``bind_film``), and the
+        # warnings already given; both shared with clones and forks (one warning in all).
+        self._film_size = None
+        self._warned = set()
+
+    # -- the film's layout -------------------------------------------------------
+    def bind_film(self, film):
+        """Hook of ``layout.bind_film_layout``: read the pixel block's shape from
+        ``film`` at every seed (None: forget the film). A closure, not the film
+        itself, is stored: Dr.Jit traverses a sampler's attributes as loop state."""
+        self._film_size = None if film is None else partial(film_block_size, film)
+
+    def _warn_once(self, key: str, message: str):
+        if key not in self._warned:
+            self._warned.add(key)
+            mi.Log(mi.LogLevel.Warn, f"{self.plugin_name}: {message}")
+
+    def _layout(self, wavefront_size: int, spp: int) -> tuple[int, int, int, str]:
+        """(width, height, samples per pixel in this wavefront, source) of the pixels
+        of a wavefront; source is 'film', 'width', 'one pixel' or 'guess' (with one
+        warning). Every answer maps the pixels one to one onto Z-order codes, so the
+        image is right whatever the answer; only the blue noise needs the true width."""
+        why = "the film's layout is unknown (no film bound)"
+        if self._film_size is not None:
+            w, h = self._film_size()
+            per_pass, rest = divmod(wavefront_size, w * h)
+            # A bound film rendered in passes of spp / k samples per pixel: k divides spp.
+            if rest == 0 and per_pass >= 1 and spp % per_pass == 0:
+                if self.width and self.width != w:
+                    self._warn_once("width", f"parameter 'width' ({self.width}) differs from the film's "
+                                             f"{w}x{h} pixel block; the film's width is used")
+                return w, h, per_pass, "film"
+            why = f"a wavefront of {wavefront_size} lanes at {spp} spp does not fit the bound {w}x{h} film"
+        n_pixels = max(1, -(-wavefront_size // spp))
+        if n_pixels == 1:        # one pixel has one layout (mi.render ends with seed(0, 1))
+            return 1, 1, spp, "one pixel"
+        if self.width:
+            if self._film_size is not None:
+                self._warn_once("layout", f"{why}; using width={self.width}")
+            return self.width, -(-n_pixels // self.width), spp, "width"
+        side = isqrt_exact(n_pixels)
+        w, h = (side, side) if side else (n_pixels, 1)
+        self._warn_once("layout", f"{why}: its {n_pixels} pixels are taken as {'a square' if side else 'one row'}"
+                                  f" of {w}x{h}, unbiased but blue noise only if that is the film's shape (set "
+                                  "'width', or call mitsuba_lab.bind_film_layout(scene) before mi.render; "
+                                  "the lab's own renders do)")
+        return w, h, spp, "guess"
 
     def _seed_state(self, seed_value, wavefront_size, spp):
-        n_pixels = max(1, -(-wavefront_size // spp))
-        width = self.width or isqrt_exact(n_pixels)
-        if width is None:
-            raise ValueError(f"{self.plugin_name}: parameter 'width' must be set to the film (crop) width "
-                             f"for a non-square block of {n_pixels} pixels (got width={self.width})")
-        height = -(-n_pixels // width)
-        res_bits = log2_ceil(max(width, height))
+        width, height, spp, source = self._layout(wavefront_size, spp)
+        x_bits, y_bits = log2_ceil(width), log2_ceil(height)
+        pixel_bits = x_bits + y_bits + (x_bits + y_bits) % 2      # whole base-4 digits
         log2_spp = log2_ceil(spp)
-        self.n_bits = 2 * res_bits + log2_spp
+        self.n_bits = pixel_bits + log2_spp
         if self.n_bits > 32:
             raise ValueError(f"{self.plugin_name}: {width}x{height} pixels at {spp} spp need "
                              f"{self.n_bits} > 32 index bits; lower 'sample_count' or the resolution")
+        self.layout = (width, height, source)
         lane = dr.arange(mi.UInt32, wavefront_size)
         pixel, sample = lane // spp, lane % spp
-        self.morton_index = (morton_2d(pixel % width, pixel // width, res_bits) << log2_spp) | sample
+        code = z_order(pixel % width, pixel // width, x_bits, y_bits)
+        self.morton_index = (code << log2_spp) | sample
         self.image_key = unit_key(seed_value, IMAGE)
         self.log2_spp = log2_spp
         self._permute_pixels()
+
+    def _copy_settings(self, other, with_state: bool):
+        # Before the base's copy: it re-seeds a clone, which must see the same film.
+        other._film_size, other._warned = self._film_size, self._warned
+        return super()._copy_settings(other, with_state)
 
     def advance(self):
         super().advance()

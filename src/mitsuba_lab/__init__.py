@@ -13,7 +13,7 @@ import os as _os
 import sys as _sys
 
 __version__ = "0.1.0"
-__all__ = ["activate", "use_variant", "register_all"]
+__all__ = ["activate", "use_variant", "register_all", "bind_film_layout"]
 
 
 def activate(variant: str | None = None) -> str:
@@ -44,6 +44,15 @@ def register_all():
     from .plugins import register_all as _register_all
 
     return _register_all()
+
+
+def bind_film_layout(scene_or_sensor, sensor=0):
+    """Tell a sensor's sampler its film's shape before a plain ``mi.render`` (``lab_zsobol``
+    orders pixels along a Z-curve; renders through the lab do this themselves). See
+    ``mitsuba_lab.plugins.samplers.layout.bind_film_layout``."""
+    from .plugins.samplers.layout import bind_film_layout as _bind
+
+    return _bind(scene_or_sensor, sensor)
 
 
 def _invoked_as_cli() -> bool:

@@ -31,31 +31,40 @@ are independent (box filter, as in the shipped scenes; a wider filter shares sam
 between neighbours, and se_ref comes out somewhat small), and a pixel's luminance
 variance is taken as (sum_c w_c sd_c)^2 over its channels c, exact when the channels
 move together (as they do along one light path) and an upper bound otherwise
-(``reference_mean_variance``). Every lab strategy that applies is
-unbiased by design, so |z| > ``--z-max`` is a failure. An estimator whose rare
-events (a tiny light hit by BSDF sampling, an emitter sample inside a near-delta
-lobe) never happen in the budget shows up here too, with zero spread across splits:
-unbiased in theory, useless in practice; the note column says so.
+(``reference_mean_variance``).
 
-Exit status: 0 when every strategy is finite, non-negative and within the bound;
-1 when any is not; 2 for bad input (raised as LabError).
+Verdicts (``check_verdicts``): every lab strategy that applies is unbiased by design, so
+|z| > ``--z-max`` is a failure, with two exceptions that are told apart, not assumed. A mean
+too *low* may be an unbiased estimator whose rare, huge samples the budget does not resolve
+(a BSDF ray hitting a tiny light, an emitter sample inside a near-delta lobe): the strategy
+is rendered again at 4 and 16 times the budget per split (``--escalate``), and when the
+deficit sits in pixels where no sample ever found light, or shrinks as the budget grows, or
+the split means are strongly skewed, the row is a warning, "unconverged: heavy-tailed
+estimator", with those numbers; a deficit that holds, with symmetric split means, fails as a
+bias (and so does any mean too *high*). A scene that declares an unscaled twin
+(``<default name="twin" value="PATH"/>``) has `path` rendered on the twin as well; when the
+scene's `path` disagrees with it, Mitsuba's reference is off there (ray offsets at this
+scale) and the strategies are judged against the twin.
+
+Exit status: 0 when every strategy is finite, non-negative and within the bound or only
+warned about (heavy tail); 1 when any fails; 2 for bad input (raised as LabError).
 """
 from __future__ import annotations
 
 import argparse
 import glob
-import html
 import math
 import os
 import time
 
 import numpy as np
 
-from .commands.args import positive_int
-
 from . import metrics
+from .check_report import format_table, format_verdicts, verdict_kind, write_csv, write_html
+from .check_verdicts import (LADDER_SEED, LADDER_SPLITS, Rung, Twin, Verdict, empty_pixels, judge,
+                             ladder_factors, path_off_note, twin_status)
+from .commands.args import positive_int
 from .errors import LabError
-from .reporting import dict_rows, fmt, html_page, html_table, write_csv as write_table, write_text
 
 #: name -> (integrator type, parameters); max_depth comes from --max-depth.
 STRATEGIES = {
@@ -69,9 +78,6 @@ REFERENCE = "path"
 LUMINANCE = (0.2126, 0.7152, 0.0722)
 FIREFLY_WINDOW = 5
 FIREFLY_FLOOR = 0.01
-COLUMNS = ("scene", "strategy", "status", "finite_fraction", "negative_pixels", "max_value",
-           "fireflies", "mean", "ref_mean", "z", "camera_rays_per_pixel",
-           "extension_rays_per_pixel", "shadow_rays_per_pixel", "time_s", "note")
 
 
 def _positive_float(text: str) -> float:
@@ -87,7 +93,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "power and balance) and Mitsuba's path as reference; print finite fraction, negative "
         "pixels, max value, fireflies, mean and its z-score against the reference, rays per "
         "pixel by kind; write CSV + HTML. Exit status 1 when any strategy gives NaN, Inf or "
-        "negative values or a mean beyond --z-max standard errors of the reference.")
+        "negative values or a mean beyond --z-max standard errors of the reference, except a low "
+        "mean with the marks of an unresolved heavy tail (a warning). A scene that declares an "
+        "unscaled twin (<default name=\"twin\" .../>) is also compared with path on the twin.")
     parser.add_argument("scenes", nargs="*", metavar="SCENE",
                         help="Mitsuba XML scene files (default: every scenes/stiff/*.xml)")
     parser.add_argument("--res", type=positive_int, default=32,
@@ -107,6 +115,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--z-max", type=_positive_float, default=5.0,
                         help="largest |z| of the mean luminance against the reference that passes "
                              "(default: 5; P(|z| > 5) = 6e-7 for a normal z)")
+    parser.add_argument("--escalate", type=positive_int, default=16,
+                        help="a strategy whose mean is below the reference by more than --z-max is "
+                             "rendered again at 4x, 16x, ... up to this many times the budget per split "
+                             f"({LADDER_SPLITS} splits each) to tell an unresolved heavy tail (a warning) "
+                             "from a bias (a failure); 1 = never (default: 16)")
     parser.add_argument("--firefly-k", type=_positive_float, default=10.0,
                         help="a pixel is a firefly when its luminance exceeds k times the median of "
                              "its 5x5 neighbourhood (and k times 1%% of the reference's mean) "
@@ -175,14 +188,15 @@ def reference_summary(reference, k: float) -> tuple[dict, dict]:
     mean image."""
     image, variance = reference.image.astype(np.float64), reference.variance
     finite = np.isfinite(image)
-    mean = float(luminance(image).mean())
-    summary = {"mean": mean, "mean_variance": reference_mean_variance(variance),
+    pixels = luminance(image)
+    mean = float(pixels.mean())
+    summary = {"mean": mean, "mean_variance": reference_mean_variance(variance), "pixels": pixels,
                "finite": bool(finite.all() and np.isfinite(variance).all())}
     row = {"finite_fraction": float(finite.mean()), "negative_pixels": int(np.sum(np.any(image < 0, axis=-1))),
            "max_value": float(image[finite].max()) if finite.any() else math.nan, "mean": mean,
            "time_s": float(reference.meta.get("seconds", 0.0)),
            **{f"{kind}_rays_per_pixel": 0.0 for kind in ("camera", "extension", "shadow")}}
-    floor = FIREFLY_FLOOR * float(np.nanmean(luminance(image)))
+    floor = FIREFLY_FLOOR * float(np.nanmean(pixels))
     row["fireflies"] = firefly_count(image, k, max(floor, 1e-12))
     return summary, row
 
@@ -201,6 +215,28 @@ def render_splits(scene, integrator, spp_total, splits, seed0):
         for kind, count in stats.rays.items():
             rays[kind] = rays.get(kind, 0) + count
     return np.stack(images), rays, seconds
+
+
+def render_ladder(scene, integrator, stack, spp, escalate: int):
+    """The budgets of ``check_verdicts.judge``: the first (``stack``: its splits of ``spp``
+    samples per pixel each) and the larger ones, rendered here (``LADDER_SPLITS`` splits of
+    4, 16, ... x ``spp`` up to ``escalate`` x, seeds from rung x ``LADDER_SEED``). Returns
+    (rungs, each pixel's luminance summed over every render, the mean luminance of all samples,
+    samples per pixel in all, seconds spent here)."""
+    first = luminance(stack.astype(np.float64))
+    rungs = [Rung(1, spp, first.mean(axis=(1, 2)))]
+    sums, weighted, samples = first.sum(axis=0), first.mean() * spp * len(stack), spp * len(stack)
+    seconds = 0.0
+    for index, factor in enumerate(ladder_factors(escalate), 1):
+        more, _, wall = render_splits(scene, integrator, spp * factor * LADDER_SPLITS, LADDER_SPLITS,
+                                      index * LADDER_SEED)
+        seconds += wall
+        lum = luminance(more.astype(np.float64))
+        rungs.append(Rung(factor, spp * factor, lum.mean(axis=(1, 2))))
+        sums += lum.sum(axis=0)
+        weighted += lum.mean() * spp * factor * LADDER_SPLITS
+        samples += spp * factor * LADDER_SPLITS
+    return rungs, sums, weighted / samples, samples, seconds
 
 
 def default_scenes() -> list[str]:
@@ -234,6 +270,21 @@ def load_check_scene(path: str, res: int, defines: dict):
     return load_scene_variant(path, resolution, None, defaults)
 
 
+def twin_of(path: str, defines: dict) -> tuple[str, str, dict] | None:
+    """(declared name, path, -D values it declares) of the scene's unscaled twin
+    (``<default name="twin" value="PATH"/>``, relative to the scene file), or None."""
+    from .scene_xml import scene_defaults
+
+    name = scene_defaults(path).get("twin")
+    if not name:
+        return None
+    twin = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(path)), name))
+    if not os.path.isfile(twin):
+        raise LabError(f"{path}: its twin scene {name} is not found ({twin})")
+    declared = scene_defaults(twin)
+    return name, twin, {k: v for k, v in defines.items() if k in declared}
+
+
 def cache_folder(option: str | None) -> str:
     """The reference cache: ``--cache``, else $MITSUBA_LAB_CACHE, else the default folder
     (as ``mitsuba-lab reference``)."""
@@ -254,6 +305,75 @@ def check_reference(path: str, args, defines: dict):
                          cache_folder(args.cache))
 
 
+def _origin(reference, cached: bool, args) -> str:
+    return f"{args.ref_spp} spp, {'from the cache' if cached else 'rendered into the cache'} ({reference.key})"
+
+
+def references(path, name, args, defines, traits):
+    """(reference rows, summary the strategies are judged against, path's summary, Twin or None,
+    scene warnings): Mitsuba's path on the scene, and on its unscaled twin when it declares one."""
+    reference, cached = check_reference(path, args, defines)
+    ref, ref_row = reference_summary(reference, args.firefly_k)
+    rows = [{"scene": name, "strategy": f"{REFERENCE} (reference)", "status": "reference", **ref_row,
+             "ref_mean": ref["mean"], "z": 0.0, "note": _origin(reference, cached, args)}]
+    warnings = [] if ref["finite"] else ["the path reference has non-finite pixels: no z-scores"]
+    found = twin_of(path, defines)
+    if found is not None and traits.far_clip_problems:   # no longer the same scene at another scale
+        warnings.append(f"not compared with its unscaled twin {found[0]}: it loses geometry beyond far_clip")
+        found = None
+    if found is None:
+        return rows, ref, ref, None, warnings
+    twin_name, twin_path, twin_defines = found
+    twin_reference, twin_cached = check_reference(twin_path, args, twin_defines)
+    twin_ref, twin_row = reference_summary(twin_reference, args.firefly_k)
+    twin = Twin.compare(twin_name, twin_ref["mean"], twin_ref["mean_variance"], ref["mean"], ref["mean_variance"])
+    rows[0].update(ref_mean=twin.mean, z=twin.z_path, z_twin=twin.z_path)
+    rows.append({"scene": name, "strategy": f"{REFERENCE} (twin)", "status": "twin reference", **twin_row,
+                 "ref_mean": twin.mean, "note": f"Mitsuba's path on the unscaled twin {twin_name}: "
+                                                f"{_origin(twin_reference, twin_cached, args)}"})
+    if twin.path_off(args.z_max) and twin_ref["finite"] and ref["finite"]:
+        note = path_off_note(twin, traits.bbox_min, traits.bbox_max)
+        rows[0].update(status="reference: OFF", note=note, evidence=[rows[0]["note"]])
+        warnings.append(note)
+        return rows, twin_ref, ref, twin, warnings
+    rows[0]["note"] += f"; agrees with the unscaled twin {twin_name} ({twin.rel_path:+.1%})"
+    return rows, ref, ref, twin, warnings
+
+
+def _z_against(row: dict, mean: float, variance: float) -> float:
+    means = row["split_means"]
+    return metrics.z_score(row["mean"], np.var(means, ddof=1), len(means), mean, variance, 1)
+
+
+def judge_strategy(row, stack, scene, integrator, args, judged, path_ref, twin) -> None:
+    """Fill the row's status, note and evidence (module doc, ``check_verdicts``)."""
+    problems = [name for name, bad in (("NaN/Inf", row["finite_fraction"] < 1),
+                                       ("negative", row["negative_pixels"] > 0)) if bad]
+    verdict = Verdict("ok")
+    if judged["finite"] and not problems:
+        rungs = [Rung(1, args.spp // args.splits, row["split_means"])]
+        verdict = judge(rungs, judged["mean"], judged["mean_variance"], args.z_max)
+        if verdict.kind != "ok" and row["z"] < 0:      # a low mean: larger budgets tell bias from tail
+            rungs, sums, lab_mean, samples, wall = render_ladder(scene, integrator, stack, rungs[0].spp,
+                                                                 args.escalate)
+            empty = empty_pixels(sums, judged["pixels"], lab_mean, judged["mean"], samples)
+            verdict = judge(rungs, judged["mean"], judged["mean_variance"], args.z_max, empty)
+            if len(rungs) > 1:
+                verdict.evidence.append(f"the larger budgets took {wall:.1f} s (not in time_s)")
+    elif judged["finite"] and not abs(row["z"]) <= args.z_max:
+        problems.append(f"mean off by {row['z']:+.1f} sigma")
+    row["note"], row["evidence"] = verdict.summary, verdict.evidence
+    if twin is not None:
+        row["z_twin"] = _z_against(row, twin.mean, twin.variance)
+    if twin is not None and judged is not path_ref:       # path is off: judged against the twin
+        z_path = _z_against(row, path_ref["mean"], path_ref["mean_variance"])
+        status, row["note"] = twin_status(verdict, z_path, row["mean"] / twin.mean - 1, twin, args.z_max)
+    else:
+        status = {"ok": "ok", "heavy tail": "WARN: heavy tail"}.get(
+            verdict.kind, f"FAIL: mean off by {row['z']:+.1f} sigma")
+    row["status"] = "FAIL: " + ", ".join(problems) if problems else status
+
+
 def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
     from .scene import SceneTraits, equivalent_strategies, make_integrator, strategy_applicability
 
@@ -261,18 +381,11 @@ def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
     traits = SceneTraits.from_scene(scene)
     name = os.path.basename(path)
     warnings = traits.warnings()
+    rows, judged, path_ref, twin, more = references(path, name, args, defines, traits)
+    warnings += more
     for warning in warnings:
         print(f"  warning: {name}: {warning}", file=out)
     depth = {"max_depth": args.max_depth}
-    reference, cached = check_reference(path, args, defines)
-    ref, ref_row = reference_summary(reference, args.firefly_k)
-    if not ref["finite"]:
-        warnings.append("the path reference has non-finite pixels: no z-scores")
-    origin = "from the cache" if cached else "rendered into the cache"
-    rows = [{"scene": name, "strategy": f"{REFERENCE} (reference)", "status": "reference",
-             **ref_row, "ref_mean": ref["mean"], "z": 0.0,
-             "note": f"{args.ref_spp} spp, {origin} ({reference.key})"}]
-
     applicable = {}
     for strategy, (kind, params) in STRATEGIES.items():
         applies, reason = strategy_applicability(traits, kind, params)
@@ -283,80 +396,24 @@ def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
     canonical = equivalent_strategies(traits, applicable)
     measured = {}
     for strategy, (kind, params) in applicable.items():
-        twin = canonical[strategy]
-        if twin != strategy:
-            rows.append({**measured[twin], "strategy": strategy, "status": "same", "time_s": 0.0,
-                         "note": f"the same estimator as {twin} on this scene: not rendered "
-                                 f"(its row's numbers)"})
+        same = canonical[strategy]
+        if same != strategy:
+            rows.append({**measured[same], "strategy": strategy, "status": "same", "time_s": 0.0,
+                         "note": f"the same estimator as {same} on this scene: not rendered "
+                                 f"(its row's numbers)", "evidence": []})
             continue
         integrator = make_integrator(kind, {**params, **depth})
         render_splits(scene, integrator, args.splits, 1, 0)               # warm-up: compile
         stack, rays, seconds = render_splits(scene, integrator, args.spp, args.splits, 0)
-        row = {"scene": name, "strategy": strategy,
-               **measure(stack, rays, seconds, ref, args.firefly_k), "note": ""}
-        problems = []
-        if row["finite_fraction"] < 1:
-            problems.append("NaN/Inf")
-        if row["negative_pixels"]:
-            problems.append("negative")
-        if not abs(row["z"]) <= args.z_max and ref["finite"]:
-            problems.append(f"mean off by {row['z']:+.1f} sigma")
-            if np.ptp(row["split_means"]) == 0:
-                row["note"] = ("no spread across splits: the estimator never sampled what the "
-                               "reference sees (unbiased, but unconverged at this spp)")
-        row["status"] = "FAIL: " + ", ".join(problems) if problems else "ok"
+        row = {"scene": name, "strategy": strategy, **measure(stack, rays, seconds, judged, args.firefly_k)}
+        judge_strategy(row, stack, scene, integrator, args, judged, path_ref, twin)
         measured[strategy] = row
         rows.append(row)
     return rows, warnings
 
 
-# -- Output -------------------------------------------------------------------------------------
-
-def _fmt(value, digits=4) -> str:
-    return fmt(value, digits, missing="-")
-
-
-def format_table(rows: list[dict]) -> str:
-    head = (f"{'scene':26s} {'strategy':18s} {'status':24s} {'finite':>7s} {'neg':>5s} {'max':>9s} "
-            f"{'ffly':>5s} {'mean':>9s} {'z':>7s} {'cam/px':>7s} {'ext/px':>7s} {'shd/px':>7s}")
-    lines = [head]
-    for r in rows:
-        lines.append(
-            f"{r['scene'][:26]:26s} {r['strategy'][:18]:18s} {r['status'][:24]:24s} "
-            f"{_fmt(r.get('finite_fraction')):>7s} {_fmt(r.get('negative_pixels')):>5s} "
-            f"{_fmt(r.get('max_value')):>9s} {_fmt(r.get('fireflies')):>5s} {_fmt(r.get('mean')):>9s} "
-            f"{_fmt(r.get('z'), 3):>7s} {_fmt(r.get('camera_rays_per_pixel'), 3):>7s} "
-            f"{_fmt(r.get('extension_rays_per_pixel'), 3):>7s} {_fmt(r.get('shadow_rays_per_pixel'), 3):>7s}"
-            + (f"  {r['note']}" if r.get("note") else ""))
-    return "\n".join(lines)
-
-
-def write_csv(path: str, rows: list[dict]) -> None:
-    write_table(path, COLUMNS, dict_rows(rows, COLUMNS))
-
-
-#: Row colours of the HTML table by status.
-ROW_STYLE = "tr.fail td { background: #fcc; } tr.skipped td, tr.same td { color: #777; }"
-
-
-def write_html(path: str, rows: list[dict], warnings: dict[str, list[str]], settings: str) -> None:
-    parts = ["<h1>mitsuba-lab check</h1>", f"<p>{html.escape(settings)}</p>",
-             f"<pre>{html.escape(__doc__.split(chr(10) * 2, 1)[1])}</pre>"]
-    if any(warnings.values()):
-        parts.append("<h2>Warnings</h2><ul>")
-        for scene, notes in warnings.items():
-            parts.extend(f"<li>{html.escape(scene)}: {html.escape(n)}</li>" for n in notes)
-        parts.append("</ul>")
-    classes = []
-    for row in rows:
-        status = row.get("status", "")
-        classes.append("fail" if status.startswith("FAIL") else status.split(":")[0])
-    parts.append(html_table(COLUMNS, [[_fmt(row.get(c)) for c in COLUMNS] for row in rows], classes))
-    write_text(path, html_page("mitsuba-lab check", "\n".join(parts), ROW_STYLE))
-
-
 def run(args, out) -> int:
-    """The command: 0 = all good, 1 = some strategy failed (LabError for bad input)."""
+    """The command: 0 = all good (warnings allowed), 1 = some strategy failed (LabError for bad input)."""
     from .commands.args import parse_assignments
 
     if args.splits < 2:
@@ -370,6 +427,9 @@ def run(args, out) -> int:
         defines = parse_assignments(args.define, "--define")
     except ValueError as err:
         raise LabError(str(err)) from err
+    if "twin" in defines:
+        raise LabError("-D twin=... is not a scene parameter: a scene names its unscaled twin itself "
+                       "with <default name=\"twin\" value=\"PATH\"/>")
     scenes = args.scenes or default_scenes()
     if not scenes:
         raise LabError("no scenes given and no scenes/stiff/*.xml found")
@@ -384,7 +444,7 @@ def run(args, out) -> int:
 
     settings = (f"{args.res}x{args.res}, {args.spp} spp per strategy, path reference {args.ref_spp} spp, "
                 f"{args.splits} splits, max_depth {args.max_depth}, |z| <= {args.z_max:g}, "
-                f"firefly k = {args.firefly_k:g}")
+                f"escalate x{args.escalate}, firefly k = {args.firefly_k:g}")
     print(f"mitsuba-lab check: {len(scenes)} scene(s); {settings}", file=out)
     rows, warnings = [], {}
     start = time.perf_counter()
@@ -394,9 +454,13 @@ def run(args, out) -> int:
         rows.extend(scene_rows)
         warnings[os.path.basename(path)] = scene_warnings
     print(format_table(rows), file=out)
+    verdicts = format_verdicts(rows)
+    if verdicts:
+        print(verdicts, file=out)
     write_csv(args.output + ".csv", rows)
-    write_html(args.output + ".html", rows, warnings, settings)
-    failures = [r for r in rows if r.get("status", "").startswith("FAIL")]
-    print(f"{len(failures)} failure(s) in {time.perf_counter() - start:.1f} s; wrote {args.output}.csv "
-          f"and {args.output}.html", file=out)
+    write_html(args.output + ".html", rows, warnings, settings, __doc__)
+    failures = [r for r in rows if verdict_kind(r) == "FAIL"]
+    tails = [r for r in rows if verdict_kind(r) == "WARNING"]
+    print(f"{len(failures)} failure(s), {len(tails)} heavy-tail warning(s) in {time.perf_counter() - start:.1f} s; "
+          f"wrote {args.output}.csv and {args.output}.html", file=out)
     return 1 if failures else 0

@@ -4,6 +4,10 @@ Dr.Jit records work lazily and launches it asynchronously, so the clock stops
 only after ``dr.eval`` and ``dr.sync_thread``. Dr.Jit's kernel history splits
 the time into compilation (code generation + LLVM/CUDA backend) and kernel
 execution; the rest of the wall time is tracing Python and Mitsuba's set-up.
+
+Before the clock starts the sensor's film is bound to its sampler
+(``bind_film_layout``): a sampler whose points depend on the pixel's position
+(``lab_zsobol``) then knows the film's shape under any integrator, Mitsuba's too.
 """
 from __future__ import annotations
 
@@ -13,6 +17,8 @@ from dataclasses import asdict, dataclass, field
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+
+from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 
 
 @dataclass
@@ -48,11 +54,13 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, spp: int = 
            sensor: int = 0) -> tuple[np.ndarray, RenderStats]:
     """Render and wait for the result. Returns (H x W x C float32 image, stats).
 
-    ``spp`` = 0 keeps the scene sampler's own sample count.
+    ``spp`` = 0 keeps the scene sampler's own sample count. The film of sensor
+    ``sensor`` is bound to its sampler first (``bind_film_layout``).
     """
     if spp < 0:
         raise ValueError(f"spp must be >= 0, got {spp}")
     integrator = integrator if integrator is not None else scene.integrator()
+    bind_film_layout(scene, sensor)
     sampler = scene.sensors()[sensor].sampler()
     spp_used = spp or sampler.sample_count()
     dr.sync_thread()                                   # nothing earlier leaks into the clock

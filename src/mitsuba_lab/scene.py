@@ -309,16 +309,17 @@ class SceneTraits:
         """Length of the bounding box diagonal of the geometry (0 without shapes)."""
         return float(sum((b - a) ** 2 for a, b in zip(self.bbox_min, self.bbox_max)) ** 0.5)
 
-    def warnings(self) -> list[str]:
-        """Problems a user should know about before trusting a render of this scene."""
+    def warnings(self, media: bool = True) -> list[str]:
+        """Problems a user should know about before trusting a render of this scene
+        (``media``: include the note on participating media)."""
         notes = list(self.far_clip_problems)
         for name in self.dark_emitters:
             notes.append(f"emitter '{name}' emits nothing (zero radiance or zero area)")
         if not self.emits_light:
             notes.append("no emitter emits light: every image is black")
-        if self.media:
-            notes.append("the scene has participating media, which the lab integrators refuse and "
-                         "Mitsuba's path ignores: render it with Mitsuba's volpath")
+        if self.media and media:
+            notes.append("the scene has participating media, which the lab integrators cannot "
+                         "render and Mitsuba's path ignores: render it with Mitsuba's volpath")
         return notes
 
 

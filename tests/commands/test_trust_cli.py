@@ -105,15 +105,19 @@ def test_a_string_where_the_scene_needs_an_integer(tmp_path):
 
 
 def test_errors_inside_dr_jit_name_their_cause(tmp_path):
-    """lab_zsobol on a non-square film without `width`: raised inside the render's custom op."""
-    scene = user_scene(tmp_path, sampler="lab_zsobol")
-    code, _, err = run(["render", scene, "-o", str(tmp_path / "x.exr")])
-    assert code == 2 and "lab_zsobol: parameter 'width' must be set to the film (crop) width" in err, err
-    assert "see above" not in err
+    """lab_zsobol out of index bits (1025^2 pixels x 2048 spp): raised inside the render's custom op."""
+    scene = tmp_path / "big.xml"
+    scene.write_text(USER_SCENE.format(extra="", sampler="lab_zsobol", lights="")
+                     .replace('name="width" value="24"/><integer name="height" value="16"',
+                              'name="width" value="1025"/><integer name="height" value="1025"'))
+    code, _, err = run(["render", str(scene), "--spp", "2048", "-o", str(tmp_path / "x.exr")])
+    assert code == 2 and "lab_zsobol: 1025x1025 pixels at 2048 spp need 33 > 32 index bits" in err, err
+    assert "see above" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.exr").exists()
 
 
 @pytest.mark.parametrize("variant, integrator, expected", [
-    ("llvm_ad_spectral", "lab_photon", "lab_photon: spectral variants are not supported"),
+    ("llvm_ad_mono_polarized", "lab_photon", "lab_photon: variant 'llvm_ad_mono_polarized' is not supported"),
     ("scalar_rgb", "lab_mis", "lab_mis: variant 'scalar_rgb' is not supported"),
 ])
 def test_unsupported_variants_are_one_line(variant, integrator, expected, tmp_path):
@@ -140,9 +144,14 @@ def test_outputs_honour_the_umask_and_create_their_folder(tmp_path):
     assert oct((target.parent / "x.png").stat().st_mode & 0o777) == "0o644"
 
 
-def test_render_warns_when_the_estimator_cannot_see_the_light(tmp_path):
+def test_render_refuses_an_estimator_that_cannot_see_the_light(tmp_path):
     scene = user_scene(tmp_path, lights=POINT_LIGHT)
     code, _, err = run(["render", scene, "--integrator", "lab_naive", "--spp", "1", "-o", str(tmp_path / "x.exr")])
+    assert code == 2 and "error: lab_naive cannot reach delta lights (point)" in err, err
+    assert "--allow-unsupported" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.exr").exists()
+    code, _, err = run(["render", scene, "--integrator", "lab_naive", "--spp", "1", "--allow-unsupported",
+                        "-o", str(tmp_path / "x.exr")])
     assert code == 0 and "warning: lab_naive cannot reach delta lights (point)" in err, err
     code, _, err = run(["render", scene, "--spp", "1", "-o", str(tmp_path / "y.exr")])
     assert code == 0 and "warning" not in err

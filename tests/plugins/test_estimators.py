@@ -48,15 +48,14 @@ def plastic_scene(bsdf):
     {"type": "twosided", "inner": {"type": "plastic"}},
 ])
 @pytest.mark.parametrize("direct", ["photons", "nee"])
-def test_photon_is_left_out_where_a_bsdf_mixes_delta_and_smooth_lobes(bsdf, direct):
+def test_photon_applies_where_a_bsdf_mixes_delta_and_smooth_lobes(bsdf, direct):
+    """Its camera paths continue through the delta lobes (tests/plugins/test_photon_scenes.py
+    shows the light is there)."""
     t = traits_of(plastic_scene(bsdf))
     assert len(t.mixed_bsdfs) == 1
-    applies, reason = strategy_applicability(t, "lab_photon", {"direct": direct})
-    assert not applies
-    assert reason.startswith("lab_photon cannot render BSDFs that mix delta and smooth lobes (")
-    assert "misses the light their delta lobe reflects or transmits" in reason
-    for kind in ("lab_naive", "lab_nee", "lab_mis", "path"):          # the path tracers handle them
-        assert strategy_applicability(t, kind, {}) == (True, "")
+    for kind, params in (("lab_photon", {"direct": direct}), ("lab_naive", {}), ("lab_nee", {}),
+                         ("lab_mis", {}), ("path", {})):
+        assert strategy_applicability(t, kind, params) == (True, "")
 
 
 def test_photon_applies_to_smooth_and_purely_delta_bsdfs():
@@ -78,7 +77,7 @@ def test_photon_is_left_out_with_media_and_without_emitters():
     assert not applies and "needs an emitter" in reason
 
 
-def test_a_sweep_leaves_lab_photon_out_of_a_plastic_scene(tmp_path):
+def test_a_sweep_keeps_lab_photon_in_a_plastic_scene(tmp_path):
     from mitsuba_lab.experiment.sweep import assess_scene
 
     (tmp_path / "plastic.xml").write_text(PLASTIC_XML)
@@ -89,9 +88,8 @@ def test_a_sweep_leaves_lab_photon_out_of_a_plastic_scene(tmp_path):
                            "strategies": {"mis": {"type": "lab_mis"}, "ppm": {"type": "lab_photon"}}},
                           str(tmp_path / "x.toml"))
     plan = build_plan(config, assess_scene)
-    assert [(x["scene"], x["strategy"]) for x in plan.left_out] == [("plastic", "ppm")]
-    assert "ball" in plan.left_out[0]["reason"] and "delta and smooth lobes" in plan.left_out[0]["reason"]
-    assert sorted(p.strategy for p in plan.points) == ["mis", "mis", "ppm"]
+    assert plan.left_out == []
+    assert sorted(p.strategy for p in plan.points) == ["mis", "mis", "ppm", "ppm"]
 
 
 def test_photon_strategies_are_the_same_estimator_after_defaults():

@@ -132,9 +132,10 @@ def test_unknown_name_without_a_close_match():
                               "seed, width; did you mean 'width' for 'widht'?")
 
 
-def test_photon_does_not_take_hide_emitters():
-    assert load_error({"type": "lab_photon", "hide_emitters": True}).startswith(
-        "ParameterError: lab_photon: unknown parameter 'hide_emitters'; valid parameters: alpha, direct,")
+def test_photon_takes_hide_emitters_as_the_path_tracers_do():
+    assert resolve("lab_photon", {"hide_emitters": True})["hide_emitters"] is True
+    assert load_error({"type": "lab_photon", "hide_emitters": 3}).endswith(
+        "lab_photon: parameter 'hide_emitters' expects a boolean, got 3")
 
 
 def test_mitsuba_base_parameters_and_nested_objects_are_left_to_mitsuba():
@@ -157,7 +158,8 @@ DEFAULTS = {
     "lab_nee": PATH_DEFAULTS,
     "lab_mis": {**PATH_DEFAULTS, "heuristic": "power", "beta": 2.0, "emitter_samples": 1},
     "lab_photon": {"photons_per_pass": 100_000, "passes": 16, "alpha": 2.0 / 3.0, "radius": 0.0,
-                   "max_depth": -1, "rr_depth": 5, "direct": "nee", "max_records": 1 << 21},
+                   "max_depth": -1, "rr_depth": 5, "direct": "nee", "max_records": 1 << 21,
+                   "hide_emitters": False},
     "lab_independent": {"sample_count": 4, "seed": 0},
     "lab_stratified": {"sample_count": 4, "seed": 0, "jitter": True},
     "lab_halton": {"sample_count": 4, "seed": 0, "randomization": "owen"},

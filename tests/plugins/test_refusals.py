@@ -31,11 +31,17 @@ def render_error(scene, integrator) -> str:
 
 @pytest.mark.parametrize("kind, params", [("lab_naive", {}), ("lab_nee", {}), ("lab_mis", {}),
                                           ("lab_photon", {"photons_per_pass": 1000, "passes": 1})])
-def test_participating_media_are_refused(kind, params):
+def test_participating_media_render_with_one_logged_warning(kind, params, capfd):
+    """As a plugin in a user's scene: it renders (media ignored) and says so once, through
+    Mitsuba's logger, naming the plugin and the reason."""
     scene = mi.load_string(MEDIUM_SCENE)
-    message = render_error(scene, mi.load_dict({"type": kind, **params}))
-    assert message == (f"{kind} does not support participating media (the scene has a medium): "
-                       f"use Mitsuba's volpath")
+    capfd.readouterr()
+    image = mi.render(scene, integrator=mi.load_dict({"type": kind, **params}), spp=2)
+    assert image.shape[:2] == (8, 8)
+    logged = [line for line in capfd.readouterr().out.splitlines() if "participating media" in line]
+    assert len(logged) == 1 and "WARN" in logged[0], logged
+    assert (f"{kind} does not support participating media (the scene has a medium): use Mitsuba's "
+            f"volpath (rendering it anyway") in logged[0]
 
 
 def test_lab_photon_nested_in_a_wrapper_is_refused(tmp_path):
@@ -48,14 +54,34 @@ def test_lab_photon_nested_in_a_wrapper_is_refused(tmp_path):
     assert mi.render(scene, integrator=lab, spp=1).shape[:2] == (8, 8)       # directly: renders
 
 
-def test_render_refuses_media_in_one_line(tmp_path, capsys):
+def test_render_refuses_media_in_one_line(tmp_path, capfd):
     scene = tmp_path / "medium.xml"
     scene.write_text(MEDIUM_SCENE)
     code = cli.main(["render", str(scene), "--integrator", "lab_mis", "-o", str(tmp_path / "x.exr")])
-    err = capsys.readouterr().err
+    err = capfd.readouterr().err
     assert code == 2 and err.strip() == ("mitsuba-lab: error: lab_mis does not support participating media "
-                                         "(the scene has a medium): use Mitsuba's volpath")
+                                         "(the scene has a medium): use Mitsuba's volpath "
+                                         "(--allow-unsupported renders it anyway)")
     assert not (tmp_path / "x.exr").exists()
+    # allowed: rendered, with one warning line (the plugin does not log it a second time)
+    capfd.readouterr()
+    code = cli.main(["render", str(scene), "--integrator", "lab_mis", "--allow-unsupported",
+                     "-o", str(tmp_path / "x.exr")])
+    out, err = capfd.readouterr()
+    assert code == 0 and (tmp_path / "x.exr").exists()
+    said = [line for line in (out + err).splitlines() if "participating media" in line]
+    assert said == ["mitsuba-lab: warning: lab_mis does not support participating media (the scene has "
+                    "a medium): use Mitsuba's volpath (rendering it anyway: --allow-unsupported)"]
     code = cli.main(["render", str(scene), "--integrator", "path", "-o", str(tmp_path / "p.exr")])
-    err = capsys.readouterr().err
+    err = capfd.readouterr().err
     assert code == 0 and "warning: the scene has participating media" in err
+
+
+def test_render_refuses_an_estimator_that_misses_light(tmp_path, capsys):
+    """lab_naive on a scene lit only by a point light would render black: refused."""
+    code = cli.main(["render", "scenes/stiff/delta_lights_only.xml", "--integrator", "lab_naive",
+                     "-D", "res=8", "--spp", "1", "-o", str(tmp_path / "n.exr")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("mitsuba-lab: error: lab_naive cannot reach delta lights")
+    assert err.strip().endswith("(--allow-unsupported renders it anyway)") and len(err.splitlines()) == 1
+    assert not (tmp_path / "n.exr").exists()

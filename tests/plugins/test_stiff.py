@@ -81,7 +81,13 @@ def test_no_nan_inf_or_negative_pixels(scene_name, strategy):
     assert stats.rays["camera"] == RES * RES * 16
 
 
-SMOOTH_SCENES = [s for s in STIFF if SceneTraits.from_scene(scene(s)).smooth_bsdf]
+def mitsuba_offsets(traits) -> bool:
+    """The lab's ray offsets are Mitsuba's (scene coordinates reach 1; ``spawn.offset_floor``)."""
+    return max(abs(v) for v in (*traits.bbox_min, *traits.bbox_max)) >= 1
+
+
+SMOOTH_SCENES = [s for s in STIFF if SceneTraits.from_scene(scene(s)).smooth_bsdf
+                 and mitsuba_offsets(SceneTraits.from_scene(scene(s)))]
 
 
 @pytest.mark.parametrize("scene_name", SMOOTH_SCENES)
@@ -107,7 +113,6 @@ AGREEMENT_CASES = [  # (scene, strategy, spp): affordable and with estimable var
     ("light_in_glass.xml", "nee", 64),
     ("grazing_camera.xml", "mis_balance", 32),
     ("scaled_1e4.xml", "nee", 32),
-    ("scaled_1e-4.xml", "nee", 32),
     ("tiny_bright_light.xml", "nee", 32),
     ("tiny_bright_light.xml", "mis_balance", 32),
     ("huge_dim_light.xml", "naive", 32),
@@ -144,3 +149,36 @@ def test_scaling_by_1e4_changes_nothing():
     a, _ = render(plain, make_integrator("lab_mis", {"max_depth": MAX_DEPTH}), spp=16, seed=2)
     b, _ = render(big, make_integrator("lab_mis", {"max_depth": MAX_DEPTH}), spp=16, seed=2)
     assert abs(a.mean() / b.mean() - 1) < 2e-3
+
+
+TWIN_STRATEGIES = ("naive", "nee", "mis_power")
+
+
+@pytest.mark.parametrize("strategy", TWIN_STRATEGIES)
+def test_scaling_by_1e_4_changes_nothing(strategy):
+    """The Cornell box scaled by 1e-4 renders like the unscaled box (its twin, rendered by
+    Mitsuba's `path`): the lab's ray offsets shrink with the scene (``spawn.py``)."""
+    kind, params = STRATEGIES[strategy]
+    tiny = renders(scene("scaled_1e-4.xml"), make_integrator(kind, {"max_depth": MAX_DEPTH, **params}), 32,
+                   range(SEEDS))
+    result = z_scores(tiny, unscaled_reference())
+    assert result.max_abs_z <= Z_MAX, (f"{strategy} on scaled_1e-4: max |z| {result.max_abs_z:.2f}, "
+                                       f"relative difference {result.rel_diff}")
+
+
+def test_mitsuba_path_is_dark_on_the_tiny_box():
+    """Why the test above compares with the twin: Mitsuba 3.9's own `path` is off at this
+    scale (ray offsets of at least 8.9e-5 in a box 2e-4 across): 3-12% dark by channel; the same
+    z-test that passes the lab's estimators fails it."""
+    tiny = renders(scene("scaled_1e-4.xml"), make_integrator("path", {"max_depth": MAX_DEPTH}), 32,
+                   range(SEEDS))
+    result = z_scores(tiny, unscaled_reference())
+    assert result.max_abs_z > 3 * Z_MAX and result.rel_diff.mean() < -0.05, result.rel_diff
+
+
+def unscaled_reference():
+    if "twin" not in _refs:
+        plain = load_scene(os.path.join(ROOT, "scenes", "cornell_box.xml"), res=RES)
+        _refs["twin"] = renders(plain, make_integrator("path", {"max_depth": MAX_DEPTH}), 32,
+                                range(1000, 1000 + SEEDS))
+    return _refs["twin"]

@@ -22,21 +22,14 @@ class PhotonMapping(Estimator):
         """Left out (in either ``direct`` mode) on scenes whose light it cannot estimate:
 
         * participating media (photons and camera paths ignore them);
-        * no emitter (no photon to trace);
-        * a BSDF mixing delta and smooth lobes (``plastic``, ``mask`` over a smooth BSDF,
-          ``blendbsdf``, ...): the camera path stops at its first smooth vertex and gathers
-          there, and the density estimate evaluates only smooth lobes, so the light its delta
-          lobe reflects or transmits is missed (``direct = nee`` recovers only the part coming
-          straight from emitters), however many passes are averaged.
+        * no emitter (no photon to trace).
+
+        BSDFs that mix delta and smooth lobes (``plastic``, ``mask``, ``blendbsdf``, ...) are
+        rendered: camera paths follow their delta lobes stochastically (``gather``).
         """
         problem = cls.media_problem(traits)
         if problem:
             return False, problem
         if traits.emitters == 0:
             return False, "lab_photon needs an emitter to trace photons from, and the scene has none"
-        if traits.mixed_bsdfs:
-            names = ", ".join(traits.mixed_bsdfs[:3]) + (", ..." if len(traits.mixed_bsdfs) > 3 else "")
-            return False, (f"lab_photon cannot render BSDFs that mix delta and smooth lobes ({names}): it "
-                           f"gathers at their smooth lobe and misses the light their delta lobe reflects "
-                           f"or transmits")
         return True, ""

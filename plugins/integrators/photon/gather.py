@@ -4,13 +4,17 @@ At a camera vertex x with outgoing direction wo (towards the camera), the photon
 p within distance r estimate the reflected radiance (Jensen 2001, eq. 7.6, with a
 smooth kernel instead of the constant disk):
 
-    L_r(x, wo) ~= sum_p f(x, wo, wi_p) Phi_p K(|x - x_p| / r) / r^2
+    L_r(x, wo) ~= sum_p f(x, wo, wi_p) (|wi_p . n_s| / |wi_p . n_p|) Phi_p K(|x - x_p| / r) / r^2
 
 with the 2D Epanechnikov kernel K(t) = (2 / pi) (1 - t^2) for t < 1, 0 otherwise,
-normalised over the plane: int_{R^2} K(|u|) du = 1. f is the BSDF without the
-cosine: Mitsuba's ``BSDF.eval(ctx, si, wi_p)`` returns f |cos theta_p| (the cosine of
-its direction argument, here the photon's), so it is divided by |cos theta_p|: the
-photon's flux per area already is irradiance, there is no cosine left to apply.
+normalised over the plane: int_{R^2} K(|u|) du = 1. The photons' flux is per unit of
+*geometric* area, Phi_p ~ L_i |wi_p . n_g|, while the reflected radiance integrates
+f L_i |wi_p . n_s| over directions (n_s the shading normal the BSDF uses), so each photon
+counts with f |wi_p . n_s| / |wi_p . n_g|: Mitsuba's ``BSDF.eval(ctx, si, wi_p)`` (which is
+f times the cosine of the BSDF's own shading normal, perturbed by a normal map if there is
+one) divided by |wi_p . n_p|, the photon's geometric cosine. Without shading normals that is
+f: the photon's flux per area already is irradiance. (Veach 1997, sec. 5.3; the photons'
+own adjoint correction is in ``tracer``.)
 
 A photon counts only if
 
@@ -20,13 +24,33 @@ A photon counts only if
 * n_x . n_p > ``NORMAL_COS`` (a photon on a surface facing another way, e.g. on the
   other wall at a corner or the far side of a thin slab, is rejected);
 * its path length plus the camera's stays within ``max_depth``.
+
+**Camera paths** (``CameraPass.sample``) follow delta lobes (mirror, glass, a ``mask``'s
+pass-through) and estimate the radiance at every vertex with a smooth lobe, as pbrt-v4's
+SPPM makes its visible points at non-specular interactions. A BSDF with both (``plastic``,
+``mask`` with partial opacity, ``blendbsdf`` of a dielectric and a diffuse BSDF,
+``twosided`` of those) gets both: the density estimate and next-event estimation there see
+only its smooth lobes (``eval`` never includes a delta lobe, and the BSDF sample of the
+direct-light MIS is dropped when it picks a delta lobe), and the path goes on through its
+delta lobes alone, sampled with a ``BSDFContext`` whose type mask holds only the delta
+flags (weight w_d, E[w_d] = the delta lobes' share of the reflected light). The two parts
+add up to the BSDF (splitting: no choice between them, so a bright mirror image in a
+plastic's weak Fresnel reflection is not amplified by a 1 / probability). A path that
+crosses k mixed vertices gathers up to k + 1 times; where no BSDF is mixed it gathers once,
+at its first smooth vertex. (Sampling the delta lobes alone also sidesteps ``blendbsdf``'s
+full ``sample()``, which adds the smooth BSDF's density to the delta lobe's discrete
+probability and so weights a delta sample low: 0.55 instead of 0.6 for a 0.4 blend of a
+mirror and a diffuse BSDF. Mitsuba's ``path`` inherits that.)
+
+``hide_emitters``: camera rays pass through area emitters (Mitsuba's meaning, as the lab's
+path tracers); a camera ray that sees only the environment leaves its pixel invalid (alpha 0).
 """
 from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators import direct
+from mitsuba_lab.plugins.integrators import direct, spawn
 from mitsuba_lab.plugins.integrators.counters import RayCounters
 from mitsuba_lab.plugins.integrators.mis import MIS
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
@@ -38,6 +62,9 @@ NORMAL_COS = 0.8
 KERNEL_NORM = 2.0 / dr.pi
 #: Direct light in ``direct = nee`` mode: one emitter sample and one BSDF sample, power heuristic.
 DIRECT_MIS = MIS({"heuristic": "power", "beta": 2.0, "emitter_samples": 1})
+#: BSDFContext type mask of the delta lobes alone (null pass-through, delta reflection and
+#: transmission, with every side and property flag).
+DELTA_MASK = int(mi.BSDFFlags.All) & ~int(mi.BSDFFlags.Smooth)
 
 
 @dr.syntax
@@ -66,12 +93,12 @@ def density_estimate(grid: PhotonGrid, si: mi.SurfaceInteraction3f, bsdf: mi.BSD
             ok = (dist2 < radius2) & (dr.dot(n_p, si.n) > NORMAL_COS)
             ok &= dr.gather(mi.UInt32, rec.depth, j, ok) <= max_photon_depth
             ok &= dr.all(cell_of(p, inv_cell) == cell)
-            wi_p = si.to_local(dr.gather(mi.Vector3f, rec.wi, j, ok))
-            f_cos = bsdf.eval(ctx, si, wi_p, ok)
-            cos_p = dr.abs(mi.Frame3f.cos_theta(wi_p))
+            wi_world = dr.gather(mi.Vector3f, rec.wi, j, ok)
+            f_cos = bsdf.eval(ctx, si, si.to_local(wi_world), ok)       # f |wi . n_s|
+            cos_g = dr.abs(dr.dot(wi_world, n_p))                      # the flux's |wi . n_g|
             kernel = KERNEL_NORM * (1.0 - dist2 * inv_r2)
             power = dr.gather(mi.Spectrum, rec.power, j, ok)
-            result += dr.select(ok & (cos_p > 0), f_cos * power * (kernel / dr.maximum(cos_p, 1e-30)), 0.0)
+            result += dr.select(ok & (cos_g > 0), f_cos * power * (kernel / dr.maximum(cos_g, 1e-30)), 0.0)
             j += 1
         k += 1
     return result * inv_r2
@@ -81,10 +108,11 @@ class CameraPass(mi.SamplingIntegrator):
     """One camera pass of ``lab_photon`` against the current photon map (not a plugin).
 
     Its ``render`` is Mitsuba's own ``SamplingIntegrator.render`` (film, filter,
-    sampler, spp); its ``sample`` follows camera paths through delta vertices to
-    the first vertex with a smooth BSDF and estimates the radiance there.
+    sampler, spp); its ``sample`` follows camera paths through delta lobes and estimates
+    the radiance at every vertex with a smooth lobe (see the module's docstring).
     ``grid`` (a PhotonGrid or None), ``with_direct`` (count emission and NEE: only
-    in the first batch of a pass) and ``settings`` (PhotonSettings) are set by the driver.
+    in the first batch of a pass), ``offset_floor`` (``spawn.offset_floor``) and
+    ``hide_emitters`` are set by the driver; ``settings`` is its PhotonSettings.
     """
 
     def __init__(self, settings):
@@ -92,6 +120,8 @@ class CameraPass(mi.SamplingIntegrator):
         self.settings = settings
         self.grid = None
         self.with_direct = True
+        self.hide_emitters = False
+        self.offset_floor = 1.0
         self.counters = RayCounters()                  # camera-side extension and shadow rays
 
     @dr.syntax
@@ -100,8 +130,11 @@ class CameraPass(mi.SamplingIntegrator):
         cfg = self.settings
         grid = self.grid
         with_direct = self.with_direct
+        hide = self.hide_emitters
+        floor = self.offset_floor
         use_nee = cfg.direct == "nee"
         bsdf_ctx = mi.BSDFContext()
+        delta_ctx = mi.BSDFContext(mi.TransportMode.Radiance, DELTA_MASK)
         max_depth = dr.opaque(mi.UInt32, cfg.depth_limit)
         rr_depth = dr.opaque(mi.UInt32, cfg.rr_depth)
 
@@ -112,71 +145,85 @@ class CameraPass(mi.SamplingIntegrator):
         L = mi.Spectrum(0)
         beta = mi.Spectrum(1)
         eta = mi.Float(1)
-        gather = mi.Bool(False)
-        valid_ray = mi.Bool(scene.environment() is not None) & active
+        valid_ray = mi.Bool(False)
+        if dr.hint(not hide, mode="scalar"):
+            valid_ray = mi.Bool(scene.environment() is not None) & active
         n_ext = mi.UInt32(0)
+        n_shadow = mi.UInt32(0)
+        pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
+        if dr.hint(hide, mode="scalar"):
+            # Mitsuba's meaning: camera rays pass through area emitters to what lies behind them
+            ray, pi = spawn.pass_through_emitters(scene, ray, pi, active, floor)
 
-        # ------- Camera path through delta vertices to a smooth vertex --------
+        # ---- Camera path: gather at smooth vertices, continue through delta lobes ----
         while dr.hint(active, max_iterations=-1, label="lab_photon camera loop"):
-            si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
-            valid_ray |= active & si.is_valid()
-            depth[active & si.is_valid()] += 1
+            si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
+            hit = active & si.is_valid()
 
             # ----------------------- Direct emission -----------------------
             if dr.hint(with_direct, mode="scalar"):
-                L += dr.select(active, beta * si.emitter(scene, active).eval(si, active), 0.0)
-
+                emission_on = active
+                if dr.hint(hide, mode="scalar"):
+                    emission_on = active & (depth > 0)        # (a new array: `active` stays)
+                L += dr.select(emission_on, beta * si.emitter(scene, emission_on).eval(si, emission_on), 0.0)
+            depth[hit] += 1
             bsdf = si.bsdf(ray)
-            smooth = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            gather |= active & si.is_valid() & smooth
-            active_next = active & si.is_valid() & ~smooth & (depth < max_depth)
+            flags = bsdf.flags()
+            here = hit & mi.has_flag(flags, mi.BSDFFlags.Smooth)
 
-            # ------------------------ BSDF sampling ------------------------
-            bs, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)
-            ray[active_next] = si.spawn_ray(si.to_world(bs.wo))
-            beta[active_next] *= bsdf_weight
-            eta[active_next] *= bs.eta
+            # ---------- Direct light: emitter sampling + BSDF sampling, MIS ----------
+            if dr.hint(use_nee, mode="scalar"):
+                active_em = here & (depth < max_depth)
+                if dr.hint(with_direct, mode="scalar"):
+                    L, active_b = self.direct_light(scene, sampler, bsdf_ctx, si, bsdf, beta, L, active_em,
+                                                    floor)
+                    n_shadow += dr.select(active_em, 1, 0)
+                    n_ext += dr.select(active_b, 1, 0)
+                else:     # the same sampler dimensions, so every batch follows the same paths
+                    sampler.next_2d(), sampler.next_1d(), sampler.next_2d()
+
+            # ------------------------- Density estimate -------------------------
+            if dr.hint(grid is not None and grid.photon_count > 0, mode="scalar"):
+                max_photon_depth = dr.select(depth < max_depth, max_depth - depth, 0)
+                L += beta * density_estimate(grid, si, bsdf, max_photon_depth, here)
+
+            # --------------------- Delta lobes: continue ---------------------
+            through = hit & mi.has_flag(flags, mi.BSDFFlags.Delta) & (depth < max_depth)
+            bs, w_delta = bsdf.sample(delta_ctx, si, sampler.next_1d(), sampler.next_2d(), through)
+            valid_ray |= hit & (here | ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null))
+            ray = spawn.spawn_ray(si, si.to_world(bs.wo), floor)
+            beta *= w_delta
+            eta *= bs.eta
 
             # --------------------- Stopping criterion ----------------------
             beta_max = dr.max(mi.unpolarized_spectrum(beta))
-            active_next &= (beta_max > 0) & dr.isfinite(beta_max)
+            active_next = through & (beta_max > 0) & dr.isfinite(beta_max)
             beta, survives = russian_roulette(beta, sampler.next_1d(), active_next & (depth >= rr_depth),
                                               eta=eta)
             active_next &= survives
+            pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
             n_ext += dr.select(active_next, 1, 0)
             active = active_next
-
-        # The vertex where the camera path stopped on a smooth BSDF (one ray again, cheaper
-        # than carrying the interaction through the loop).
-        si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=gather)
-        bsdf = si.bsdf(ray)
-        n_shadow = mi.UInt32(0)
-
-        # ------------- Direct light: emitter sampling + BSDF sampling, MIS -------------
-        if dr.hint(use_nee & with_direct, mode="scalar"):
-            active_em = gather & (depth < max_depth)
-            L, bs, bsdf_weight = direct.emitter_sampling(scene, sampler, bsdf_ctx, si, bsdf, beta, L,
-                                                         DIRECT_MIS.sample_weight, 1, active_em, active_em)
-            n_shadow += dr.select(active_em, 1, 0)
-
-            # The emitter the BSDF sample finds, if any (one segment: the photons hold the rest)
-            active_b = active_em & (dr.max(mi.unpolarized_spectrum(bsdf_weight)) > 0)
-            ray_b = si.spawn_ray(si.to_world(bs.wo))
-            si_b = scene.ray_intersect(ray_b, ray_flags=mi.RayFlags.All, coherent=False, active=active_b)
-            n_ext += dr.select(active_b, 1, 0)
-            ds_b = mi.DirectionSample3f(scene, si=si_b, ref=si)
-            b_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-            w_b = DIRECT_MIS.hit_weight(direct.hit_densities(scene, si, ds_b, bs.pdf, b_delta, 1, active_b))
-            L += dr.select(active_b, beta * bsdf_weight * w_b * ds_b.emitter.eval(si_b, active_b), 0.0)
-
-        # ------------------------- Density estimate -------------------------
-        if dr.hint(grid is not None and grid.photon_count > 0, mode="scalar"):
-            max_photon_depth = dr.select(depth < max_depth, max_depth - depth, 0)
-            L += beta * density_estimate(grid, si, bsdf, max_photon_depth, gather)
 
         self.counters.add("extension", n_ext)
         self.counters.add("shadow", n_shadow)
         return dr.select(valid_ray, L, 0.0), valid_ray, []
+
+    def direct_light(self, scene, sampler, ctx, si, bsdf, beta, L, active, floor):
+        """(L, lanes that traced a BSDF-sampled ray): next-event estimation at ``si`` and the
+        emitter its BSDF sample finds (one segment: the photons hold the rest), power heuristic.
+        A BSDF sample of a delta lobe is dropped: the camera path follows those lobes itself."""
+        L, bs, bsdf_weight = direct.emitter_sampling(scene, sampler, ctx, si, bsdf, beta, L,
+                                                     DIRECT_MIS.sample_weight, 1, active, active,
+                                                     offset_floor=floor)
+        b_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        active_b = active & ~b_delta & (dr.max(mi.unpolarized_spectrum(bsdf_weight)) > 0)
+        si_b = scene.ray_intersect(spawn.spawn_ray(si, si.to_world(bs.wo), floor), ray_flags=mi.RayFlags.All,
+                                   coherent=False, active=active_b)
+        ds_b = mi.DirectionSample3f(scene, si=si_b, ref=si)
+        w_b = DIRECT_MIS.hit_weight(direct.hit_densities(scene, si, ds_b, bs.pdf, b_delta, 1, active_b))
+        L += dr.select(active_b, beta * bsdf_weight * w_b * ds_b.emitter.eval(si_b, active_b), 0.0)
+        return L, active_b
 
     def aov_names(self):
         return []

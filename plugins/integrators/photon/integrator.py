@@ -9,14 +9,18 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import params
+from mitsuba_lab.plugins.integrators import spawn
+from mitsuba_lab.plugins.integrators.support import warn_if_unsupported
+from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
 from mitsuba_lab.scene import SceneTraits
 from mitsuba_lab.plugins.params import DIRECT_MODES, UNBOUNDED  # noqa: F401 (re-exported)
 
+from . import spectral
 from .estimator import PhotonMapping
 from .gather import CameraPass
 from .grid import PhotonGrid
-from .records import RECORD_BYTES
+from .records import record_bytes, spectrum_channels
 from .tracer import PhotonTracer
 
 #: max_depth = -1 (unbounded) is stored as this many segments (sums of depths stay in uint32).
@@ -39,6 +43,7 @@ class PhotonSettings:
     rr_depth: int
     direct: str
     max_records: int
+    hide_emitters: bool = False
 
     @classmethod
     def resolve(cls, given: dict | None = None) -> "PhotonSettings":
@@ -114,12 +119,17 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     radiance changes within r: the edges of surfaces (the kernel's disk sticks out),
     sharp caustics (blurred peaks: a caustic wants r_1 below the automatic value).
 
-    **Density estimate** (``gather.py``): at the first camera vertex with a smooth
-    BSDF, L = sum_p f(wo, wi_p) Phi_p K(|x - x_p| / r) / r^2 with the 2D Epanechnikov
-    kernel K(t) = (2 / pi)(1 - t^2), t < 1 (integral over the plane = 1); a photon
-    whose geometric normal is more than ~37 degrees off x's (n . n_p <= 0.8) is
-    rejected, and so is one whose path plus the camera's exceeds ``max_depth``.
-    Photons are found in a hashed grid of cell size r (``grid.py``: counting sort).
+    **Density estimate** (``gather.py``): at every camera vertex with a smooth BSDF
+    lobe, L = sum_p f(wo, wi_p) |wi_p . n_s| / |wi_p . n_p| Phi_p K(|x - x_p| / r) / r^2
+    with the 2D Epanechnikov kernel K(t) = (2 / pi)(1 - t^2), t < 1 (integral over the
+    plane = 1); a photon whose geometric normal is more than ~37 degrees off x's
+    (n . n_p <= 0.8) is rejected, and so is one whose path plus the camera's exceeds
+    ``max_depth``. Photons are found in a hashed grid of cell size r (``grid.py``:
+    counting sort). Camera paths continue through delta lobes (mirror, glass, and the
+    delta lobes of BSDFs that also have smooth ones: ``plastic``, ``mask``,
+    ``blendbsdf``), so such a BSDF is both gathered at (its smooth lobes) and passed
+    through (its delta lobes, sampled alone). Photons carry Veach's shading-normal
+    (adjoint) correction (``tracer.py``).
 
     ================ ====== ======================================================
     photons_per_pass int    Photons emitted per pass, N >= 1 (Default: 100000)
@@ -147,26 +157,36 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     max_records      int    Most photon records held at once (>= 1024). A pass
                             whose photons would need more is traced and gathered
                             in batches with the same camera samples, which gives
-                            the same estimate. (Default: 2^21: 52 bytes each,
+                            the same estimate. (Default: 2^21: 52 bytes each
+                            in RGB, 56 in spectral variants,
                             ~110 MB, held up to three times during a batch:
                             trace buffer, compacted and sorted copies)
+    hide_emitters    bool   Mitsuba's meaning: camera rays pass through area
+                            emitters to what lies behind them, and where they see
+                            only the environment the pixel is invalid (black,
+                            alpha 0) (Default: false)
     ================ ====== ======================================================
 
     Pass seeds come from the render's ``seed``: different seeds give independent
     photon maps and camera samples.
 
     Handles: any emitter with ``sample_ray`` (area, point, spot, directional,
-    environment), chosen with probability proportional to its power; BSDFs that
-    are either smooth (the path stops there and gathers) or purely delta (mirror,
-    glass: camera paths continue through them by BSDF sampling).
-    Does not handle: the delta lobes of a BSDF that mixes delta and smooth lobes
-    (e.g. ``plastic``, a ``mask`` over a smooth BSDF): the camera path gathers at the
-    smooth lobe, so the light the delta lobe reflects or transmits is missed (all of it
-    in ``photons`` mode; ``nee`` keeps only emitters seen through it). No participating
-    media, no AOVs, no ``develop=False``, no shading-normal (adjoint) correction for
-    photons, no spectral variants (RGB and mono only). Emitters are not hidden (no
-    ``hide_emitters``). The experiment planner leaves lab_photon out of the scenes it
-    cannot render, with the reason (``estimator.PhotonMapping.applicability``).
+    environment), chosen with probability proportional to its power; smooth, delta
+    and mixed BSDFs; shading normals (vertex normals; with a ``normalmap`` /
+    ``bumpmap`` the photons' correction uses the unperturbed shading normal, which
+    is all Mitsuba's BSDF interface shows, as Mitsuba's ``ptracer`` does);
+    ``hide_emitters``; RGB, mono and spectral variants. **Spectral**: each pass uses
+    one set of wavelengths for all its photons and camera rays (``spectral.py``),
+    so a pass image carries the colour noise of 4 wavelengths, averaged out over
+    passes (not over the spp of a pass). Every emitter spectrum works (``rgb``,
+    bitmap, ``blackbody``, spectrum files, ``envmap``): photons are emitted at the
+    camera's wavelengths by inverting each emitter's wavelength sampling.
+    Refused, in one line: polarized variants; ``render(develop=False)``; being
+    wrapped by an integrator that calls its ``sample()`` (``aov``, ``moment``):
+    the photon maps are built by its own ``render()``. Participating media are
+    ignored (one warning through Mitsuba's logger); the experiment planner leaves
+    lab_photon out of such scenes, with the reason
+    (``estimator.PhotonMapping.applicability``).
 
     Statistics of the last render: ``photon_stats()`` (passes, photons traced and
     stored, photon tracing / grid / gather times, photons per second) and
@@ -175,7 +195,8 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     .. code-block:: python
 
         {'type': 'lab_photon', 'photons_per_pass': 200000, 'passes': 32,
-         'alpha': 0.66, 'radius': 0.0, 'max_depth': -1, 'direct': 'nee'}
+         'alpha': 0.66, 'radius': 0.0, 'max_depth': -1, 'direct': 'nee',
+         'hide_emitters': False}
     """
     #: The estimator class: what lab_photon knows about scenes and sample counts.
     ESTIMATOR = PhotonMapping
@@ -185,6 +206,10 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     def __init__(self, props: mi.Properties):
         name = self.ESTIMATOR.plugin_name
         values = plugin_settings(name, props, self.PARAMETERS, "integrator")
+        if mi.is_polarized:
+            variant = mi.variant()
+            raise ValueError(f"{name}: variant '{variant}' is not supported: photons carry unpolarized flux "
+                             f"(no Stokes vectors in the photon map); use {variant.replace('_polarized', '')}")
         super().__init__(props)
         self.settings_ = PhotonSettings(**values)
         self.stats = PhotonStats()
@@ -196,14 +221,11 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
         if not develop:
-            raise ValueError("lab_photon: render(develop=False) is not supported (passes are averaged "
-                             "as developed images)")
-        if mi.is_spectral:
-            raise ValueError("lab_photon: spectral variants are not supported (a photon's wavelengths "
-                             "would have to match the camera path's); use an RGB or mono variant")
-        problem = self.ESTIMATOR.media_problem(SceneTraits.from_scene(scene))
-        if problem:                       # never an image as if the medium were not there
-            raise ValueError(problem)
+            raise ValueError("lab_photon: render(develop=False) is not supported: its image is the "
+                             "average of developed pass images, so there is no film to leave undeveloped; "
+                             "call render() with develop=True")
+        traits = SceneTraits.from_scene(scene)
+        warn_if_unsupported(self, traits)         # never an image silently missing light
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
         seed = int(seed[0]) if hasattr(seed, "__len__") and not isinstance(seed, int) else int(seed)
@@ -211,28 +233,35 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         spp = spp or sensor.sampler().sample_count()
         depth = cfg.depth_limit
         min_segments = 2 if cfg.direct == "nee" else 1
-        stats = PhotonStats(stored_flux=[0.0] * (1 if mi.is_monochromatic else 3))
+        floor = spawn.offset_floor(traits)
+        stats = PhotonStats(stored_flux=[0.0] * spectrum_channels())
         self._camera.counters.reset()
+        self._camera.hide_emitters, self._camera.offset_floor = cfg.hide_emitters, floor
         size = sensor.film().crop_size()
         self._camera_rays = int(size[0]) * int(size[1]) * spp * cfg.passes
+        bind_film_layout(sensor)                         # lab_zsobol learns the film's shape
 
         # Photons travel at most depth - 1 segments: the camera needs one to reach them.
         tracer = PhotonTracer(scene, max_segments=min(depth - 1, DEPTH_CAP), min_segments=min_segments,
-                              rr_depth=cfg.rr_depth)
+                              rr_depth=cfg.rr_depth, offset_floor=floor)
         r1 = cfg.radius if cfg.radius > 0 else automatic_radius(scene, sensor)
         radii = radius_schedule(r1, cfg.passes, cfg.alpha)
         stats.radius_first, stats.radius_last = radii[0], radii[-1]
+        # Spectral variants: one wavelength sample per pass, shared by photons and camera rays.
+        u_passes = spectral.pass_samples(seed, cfg.passes) if mi.is_spectral else [None] * cfg.passes
         stores_per_photon = 4.0                          # first guess; learnt from each batch
 
         image = None
         for i, radius in enumerate(radii):
             pass_seed = int(mi.sample_tea_32(seed & 0xFFFFFFFF, i)[0])
             camera_seed = int(mi.sample_tea_32(i, seed & 0xFFFFFFFF)[0])
+            u = u_passes[i]
+            wavelengths = None if u is None else spectral.sensor_wavelengths(sensor, u)
             first, remaining, batch_index = 0, cfg.photons_per_pass, 0
             while remaining > 0:
                 count = min(remaining, max(1, int(cfg.max_records / (1.25 * stores_per_photon))))
                 for records, n_traced in self._trace_fitting(tracer, first, count, pass_seed, stats,
-                                                             stores_per_photon):
+                                                             stores_per_photon, wavelengths):
                     stores_per_photon = max(0.25, (records.count + 1) / n_traced)
                     flux = records.total_power()
                     stats.stored_flux = [a + b for a, b in zip(stats.stored_flux, flux)]   # per channel
@@ -240,14 +269,11 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
                     grid = PhotonGrid(records, radius)
                     dr.sync_thread()
                     stats.grid_s += time.perf_counter() - t0
-                    stats.peak_record_bytes = max(stats.peak_record_bytes, 2 * records.count * RECORD_BYTES)
+                    stats.peak_record_bytes = max(stats.peak_record_bytes, 2 * records.count * record_bytes())
                     del records
                     self._camera.grid, self._camera.with_direct = grid, batch_index == 0
                     t0 = time.perf_counter()
-                    # Mitsuba's own SamplingIntegrator.render on the camera-pass object: its
-                    # film, filter, sampler and spp handling, with our sample().
-                    img = self._camera.render(scene, sensor, dr.opaque(mi.UInt32, camera_seed), spp,
-                                              True, True)
+                    img = self._camera_pass(scene, sensor, camera_seed, spp, u)
                     dr.eval(img)
                     dr.sync_thread()
                     stats.gather_s += time.perf_counter() - t0
@@ -265,14 +291,23 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         dr.eval(image)
         return image
 
-    def _trace_fitting(self, tracer, first, count, pass_seed, stats, stores_per_photon):
+    def _camera_pass(self, scene, sensor, camera_seed: int, spp: int, u):
+        """One developed camera pass: Mitsuba's own ``SamplingIntegrator.render`` on the
+        camera-pass object (its film, filter, sampler and spp handling, with our sample()), or
+        in spectral variants the same with every ray at the pass's wavelength sample ``u``."""
+        if u is None:
+            return self._camera.render(scene, sensor, dr.opaque(mi.UInt32, camera_seed), spp, True, True)
+        return spectral.render_pass(self._camera, scene, sensor, dr.opaque(mi.UInt32, camera_seed), spp, u)
+
+    def _trace_fitting(self, tracer, first, count, pass_seed, stats, stores_per_photon, wavelengths=None):
         """Yield (records, photons) for photons [first, first + count), splitting the range in
         halves while its records do not fit in ``max_records`` (same photons either way)."""
         cfg = self.settings_
         capacity = int(min(cfg.max_records, max(MIN_RECORDS, math.ceil(1.5 * stores_per_photon * count))))
         while True:
             t0 = time.perf_counter()
-            buffer, stores, segments = tracer.trace(first, count, pass_seed, cfg.photons_per_pass, capacity)
+            buffer, stores, segments = tracer.trace(first, count, pass_seed, cfg.photons_per_pass, capacity,
+                                                    wavelengths)
             dr.eval(*buffer.arrays(), stores, segments)
             dr.sync_thread()
             stats.trace_s += time.perf_counter() - t0
@@ -287,9 +322,10 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
                 break
             stats.splits += 1
             half = count // 2
-            yield from self._trace_fitting(tracer, first, half, pass_seed, stats, n_stores / count)
+            yield from self._trace_fitting(tracer, first, half, pass_seed, stats, n_stores / count,
+                                           wavelengths)
             yield from self._trace_fitting(tracer, first + half, count - half, pass_seed, stats,
-                                           n_stores / count)
+                                           n_stores / count, wavelengths)
             return
         stats.photons_stored += n_stores
         stats.photon_segments += int(segments[0])

@@ -7,7 +7,8 @@ p            Point3f   position of the interaction
 wi           Vector3f  direction towards where the photon came from (world)
 n            Normal3f  geometric normal at the interaction
 power        Spectrum  flux carried by the photon, already divided by the
-                       number of photons emitted in the pass (watts)
+                       number of photons emitted in the pass (watts; in
+                       spectral variants at the pass's wavelengths)
 depth        UInt32    segments from the emitter to here (1 = no bounce yet)
 ============ ========= ===================================================
 """
@@ -17,8 +18,18 @@ import drjit as dr
 import mitsuba as mi
 
 FIELDS = ("p", "wi", "n", "power", "depth")
-#: Bytes per record: 4 three-component float vectors + one uint32.
+#: Bytes per record in RGB variants: 4 three-component float vectors + one uint32.
 RECORD_BYTES = 4 * 3 * 4 + 4
+
+
+def spectrum_channels() -> int:
+    """Channels of the variant's unpolarized spectrum: 3 (RGB), 1 (mono), 4 (spectral)."""
+    return dr.size_v(mi.UnpolarizedSpectrum)
+
+
+def record_bytes() -> int:
+    """Bytes per record in the current variant (3 vectors + the power's channels + depth)."""
+    return 4 * (3 * 3 + spectrum_channels()) + 4
 
 
 class PhotonRecords:

@@ -13,14 +13,34 @@ power (minus what escapes). It is then traced with BSDF sampling in importance
 component. Every photon has its own PCG32 stream,
 seeded from (pass seed, global photon index), so a batch split in two reproduces
 exactly the photons of the unsplit batch.
+
+**Shading normals.** Mitsuba's BSDFs in ``TransportMode.Importance`` only drop the 1/eta^2
+radiance scaling at refractions; the asymmetry that shading normals add is left to the
+integrator (Mitsuba's ``ptracer`` applies it itself). A photon scattered from direction wi
+(towards where it came from) into the sampled direction wo is therefore weighted by
+Veach's adjoint correction (Veach 1997, sec. 5.3, eq. 5.19)
+
+    |wi . n_s| |wo . n_g| / (|wi . n_g| |wo . n_s|)
+
+with n_s the interaction's shading normal (``si.sh_frame``; the interpolated vertex normal: a
+``normalmap`` / ``bumpmap`` perturbs it inside the BSDF, where the integrator cannot see it,
+so there the correction uses the unperturbed one, as ``ptracer`` does) and n_g its geometric
+normal. No photon is dropped for lying on the "wrong" side of one normal and not the other,
+so photon paths cover what the path tracers' camera paths cover.
+
+In spectral variants every photon of a pass is emitted at the pass's wavelengths
+(``spectral.emit``). Rays leave surfaces at the lab's scale-robust offsets (``spawn``); in a
+scene smaller than 1 unit an area emitter's own offset (Mitsuba's, absolute) is replaced too.
 """
 from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
 
+from mitsuba_lab.plugins.integrators import spawn
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 
+from . import spectral
 from .records import PhotonRecords
 
 #: Emission samples per emitter for the power estimate that drives emitter selection.
@@ -47,11 +67,48 @@ def emitter_powers(scene: mi.Scene, seed: int = 0) -> list[float]:
         _, weight = emitter.sample_ray(mi.Float(0), rng.next_float32(),
                                        mi.Point2f(rng.next_float32(), rng.next_float32()),
                                        mi.Point2f(rng.next_float32(), rng.next_float32()))
-        value = mi.unpolarized_spectrum(weight)
-        mean = dr.mean(dr.select(dr.isfinite(value[0] + value[1] + value[2]),
-                                 (value[0] + value[1] + value[2]) / 3, 0.0))
+        value = channel_mean(weight)
+        mean = dr.mean(dr.select(dr.isfinite(value), value, 0.0))
         powers.append(max(float(mean[0]), 0.0))
     return powers
+
+
+def channel_mean(spectrum):
+    """Mean over the channels of a (unpolarized) spectrum: RGB, mono or 4 wavelengths."""
+    value = mi.unpolarized_spectrum(spectrum)
+    n = len(value)
+    total = value[0]
+    for i in range(1, n):
+        total = total + value[i]
+    return total * (1.0 / n)
+
+
+def adjoint_correction(si: mi.SurfaceInteraction3f, wi_world, wo_local):
+    """|wi.n_s| |wo.n_g| / (|wi.n_g| |wo.n_s|) for a photon arriving from ``wi_world`` (towards
+    its origin) and leaving along ``wo_local`` (shading frame); 0 where a cosine is 0."""
+    wo_world = si.to_world(wo_local)
+    num = dr.abs(mi.Frame3f.cos_theta(si.wi) * dr.dot(si.n, wo_world))
+    den = dr.abs(mi.Frame3f.cos_theta(wo_local) * dr.dot(si.n, wi_world))
+    return dr.select(den > 0, num / dr.maximum(den, 1e-30), 0.0)
+
+
+def area_origin_fixes(scene: mi.Scene, floor: float) -> list:
+    """Per emitter, a function (time, sample2, ray) -> ray origin. An area emitter's
+    ``sample_ray`` starts its ray at Mitsuba's absolute offset from the point it sampled with
+    ``sample2``; ``sample_position`` with the same sample gives that point again, and the ray
+    starts at the lab's offset from it instead. Other emitters start their rays on no surface."""
+    def fixed(emitter):
+        def origin(time, sample2, ray):
+            ps, _ = emitter.sample_position(time, sample2)
+            it = dr.zeros(mi.Interaction3f)
+            it.p, it.n = ps.p, ps.n
+            return spawn.offset_point(it, ray.d, floor)
+        return origin
+
+    def unchanged(time, sample2, ray):
+        return ray.o
+
+    return [fixed(e) if e.get_shape() is not None else unchanged for e in scene.emitters()]
 
 
 def selection_pmf(powers: list[float]) -> list[float]:
@@ -74,10 +131,15 @@ class PhotonTracer:
     2 = only after at least one bounce); ``rr_depth``: Russian roulette from this depth.
     """
 
-    def __init__(self, scene: mi.Scene, max_segments: int, min_segments: int, rr_depth: int):
+    def __init__(self, scene: mi.Scene, max_segments: int, min_segments: int, rr_depth: int,
+                 offset_floor: float = 1.0):
         if not scene.emitters():
             raise ValueError("lab_photon: the scene has no emitter")
+        self.spectra = spectral.EmitterSpectra(scene) if mi.is_spectral else None
         self.scene = scene
+        self.offset_floor = offset_floor
+        # Mitsuba's offsets equal the lab's for floor = 1: only smaller scenes need the fix.
+        self.origin_fixes = area_origin_fixes(scene, offset_floor) if offset_floor < 1.0 else None
         self.max_segments = max_segments
         self.min_segments = min_segments
         self.rr_depth = rr_depth
@@ -87,8 +149,12 @@ class PhotonTracer:
         self.emitters = scene.emitters_dr()
 
     @dr.syntax
-    def trace(self, first: int, count: int, pass_seed: int, emitted_in_pass: int, capacity: int):
+    def trace(self, first: int, count: int, pass_seed: int, emitted_in_pass: int, capacity: int,
+              wavelengths: list | None = None):
         """Trace photons [first, first + count) of a pass into a buffer of ``capacity`` records.
+
+        ``wavelengths``: in spectral variants, the pass's wavelengths (nm, one per channel),
+        at which every photon is emitted and traced.
 
         Returns (records buffer, stores attempted (UInt32[1]), segments traced (UInt32[1])).
         When stores attempted > capacity, the records past the capacity were dropped and
@@ -103,9 +169,20 @@ class PhotonTracer:
         # --------------------- Emission ----------------------
         emitter_index, p_emitter = self.distribution.sample_pmf(rng.next_float32())
         emitter = dr.gather(mi.EmitterPtr, self.emitters, emitter_index)
-        ray, weight = emitter.sample_ray(mi.Float(0), rng.next_float32(),
-                                         mi.Point2f(rng.next_float32(), rng.next_float32()),
-                                         mi.Point2f(rng.next_float32(), rng.next_float32()))
+        time = mi.Float(0)
+        u_wavelength = rng.next_float32()
+        sample2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+        sample3 = mi.Point2f(rng.next_float32(), rng.next_float32())
+        if dr.hint(wavelengths is not None, mode="scalar"):
+            lam = [dr.opaque(mi.Float, v) for v in wavelengths]
+            u_tables, p_tables = self.spectra.tables(wavelengths)
+            samples = [dr.gather(mi.Float, table, emitter_index) for table in u_tables]
+            densities = [dr.gather(mi.Float, table, emitter_index) for table in p_tables]
+            ray, weight = spectral.emit(emitter, time, lam, samples, densities, sample2, sample3, True)
+        else:
+            ray, weight = emitter.sample_ray(time, u_wavelength, sample2, sample3)
+        if dr.hint(self.origin_fixes is not None, mode="scalar"):
+            ray.o = dr.switch(emitter_index, self.origin_fixes, time, sample2, ray)
         n_emitted = dr.opaque(mi.Float, float(emitted_in_pass))
         beta = mi.Spectrum(weight) * dr.select(p_emitter > 0, dr.rcp(p_emitter * n_emitted), 0.0)
         beta_max0 = dr.max(mi.unpolarized_spectrum(beta))
@@ -113,6 +190,7 @@ class PhotonTracer:
         stores = dr.zeros(mi.UInt32, 1)
         segments = dr.zeros(mi.UInt32, 1)
         cap = dr.opaque(mi.UInt32, capacity)
+        floor = self.offset_floor
         max_segments = dr.opaque(mi.UInt32, self.max_segments)
         min_segments = dr.opaque(mi.UInt32, self.min_segments)
         rr_depth = dr.opaque(mi.UInt32, self.rr_depth)
@@ -137,8 +215,8 @@ class PhotonTracer:
             active &= depth < max_segments
             bs, bsdf_weight = bsdf.sample(ctx, si, rng.next_float32(),
                                           mi.Point2f(rng.next_float32(), rng.next_float32()), active)
-            beta *= bsdf_weight
-            ray = si.spawn_ray(si.to_world(bs.wo))
+            beta *= bsdf_weight * adjoint_correction(si, -ray.d, bs.wo)
+            ray = spawn.spawn_ray(si, si.to_world(bs.wo), floor)
 
             # ------------------- Stopping criterion -----------------
             beta_max = dr.max(mi.unpolarized_spectrum(beta))

@@ -62,6 +62,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=seed_int, default=0, help="render seed, in [0, 2^32) (default: 0)")
     parser.add_argument("-o", "--output", help="output EXR path (default: out/SCENE_INTEGRATOR.exr)")
     parser.add_argument("--no-png", action="store_true", help="do not write the PNG preview")
+    parser.add_argument("--allow-unsupported", action="store_true",
+                        help="render with a lab integrator that cannot render the scene's light "
+                             "correctly (participating media, delta lights for lab_naive), with a "
+                             "warning; without it such a render is refused (exit 2)")
 
 
 def integrator_params(args) -> dict:
@@ -123,6 +127,7 @@ def render_plan(args, defines: dict):
 
 def run(args, out) -> int:
     from .. import images, scene as scenes
+    from ..errors import LabError
     from ..experiment.config import PluginSpec, sample_count_plugin
     from ..plugins.params import resolve
     from ..render import render
@@ -145,7 +150,13 @@ def run(args, out) -> int:
     spec, spp = sample_count_plugin(PluginSpec(kind, kind, params), samples)
     params = spec.params
     integrator = scenes.make_integrator(kind, params)
-    for note in render_warnings(scene, kind, params):
+    notes, unsupported = render_warnings(scene, kind, params)
+    if unsupported and not args.allow_unsupported:
+        raise LabError(f"{unsupported} (--allow-unsupported renders it anyway)")
+    if unsupported:
+        notes.append(f"{unsupported} (rendering it anyway: --allow-unsupported)")
+        integrator.unsupported_acknowledged = True       # said here: the plugin need not log it
+    for note in notes:
         print(f"mitsuba-lab: warning: {note}", file=sys.stderr)
     if dropped:
         print(f"mitsuba-lab: note: the scene's integrator parameters {', '.join(dropped)} do not "
@@ -165,19 +176,16 @@ def run(args, out) -> int:
     return 0
 
 
-def render_warnings(scene, kind: str, params: dict) -> list[str]:
-    """What the user should know before trusting this render: the scene's own problems and
-    the planner's reason when the estimator cannot render the scene's light correctly."""
-    from ..scene import ALL_LAB_INTEGRATORS, SceneTraits, strategy_applicability
+def render_warnings(scene, kind: str, params: dict) -> tuple[list[str], str]:
+    """(warnings, reason): what the user should know before trusting this render (the scene's
+    own problems), and the reason a lab integrator cannot render the scene's light correctly
+    ('' when it can; the planner's answer, ``strategy_applicability``)."""
+    from ..scene import SceneTraits, strategy_applicability
 
     traits = SceneTraits.from_scene(scene)
-    if traits.media and kind in ALL_LAB_INTEGRATORS:
-        return []                      # the plugin refuses the scene itself, in one line
-    notes = traits.warnings()
     ok, reason = strategy_applicability(traits, kind, params)
-    if not ok and reason not in notes:
-        notes.append(reason)
-    return notes
+    notes = traits.warnings(media=ok)           # an unsupported lab integrator names the media itself
+    return notes, "" if ok else reason
 
 
 def describe_settings(settings: dict) -> str:

@@ -58,9 +58,11 @@ def cornell_texture_scene(resolution: int, texture_size: int, sampler: dict | No
 
 
 def load_inverse_scene(cfg: InverseConfig, sampler: dict | None = None):
-    """The config's scene at its resolution, optionally with another sampler (type + params)."""
+    """The config's scene at its resolution, optionally with another sampler (type + params),
+    its film bound to its sampler (``bind_film_layout``: the demos call ``mi.render`` directly)."""
     import mitsuba as mi
 
+    from ..plugins.samplers.layout import bind_film_layout
     from ..scene_xml import load_scene_variant
 
     if cfg.builtin is not None:
@@ -70,6 +72,7 @@ def load_inverse_scene(cfg: InverseConfig, sampler: dict | None = None):
             raise LabError(f"cannot build scene {cfg.builtin}: {one_line(err)}") from err
     else:
         scene = load_scene_variant(cfg.scene_path, cfg.resolution, sampler, cfg.defaults)
+    bind_film_layout(scene)
     return scene
 
 

@@ -1,0 +1,170 @@
+"""Spectral variants: one set of wavelengths per pass, shared by photons and camera rays.
+
+A density estimate adds up photons that hit near a camera vertex, so a photon's flux and the
+camera path's BSDF values must be spectra at the same wavelengths. In a spectral variant every
+pass therefore draws one wavelength sample u_i for all of its lanes:
+
+* camera rays come from ``Sensor.sample_ray_differential(time, u_i, ...)``: the sensor's own
+  wavelength sampling (its response function and pdf, the ray weight), the same wavelengths
+  lambda_i in every lane (``render_pass``, Mitsuba's camera pass with u_i in place of a
+  per-lane sample);
+* photons are emitted at lambda_i (``EmitterSpectra``, ``emit``). An emitter samples its
+  k-th wavelength as F(frac(u + k/4)) with weight L_e(lambda) / p(lambda), F its own
+  monotone inverse CDF: uniform over [MI_CIE_MIN, MI_CIE_MAX] for ``rgb``, ``uniform`` and
+  bitmap spectra, importance sampled for ``blackbody``, spectrum files and the D65 of an
+  ``envmap``. F does not depend on where the emitter is sampled, so it is tabulated once per
+  render; for each pass and emitter the table gives u_k with F(frac(u_k + k/4)) = lambda_k
+  and the density p(lambda_k) = dF^-1/dlambda (a central difference over 8 table steps,
+  exact for the uniform map). One ``sample_ray`` call per wavelength with the same spatial
+  samples (so the same ray), wavelength k of call k, times p(lambda_k), is the flux
+  L_e(lambda_k) x (spatial weight) at exactly the camera's wavelengths. An emitter whose F
+  is not monotone is refused in one line.
+
+The sensor's weight carries the spectral pdf, the photon flux does not, so a pass estimates
+the pixel's spectral integral at lambda_i; u_i follows a golden-ratio sequence with a random
+start (``pass_samples``), so any number of passes covers the spectrum evenly and every u_i
+is uniform: the average over passes converges to the full spectral integral. Consequence:
+each pass has the colour noise of only 4 wavelengths, and that noise averages out over
+passes, not over the camera samples of one pass (a few passes show colour noise that more
+spp per pass would not remove).
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+#: 1 / golden ratio: u_i = frac(u_0 + i / phi) fills [0, 1) evenly for any number of passes.
+INV_PHI = (math.sqrt(5.0) - 1.0) / 2.0
+
+
+def pass_samples(seed: int, passes: int) -> list[float]:
+    """u_i for passes i = 0..P-1: golden-ratio sequence from a start drawn from ``seed``."""
+    start = float(mi.sample_tea_float32(seed & 0xFFFFFFFF, 0x5EC7)) if passes else 0.0
+    return [(start + i * INV_PHI) % 1.0 for i in range(passes)]
+
+
+def sensor_wavelengths(sensor: mi.Sensor, u: float) -> list[float]:
+    """The wavelengths (nm) the sensor gives every camera ray of a pass with sample ``u``."""
+    wavelengths, _ = sensor.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f, 1), mi.Float(u))
+    return [float(wavelengths[k][0]) for k in range(dr.size_v(mi.UnpolarizedSpectrum))]
+
+
+def emitter_name(emitter, index: int) -> str:
+    shape = emitter.get_shape()                          # an area light is known by its shape
+    return (shape.id() if shape is not None else emitter.id()) or f"#{index}"
+
+
+class EmitterSpectra:
+    """Each emitter's wavelength map F (``TABLE`` + 1 points of u -> lambda), and per pass the
+    samples and densities that emit photons at given wavelengths (``tables``)."""
+
+    TABLE = 4096
+    #: Half-width, in table steps, of the central difference that gives dF^-1/dlambda.
+    HALF_WINDOW = 4
+
+    def __init__(self, scene: mi.Scene):
+        emitters = scene.emitters()
+        n = self.TABLE + 1
+        self.grid = np.linspace(0.0, 1.0, n)
+        u = mi.Float(np.minimum(self.grid, 1.0 - 2.0 ** -24))
+        si = dr.zeros(mi.SurfaceInteraction3f, n)
+        si.wi = mi.Vector3f(0, 0, 1)
+        # One direct call per emitter (some spectra, e.g. blackbody, cannot be sampled inside a
+        # symbolic call over all emitters). Wavelength 0 has no shift: it is F itself.
+        self.maps = np.array([np.array(e.sample_wavelengths(si, u)[0][0], dtype=np.float64) for e in emitters])
+        for e, lam in enumerate(self.maps):
+            if np.any(np.diff(lam) < 0) or not np.all(np.isfinite(lam)):
+                raise ValueError(f"lab_photon: emitter '{emitter_name(emitters[e], e)}' "
+                                 f"({emitters[e].class_name()}) samples its wavelengths by a map that "
+                                 f"is not monotone, so its photons cannot be emitted at the camera's "
+                                 f"wavelengths in spectral variants; use an RGB variant")
+
+    def tables(self, wavelengths: list[float]):
+        """(u_k, p_k) for k = 0..n-1, each a Float array over the emitters: the sample for
+        which an emitter's wavelength k is ``wavelengths[k]``, and that wavelength's density
+        (0 where the emitter never samples it: it emits nothing there)."""
+        n = len(wavelengths)
+        h = self.HALF_WINDOW
+        us, ps = [], []
+        for k, lam in enumerate(wavelengths):
+            u_k, p_k = [], []
+            for table in self.maps:
+                t, density = 0.0, 0.0
+                if table[0] <= lam <= table[-1]:
+                    t = float(np.interp(lam, table, self.grid))
+                    i = int(np.clip(np.searchsorted(table, lam), h, len(table) - 1 - h))
+                    span = table[i + h] - table[i - h]
+                    density = (self.grid[i + h] - self.grid[i - h]) / span if span > 0 else 0.0
+                u_k.append((t - k / n) % 1.0)
+                p_k.append(density)
+            us.append(mi.Float(u_k))
+            ps.append(mi.Float(p_k))
+        return us, ps
+
+
+def emit(emitter, time, wavelengths, samples, densities, sample2, sample3, active):
+    """(ray, flux weight) of ``Emitter.sample_ray`` at the pass's ``wavelengths``.
+
+    ``samples`` and ``densities``: per wavelength, the u_k and p(lambda_k) of this lane's
+    emitter (``EmitterSpectra.tables``). One call per wavelength with the same spatial samples
+    gives the same ray each time; wavelength k of call k is L_e(lambda_k) / p(lambda_k) x
+    (spatial weight), and p(lambda_k) is multiplied back: the camera's weight holds the pdf.
+    """
+    ray = None
+    values = []
+    for k, u in enumerate(samples):
+        ray_k, weight_k = emitter.sample_ray(time, u, sample2, sample3, active)
+        ray = ray_k if ray is None else ray
+        values.append(mi.unpolarized_spectrum(weight_k)[k] * densities[k])
+    # The camera's wavelengths exactly (the inverted map returns them up to rounding).
+    ray.wavelengths = type(ray.wavelengths)(*wavelengths)
+    return ray, mi.Spectrum(*values)
+
+
+def render_pass(integrator, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int, u: float):
+    """One camera pass of ``integrator`` (a ``SamplingIntegrator``), developed, with every
+    camera ray's wavelength sample equal to ``u``: Mitsuba's ``SamplingIntegrator.render``
+    (the Python version of its AD integrators) with that one change."""
+    film = sensor.film()
+    sampler = sensor.sampler().clone()
+    sampler.set_sample_count(spp)
+    sampler.set_samples_per_wavefront(spp)
+    size = film.crop_size()
+    border = film.rfilter().border_size() if film.sample_border() else 0
+    width, height = int(size[0]) + 2 * border, int(size[1]) + 2 * border
+    sampler.seed(seed, width * height * spp)
+    film.prepare([])
+
+    idx = dr.arange(mi.UInt32, width * height * spp) // dr.opaque(mi.UInt32, spp)
+    pos = mi.Vector2i()
+    pos.y = mi.Int32(idx // width)
+    pos.x = mi.Int32(idx % width)
+    pos += mi.Vector2i(film.crop_offset()) - border
+    pos_f = mi.Vector2f(pos) + sampler.next_2d()
+    scale = dr.rcp(mi.ScalarVector2f(film.crop_size()))
+    offset = -mi.ScalarVector2f(film.crop_offset()) * scale
+    aperture = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
+    time = mi.Float(sensor.shutter_open())
+    if sensor.shutter_open_time() > 0:
+        time += sampler.next_1d() * sensor.shutter_open_time()
+    ray, ray_weight = sensor.sample_ray_differential(time, dr.opaque(mi.Float, u), dr.fma(pos_f, scale, offset),
+                                                     aperture)
+    L, valid, _ = integrator.sample(scene, sampler, ray, None, True)
+
+    block = film.create_block()
+    block.set_coalesce(block.coalesce() and spp >= 4)
+    splat = mi.Vector2f(pos) if film.rfilter().is_box_filter() else pos_f
+    alpha = dr.select(valid, mi.Float(1), mi.Float(0))
+    value = mi.unpolarized_spectrum(L * ray_weight)
+    if mi.has_flag(film.flags(), mi.FilmFlags.Special):
+        block.put(splat, film.prepare_sample(value, ray.wavelengths, block.channel_count(), weight=1.0,
+                                             alpha=alpha))
+    else:
+        rgb = mi.spectrum_to_srgb(value, ray.wavelengths)
+        values = [rgb.x, rgb.y, rgb.z] + ([alpha] if mi.has_flag(film.flags(), mi.FilmFlags.Alpha) else [])
+        block.put(splat, values + [mi.Float(1)])
+    film.put_block(block)
+    return film.develop()

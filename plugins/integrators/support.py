@@ -1,0 +1,23 @@
+"""What a lab integrator says when it is given a scene it cannot render correctly.
+
+Used as a plugin inside a user's scene, it renders anyway (a scene may be right apart from
+one object) and logs one warning per render through Mitsuba's logger, naming the plugin and
+the reason (``Estimator.applicability``: participating media, delta lights for lab_naive).
+``mitsuba-lab render`` asks first and refuses such a scene unless ``--allow-unsupported``.
+"""
+from __future__ import annotations
+
+import mitsuba as mi
+
+
+def warn_if_unsupported(integrator, traits) -> str:
+    """Log the reason ``integrator`` (a lab integrator) cannot render a scene with these
+    ``SceneTraits`` correctly, unless its caller has already said it (its
+    ``unsupported_acknowledged`` attribute is set). Returns the reason ('' when supported)."""
+    ok, reason = integrator.ESTIMATOR.applicability(traits, integrator.settings())
+    if ok:
+        return ""
+    if not getattr(integrator, "unsupported_acknowledged", False):
+        mi.Log(mi.LogLevel.Warn, f"{reason} (rendering it anyway: the image will lack what the "
+                                 f"integrator cannot render)")
+    return reason
