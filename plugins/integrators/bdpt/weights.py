@@ -1,0 +1,279 @@
+"""MIS weights of bidirectional path tracing over all (s, t) strategies, in O(1) per connection.
+
+A path x_0 .. x_k (x_0 on an emitter, x_k on the sensor) can be built by k + 1 strategies:
+s light-subpath vertices x_0 .. x_{s-1} joined to t = k + 1 - s camera-subpath vertices
+x_s .. x_k, s = 0 .. k (t = 0, a light subpath hitting the lens, is not a strategy here). Each
+strategy is one of four kinds:
+
+* ``hit``: s = 0, the camera subpath hits the emitter;
+* ``nee``: s = 1 and t >= 2, emitter sampling (next-event estimation);
+* ``light``: t = 1, a light vertex joined to the sensor (light tracing; s = 1 is an emitter
+  point seen directly);
+* ``connect``: s >= 2 and t >= 2, a connection between two subpath vertices.
+
+The power heuristic (exponent beta; beta = 1 is the balance heuristic) gives strategy s the
+weight p_s^beta / sum_j p_j^beta, p_j being the area-measure density of the whole path under
+strategy j (the light-tracing kind's density times ``light_paths``, its sample count relative
+to camera subpaths). Rather than summing k + 1 products per connection, each subpath carries two
+running quantities and a flag (Georgiev, "Implementing Vertex Connection and Merging", 2012, with merging
+off; SmallVCM's ``dVCM`` and ``dVC``), updated per vertex in O(1):
+
+* ``dvcm``: 1 / p^beta of the vertex's own density from its subpath (times, at the subpath's
+  first vertex, the sample-count or emitter-sampling ratio that the next strategy carries);
+* ``dvc``: the sum over the strategies that would build more of the path from the other side,
+  up to the factors that are known only once the connection is made;
+* ``first``: 1.0 while ``dvcm`` still comes from the subpath's start, else 0.0 (it tells which
+  kind the innermost ratio belongs to, so a ``strategies`` subset can switch it off).
+
+Delta vertices are exact: a strategy that would join a delta emitter's point by a camera hit, or
+that would connect at a delta-lobe vertex, has density 0 and drops out of every sum. A delta
+lobe's forward and reverse selection probabilities are taken equal (Fresnel reflection and
+transmission are reciprocal), so they cancel. Delta densities are passed with the delta
+stripped (e.g. a point light's position density is its selection probability), the same way on
+every call. Infinite emitters: the vertex at infinity is a direction; pass ``cos_light`` = 1 and
+``dist2`` = 1 for the segment that touches it (densities there are in solid angle).
+
+``strategies`` restricts the sums to a subset of kinds (e.g. ``{"light"}``, light tracing alone,
+or ``{"hit", "nee"}``, which is unidirectional path tracing with MIS). Disabled kinds get weight
+0 and leave the sums, so the enabled ones still sum to 1 over any path they can build: the
+subset is unbiased for the light it can reach. The flags are folded into the running sums as the
+kinds become known: a ratio's kind depends only on whether it is its subpath's first one
+(light side: nee, camera side: light tracing) or not (connect); only the emitter hit needs the
+nee flag for a ratio the camera subpath carries, which ``first`` tells apart.
+
+Every function works on numpy arrays (or floats) and on Dr.Jit arrays, element-wise; it uses
+arithmetic operators, ``select`` and ``power``, and imports no Mitsuba, Dr.Jit or numpy at load.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+KINDS = ("hit", "nee", "light", "connect")
+PRESETS = {"all": KINDS, "camera": ("hit", "nee"), "light": ("light",)}
+
+
+class SubpathMis(NamedTuple):
+    """The MIS quantities a subpath carries at its current vertex (store them per light vertex)."""
+    dvcm: object
+    dvc: object
+    first: object
+
+
+def _select(mask, a, b):
+    """``mask ? a : b`` on numpy values or Dr.Jit arrays (Python bools select directly)."""
+    if isinstance(mask, bool):
+        return a if mask else b
+    if type(mask).__module__.startswith("drjit"):
+        import drjit as dr
+
+        return dr.select(mask, a, b)
+    import numpy as np
+
+    return np.where(mask, a, b)
+
+
+def strategy_kind(s: int, t: int) -> str:
+    """The kind of strategy (s, t) (see the module docstring)."""
+    if s == 0:
+        return "hit"
+    if t == 1:
+        return "light"
+    return "nee" if s == 1 else "connect"
+
+
+class BdptWeights:
+    """The recursive MIS weights for one heuristic, one exponent and one set of strategies.
+
+    ``heuristic``: ``balance`` or ``power`` (exponent ``beta``); ``strategies``: a preset name
+    (``all``, ``camera`` = hit + nee, ``light``) or an iterable of kinds; ``light_paths``: the
+    number of light subpaths each camera subpath competes with in the t = 1 strategy (SmallVCM's
+    light-subpath count: light tracing splats one light subpath into many pixels).
+    """
+
+    def __init__(self, heuristic: str = "power", beta: float = 2.0, strategies="all",
+                 light_paths: float = 1.0):
+        if heuristic not in ("balance", "power"):
+            raise ValueError(f"lab_bdpt: heuristic must be 'balance' or 'power', got '{heuristic}'")
+        if heuristic == "power" and not beta > 0:
+            raise ValueError(f"lab_bdpt: the power heuristic's exponent beta must be > 0, got {beta}")
+        if not light_paths > 0:
+            raise ValueError(f"lab_bdpt: light_paths must be > 0, got {light_paths}")
+        kinds = PRESETS.get(strategies, strategies) if isinstance(strategies, str) else tuple(strategies)
+        if isinstance(kinds, str) or not kinds or any(k not in KINDS for k in kinds):
+            raise ValueError(f"lab_bdpt: strategies must be one of {', '.join(PRESETS)} or a non-empty "
+                             f"subset of {', '.join(KINDS)}, got {strategies!r}")
+        self.beta = 1.0 if heuristic == "balance" else float(beta)
+        self.enabled = frozenset(kinds)
+        self.light_paths = float(light_paths)
+        self.e = {k: 1.0 if k in self.enabled else 0.0 for k in KINDS}
+
+    def _m(self, x):
+        """x^beta (the heuristic applied to a density ratio)."""
+        if self.beta == 1.0:
+            return x
+        if self.beta == 2.0:
+            return x * x
+        if type(x).__module__.startswith("drjit"):
+            import drjit as dr
+
+            return dr.power(x, self.beta)
+        import numpy as np
+
+        return np.power(x, self.beta)
+
+    def _flag(self, state: SubpathMis, start_kind: str):
+        """Enable factor of the innermost ratio ``state.dvcm`` stands for."""
+        return state.first * self.e[start_kind] + (1.0 - state.first) * self.e["connect"]
+
+    # -- starting and extending subpaths ---------------------------------------------------
+
+    def start_light(self, pdf_emit, pdf_nee, cos_light, delta=False) -> SubpathMis:
+        """State at x_0 after sampling an emitted ray.
+
+        ``pdf_emit``: joint density of the ray (position, area, times direction, solid angle;
+        infinite emitter: direction times the position on its disc); ``pdf_nee``: density with
+        which emitter sampling picks x_0 (area; solid angle for an infinite emitter), selection
+        probability included in both; ``cos_light``: |cos| at x_0 of the emitted direction (1 for
+        an infinite emitter); ``delta``: the emitter is a delta (point, spot, directional), so no
+        camera subpath can hit it.
+        """
+        dvcm = self._m(pdf_nee / pdf_emit)
+        dvc = _select(delta, 0.0 * dvcm, self.e["hit"] * self._m(cos_light / pdf_emit))
+        return SubpathMis(dvcm, dvc, 1.0)
+
+    def start_camera(self, pdf_cam) -> SubpathMis:
+        """State at the sensor after sampling a ray; ``pdf_cam``: the sensor's direction density
+        of it (solid angle, per unit film area as the t = 1 strategy's splat uses it)."""
+        return SubpathMis(self._m(self.light_paths / pdf_cam), 0.0 * pdf_cam, 1.0)
+
+    def after_hit(self, state: SubpathMis, dist2, cos_in) -> SubpathMis:
+        """State at a new vertex: ``dist2`` the squared segment length, ``cos_in`` |cos| at the new
+        vertex (both 1 on a segment to or from an infinite emitter)."""
+        inv_cos = self._m(1.0 / cos_in)
+        return SubpathMis(state.dvcm * self._m(dist2) * inv_cos, state.dvc * inv_cos, state.first)
+
+    def _scatter(self, state, pdf_fwd, pdf_rev, cos_out, delta, start_kind):
+        """Shared by both sides; only the kind of the subpath's first ratio differs."""
+        folded = self._m(cos_out / pdf_fwd) * (state.dvc * self._m(pdf_rev) + self._flag(state, start_kind) * state.dvcm)
+        dvc = _select(delta, state.dvc * self._m(cos_out), folded)
+        dvcm = _select(delta, 0.0 * folded, self._m(1.0 / pdf_fwd))
+        return SubpathMis(dvcm, dvc, 0.0 * state.first)
+
+    def scatter_light(self, state, pdf_fwd, pdf_rev, cos_out, delta=False) -> SubpathMis:
+        """State after sampling the next direction at a light-subpath vertex: ``pdf_fwd`` the
+        sampled direction's solid-angle density (adjoint BSDF), ``pdf_rev`` the density of
+        sampling the reverse (towards the previous vertex, coming from the new direction),
+        ``cos_out`` |cos| of the new direction at this vertex, ``delta`` a delta lobe sampled."""
+        return self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, "nee")
+
+    def scatter_camera(self, state, pdf_fwd, pdf_rev, cos_out, delta=False) -> SubpathMis:
+        """``scatter_light`` for a camera-subpath vertex."""
+        return self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, "light")
+
+    # -- the weights of the four kinds -----------------------------------------------------
+
+    def hit(self, camera: SubpathMis, pdf_nee, pdf_emit, pdf_pos):
+        """s = 0: the camera subpath (state after ``after_hit`` at the emitter) hit a non-delta
+        emitter. ``pdf_nee``, ``pdf_emit`` as in ``start_light`` for this point and the ray back
+        along the segment; ``pdf_pos``: the emission position density of the point (used when
+        the emitter is the first camera vertex, where the competitor is light tracing)."""
+        first = camera.first
+        inner = first * self.e["light"] * self._m(pdf_pos) + (1.0 - first) * self.e["nee"] * self._m(pdf_nee)
+        w_camera = inner * camera.dvcm + self._m(pdf_emit) * camera.dvc
+        return self.e["hit"] / (1.0 + w_camera)
+
+    def nee(self, camera: SubpathMis, pdf_nee, pdf_emit, cos_light, cos_cam, dist2,
+            pdf_cam_fwd, pdf_cam_rev, delta=False):
+        """s = 1, t >= 2: emitter sampling at a camera vertex. ``cos_light``, ``cos_cam``: |cos|
+        at the emitter point and at the camera vertex along the segment, ``dist2`` its squared
+        length (1, 1 for an infinite emitter); ``pdf_cam_fwd``: BSDF density at the camera vertex
+        of the direction to the emitter, ``pdf_cam_rev``: of the direction back along the camera
+        subpath given the emitter's; ``delta``: delta emitter (it cannot be hit)."""
+        p_cam0 = pdf_cam_fwd * cos_light / dist2
+        w_light = _select(delta, 0.0 * p_cam0, self.e["hit"] * self._m(p_cam0 / pdf_nee))
+        inner = self._flag(camera, "light") * camera.dvcm + camera.dvc * self._m(pdf_cam_rev)
+        w_camera = self._m(pdf_emit * cos_cam / (dist2 * pdf_nee)) * inner
+        return self.e["nee"] / (w_light + 1.0 + w_camera)
+
+    def connect(self, light: SubpathMis, camera: SubpathMis, pdf_light_fwd, pdf_light_rev,
+                pdf_cam_fwd, pdf_cam_rev, cos_light, cos_cam, dist2):
+        """s >= 2, t >= 2: a connection between a light vertex and a camera vertex (neither a
+        delta lobe). ``pdf_light_fwd``: density at the light vertex of the direction to the
+        camera vertex, ``pdf_light_rev``: of the direction back along the light subpath given
+        that one; ``pdf_cam_*`` likewise; ``cos_*``: |cos| at each end; ``dist2``."""
+        w_light = self._m(pdf_cam_fwd * cos_light / dist2) * (
+            self._flag(light, "nee") * light.dvcm + light.dvc * self._m(pdf_light_rev))
+        w_camera = self._m(pdf_light_fwd * cos_cam / dist2) * (
+            self._flag(camera, "light") * camera.dvcm + camera.dvc * self._m(pdf_cam_rev))
+        return self.e["connect"] / (w_light + 1.0 + w_camera)
+
+    def light_to_camera(self, light: SubpathMis, pdf_cam, cos_light, dist2, pdf_light_rev):
+        """t = 1, s >= 2: a light vertex (not a delta lobe) joined to the sensor. ``pdf_cam``: the
+        sensor's direction density towards it (as in ``start_camera``), ``cos_light`` |cos| at the
+        light vertex, ``pdf_light_rev``: density at the light vertex of the direction back along
+        the light subpath given the sensor's."""
+        w_light = self._m(pdf_cam * cos_light / (dist2 * self.light_paths)) * (
+            self._flag(light, "nee") * light.dvcm + light.dvc * self._m(pdf_light_rev))
+        return self.e["light"] / (1.0 + w_light)
+
+    def emitter_to_camera(self, pdf_cam, cos_light, dist2, pdf_pos, delta=False):
+        """t = 1, s = 1: an emitted point joined to the sensor directly (``pdf_pos``: its emission
+        position density; infinite emitter: its direction density, with cos_light = dist2 = 1)."""
+        ratio = pdf_cam * cos_light / (dist2 * self.light_paths * pdf_pos)
+        w_light = _select(delta, 0.0 * ratio, self.e["hit"] * self._m(ratio))
+        return self.e["light"] / (1.0 + w_light)
+
+
+def feasible(delta):
+    """Which strategies s = 0 .. k can build a path with these delta flags (numpy bools, k + 1
+    long): ``delta[0]`` a delta emitter (it cannot be hit, but can be connected to),
+    ``delta[i]`` for 0 < i < k a delta lobe at x_i (no connection may end there); the sensor
+    vertex ``delta[k]`` must be False."""
+    import numpy as np
+
+    delta = np.asarray(delta, dtype=bool)
+    k = delta.shape[0] - 1
+    ok = np.empty_like(delta)
+    ok[0] = ~delta[0]
+    for s in range(1, k + 1):
+        ok[s] = ~delta[s] if s == 1 else ~(delta[s] | delta[s - 1])
+    return ok
+
+
+def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies="all",
+                        p_nee=None, light_paths: float = 1.0):
+    """The weights of strategies s = 0 .. k computed directly from the path's densities (numpy).
+
+    ``p_light[i]``: area density of x_i generated from the light side (``p_light[0]`` the
+    emission position density), ``p_camera[i]``: from the camera side (``p_camera[k]`` the
+    sensor's own, common to all strategies); shape (k + 1,) or (k + 1, n paths). ``p_nee``: the
+    density of x_0 under emitter sampling (s = 1, t >= 2; default ``p_light[0]``); the t = 1
+    strategy's density is multiplied by ``light_paths``. ``delta`` as in ``feasible``. Returns
+    p_s^beta / sum over enabled feasible j of p_j^beta, 0 for a disabled or infeasible s.
+    Computed in logarithms, so densities may span any range.
+    """
+    import numpy as np
+
+    p_light, p_camera = np.asarray(p_light, dtype=np.float64), np.asarray(p_camera, dtype=np.float64)
+    k = p_light.shape[0] - 1
+    enabled = BdptWeights(strategies=strategies).enabled
+    log_l, log_c = np.log(p_light), np.log(p_camera)
+    log_nee = log_l[0] if p_nee is None else np.log(np.asarray(p_nee, dtype=np.float64))
+    ok = feasible(delta)
+    logs = []
+    for s in range(k + 1):
+        kind = strategy_kind(s, k + 1 - s)
+        log_p = log_l[:s].sum(axis=0) + log_c[s:].sum(axis=0)
+        if kind == "nee":
+            log_p = log_p - log_l[0] + log_nee
+        if kind == "light":
+            log_p = log_p + np.log(light_paths)
+        usable = ok[s] & (kind in enabled)
+        logs.append(np.where(usable, beta * log_p, -np.inf))
+    logs = np.array(logs)
+    top = logs.max(axis=0)
+    top = np.where(np.isfinite(top), top, 0.0)
+    terms = np.exp(logs - top)
+    total = terms.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(total > 0, terms / total, 0.0)
