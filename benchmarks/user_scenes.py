@@ -49,7 +49,7 @@ sys.path.insert(0, os.path.join(ROOT, "tests"))
 import mitsuba_lab  # noqa: E402  (points Dr.Jit at libLLVM first; selects llvm_ad_rgb)
 import mitsuba as mi  # noqa: E402
 import user_scenes as us  # noqa: E402
-from agreement import renders, z_scores  # noqa: E402
+from agreement import pixel_problem, renders, z_scores  # noqa: E402
 from mitsuba_lab.metrics import rel_mse  # noqa: E402
 from mitsuba_lab.scene import (SceneTraits, equivalence_reason, equivalent_strategies,  # noqa: E402
                                make_integrator, strategy_applicability)
@@ -61,16 +61,6 @@ Z_FULL = 7.0
 Z_QUICK = 6.5          # ~2500 z-scores, as the test suite
 PHOTON_FALL = 0.3
 PHOTON_RELMSE = 0.1
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-
-
-def pixel_problem(stack, spectral: bool) -> str:
-    """'' when every pixel is finite and non-negative (spectral: non-negative luminance)."""
-    if not np.all(np.isfinite(stack)):
-        return f"{int(np.sum(~np.isfinite(stack)))} NaN/Inf"
-    values = stack @ LUMINANCE if spectral else stack
-    floor = -1e-6 * max(float(np.abs(values).max()), 1.0)
-    return f"negative ({values.min():.2g})" if values.min() < floor else ""
 
 
 def short_error(err: Exception) -> str:
@@ -115,8 +105,9 @@ class Table:
             ref_spp = self.args.ref_scale * self.spp(name)
             ref_scene = us.load(self.assets, name, "independent", ref_spp)
             ref = renders(ref_scene, make_integrator("path", {"max_depth": depth}), ref_spp, self.seeds(10_000))
-            if pixel_problem(ref, spectral):
-                self.errors.append(f"{variant} {name}: Mitsuba's path: {pixel_problem(ref, spectral)} pixels")
+            ref_problem = pixel_problem(ref, spectral)
+            if ref_problem:
+                self.errors.append(f"{variant} {name}: Mitsuba's path: {ref_problem}")
             traits = SceneTraits.from_scene(ref_scene)
             tracers = [e for e in PATH_TRACERS if strategy_applicability(traits, e, {"max_depth": depth})[0]]
             same = equivalent_strategies(traits, {e: (e, {"max_depth": depth}) for e in tracers})

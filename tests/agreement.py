@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mitsuba_lab.metrics import z_score
+from mitsuba_lab.metrics import luminance, z_score
 from mitsuba_lab.render import render
 
 BLOCK = 8
@@ -52,3 +52,18 @@ def z_scores(stack_a: np.ndarray, stack_b: np.ndarray) -> Agreement:
     block_z, _, _ = z(block_means)
     image_z, mean_a, mean_b = z(lambda img: img.mean(axis=(0, 1)))
     return Agreement(block_z, image_z, (mean_a - mean_b) / np.maximum(np.abs(mean_b), 1e-12))
+
+
+def pixel_problem(stack: np.ndarray, spectral: bool) -> str:
+    """'' when every pixel is finite and non-negative, else what is wrong. In a spectral variant
+    the RGB film turns each sample's wavelengths into XYZ and then linear sRGB, which is negative
+    outside the sRGB gamut (Mitsuba's `path` does it too); its luminance Y is a non-negative
+    integral of the spectrum, so there Y is checked instead (down to float rounding)."""
+    if not np.all(np.isfinite(stack)):
+        return f"{int(np.sum(~np.isfinite(stack)))} NaN/Inf pixel values"
+    values = luminance(stack) if spectral else stack
+    floor = -1e-6 * max(float(np.abs(values).max()), 1.0) if spectral else 0.0   # Y: float rounding
+    if values.min() < floor:
+        return (f"negative {'luminance' if spectral else 'pixels'} (min {values.min():.3g}, "
+                f"{int(np.sum(values < floor))} values)")
+    return ""

@@ -60,6 +60,7 @@ import time
 import numpy as np
 
 from . import metrics
+from .metrics import luminance
 from .check_report import format_table, format_verdicts, verdict_kind, write_csv, write_html
 from .check_verdicts import (LADDER_SEED, LADDER_SPLITS, Rung, Twin, Verdict, empty_pixels, judge,
                              ladder_factors, path_off_note, twin_status)
@@ -75,7 +76,6 @@ STRATEGIES = {
 }
 REFERENCE = "path"
 #: Luminance weights (Rec. 709 primaries) of R, G, B.
-LUMINANCE = (0.2126, 0.7152, 0.0722)
 FIREFLY_WINDOW = 5
 FIREFLY_FLOOR = 0.01
 
@@ -134,10 +134,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 # -- Measurements (pure numpy) ----------------------------------------------------------------
-
-def luminance(image: np.ndarray) -> np.ndarray:
-    return image[..., 0] * LUMINANCE[0] + image[..., 1] * LUMINANCE[1] + image[..., 2] * LUMINANCE[2]
-
 
 def firefly_count(image: np.ndarray, k: float, floor: float) -> int:
     """Pixels whose luminance exceeds k * max(5x5 local median, floor) (module doc)."""

@@ -318,3 +318,14 @@ def variance_standard_error(samples) -> float:
     m2 = np.mean(centred**2)
     m4 = np.mean(centred**4)
     return float(math.sqrt(max(m4 - m2**2 * (n - 3) / (n - 1), 0.0) / n))
+
+
+#: Rec. 709 / linear-sRGB luminance weights (Y of a linear sRGB colour).
+LUMINANCE = (0.2126, 0.7152, 0.0722)
+
+
+def luminance(image: np.ndarray) -> np.ndarray:
+    """Y of the last axis' linear sRGB channels (a one-channel image is its own luminance)."""
+    if np.shape(image)[-1] == 1:
+        return image[..., 0]
+    return image[..., 0] * LUMINANCE[0] + image[..., 1] * LUMINANCE[1] + image[..., 2] * LUMINANCE[2]

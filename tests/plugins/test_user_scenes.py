@@ -43,7 +43,7 @@ import pytest
 
 import mitsuba_lab
 import user_scenes as us
-from agreement import renders, z_scores
+from agreement import pixel_problem, renders, z_scores
 from mitsuba_lab.metrics import rel_mse
 from mitsuba_lab.scene import SceneTraits, make_integrator, strategy_applicability
 
@@ -65,7 +65,6 @@ SPP = {name: 8 for name in SCENE_NAMES} | {"spot_and_directional": 16}
 #: tracers on a non-square film, and delta lights only (two path tracers) with a crop window.
 OTHER_VARIANT_SCENES = ("textured_mesh_room", "spot_and_directional")
 #: Linear sRGB -> luminance Y (Rec. 709 primaries, as Mitsuba's film).
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 _scenes: dict = {}
 _references: dict = {}
@@ -95,15 +94,9 @@ def scene(assets, name, sampler="independent"):
 
 
 def check_pixels(stack, what):
-    """No NaN, no Inf, no negative pixel. A spectral variant's RGB film turns each sample's
-    wavelengths into XYZ and then linear sRGB, which is negative outside the sRGB gamut (Mitsuba's
-    `path` does it too, at the same seeds); its luminance Y (the film's Y = 0.2126 R + 0.7152 G
-    + 0.0722 B) is a non-negative integral of the spectrum, so there Y is checked instead."""
-    assert np.all(np.isfinite(stack)), f"{what}: {int(np.sum(~np.isfinite(stack)))} NaN/Inf pixel values"
-    values = stack @ LUMINANCE if mi.variant() == SPECTRAL else stack
-    floor = -1e-6 * max(float(np.abs(values).max()), 1.0)      # float rounding of the conversion
-    assert values.min() >= floor, (f"{what}: negative {'luminance' if mi.variant() == SPECTRAL else 'pixels'} "
-                                   f"(min {values.min():.3g}, {int(np.sum(values < floor))} values)")
+    """No NaN, no Inf, no negative pixel (spectral: no negative luminance; ``pixel_problem``)."""
+    problem = pixel_problem(stack, mi.variant() == SPECTRAL)
+    assert not problem, f"{what}: {problem}"
 
 
 def reference(assets, name):
