@@ -161,6 +161,52 @@ LAB_PHOTON = (
     PATH_TRACER[2],                                   # hide_emitters, Mitsuba's meaning
 )
 
+#: lab_bdpt's strategy kinds (``bdpt/weights.py``) and the named subsets of them.
+BDPT_KINDS = ("hit", "nee", "light", "connect")
+BDPT_PRESETS = {"all": BDPT_KINDS, "camera": ("hit", "nee"), "light": ("light",)}
+
+
+def bdpt_strategy_kinds(value: str) -> tuple[str, ...] | None:
+    """The kinds a ``strategies`` value names (a preset, or kinds joined by '+'), or None."""
+    if value in BDPT_PRESETS:
+        return BDPT_PRESETS[value]
+    kinds = tuple(k.strip() for k in value.split("+"))
+    return kinds if kinds and all(k in BDPT_KINDS for k in kinds) and len(set(kinds)) == len(kinds) else None
+
+
+def bdpt_only_strategy(value: str) -> tuple[int, int] | None:
+    """(s, t) of an ``only_strategy`` value "s,t" (s >= 0, t >= 1, s + t >= 2), () for "", else None."""
+    if value == "":
+        return ()
+    parts = value.split(",")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        return None
+    s, t = (int(p) for p in parts)
+    return (s, t) if t >= 1 and s + t >= 2 else None
+
+
+#: lab_bdpt (bidirectional path tracing).
+LAB_BDPT = (
+    Param("max_depth", int, UNBOUNDED, "longest path in segments (light + camera subpath), -1 unbounded",
+          check=lambda v: v == UNBOUNDED or v >= 1, expected="-1 (unbounded) or an integer >= 1"),
+    replace(PATH_TRACER[1], doc="depth at which Russian roulette starts, on both subpaths"),
+    PATH_TRACER[2],                                   # hide_emitters, Mitsuba's meaning
+    Param("heuristic", str, "power", "MIS heuristic over all strategies of a path",
+          choices=("balance", "power")),
+    Param("beta", float, 2.0, "power-heuristic exponent (1 = balance)",
+          check=lambda v: v > 0 and math.isfinite(v), expected="a finite number > 0"),
+    Param("strategies", str, "all", "strategies used: all, camera (s <= 1), light (t = 1), or kinds "
+          "joined by '+' from hit, nee, light, connect",
+          check=lambda v: bdpt_strategy_kinds(v) is not None,
+          expected="all, camera, light or kinds from hit, nee, light, connect joined by '+'"),
+    Param("max_vertices", int, 1 << 21, "most light-subpath vertices held at once (a render is split "
+          "into passes to fit)", **_int_at_least(1024)),
+    Param("only_strategy", str, "", "render only strategy (s, t), written 's,t', with its MIS weight "
+          "(Veach's per-strategy images); empty = every strategy",
+          check=lambda v: bdpt_only_strategy(v) is not None,
+          expected="empty or 's,t' with s >= 0, t >= 1 and s + t >= 2"),
+)
+
 #: Shared by every lab sampler (``LabSampler``).
 SAMPLER = (
     Param("sample_count", int, 4, "samples per pixel", **_int_at_least(1)),
@@ -189,6 +235,7 @@ _DECLARED: dict[str, tuple[Param, ...]] = {
     "lab_nee": PATH_TRACER,
     "lab_mis": LAB_MIS,
     "lab_photon": LAB_PHOTON,
+    "lab_bdpt": LAB_BDPT,
     "lab_independent": SAMPLER,
     "lab_stratified": LAB_STRATIFIED,
     "lab_halton": LAB_HALTON,
@@ -209,7 +256,7 @@ def plugin_kind(plugin_type: str) -> str | None:
     """'integrator' or 'sampler' for a lab plugin, None for any other name."""
     if plugin_type not in _DECLARED:
         return None
-    return "integrator" if plugin_type in ("lab_naive", "lab_nee", "lab_mis", "lab_photon") else "sampler"
+    return "integrator" if plugin_type in ("lab_naive", "lab_nee", "lab_mis", "lab_photon", "lab_bdpt") else "sampler"
 
 
 # ---------------------------------------------------------------------------

@@ -56,7 +56,8 @@ def test_traits_of_the_stiff_scenes():
     assert traits("scaled_1e4.xml").extent == pytest.approx(2e4 * 3 ** 0.5, rel=0.01)
     assert traits("scaled_1e-4.xml").extent == pytest.approx(2e-4 * 3 ** 0.5, rel=0.01)
     for name in os.listdir(os.path.join(ROOT, "scenes", "stiff")):
-        assert not traits(name).far_clip_problems, name
+        if name.endswith(".xml"):                          # (regions files live there too)
+            assert not traits(name).far_clip_problems, name
 
 
 def test_far_clip_problem_is_found():

@@ -96,6 +96,13 @@ class Estimator:
         return True, ""
 
     @classmethod
+    def unsupported(cls, traits) -> str:
+        """Why the integrator cannot render the scene at all ('' when it can, perhaps leaving
+        some light out, which ``applicability`` says): ``mitsuba-lab render`` then refuses it
+        even with ``--allow-unsupported``."""
+        return ""
+
+    @classmethod
     def equivalence(cls, traits, params: dict) -> tuple[tuple, str]:
         """(key, reason): strategies with equal keys are provably the same estimator on a scene
         with these traits (same distribution of every pixel); ``reason`` says why."""

@@ -150,6 +150,26 @@ def bsdf_mixes_delta_and_smooth(shape) -> bool:
     return flags is not None and bool(flags & int(mi.BSDFFlags.Delta)) and bool(flags & int(mi.BSDFFlags.Smooth))
 
 
+def bsdf_has_delta_component(shape) -> bool:
+    """Whether the shape's BSDF has a delta lobe (mirror, glass, a null pass-through, the
+    delta part of ``plastic``). Unknown for instances: True (conservative)."""
+    flags = _bsdf_flags(shape)
+    return flags is None or bool(flags & int(mi.BSDFFlags.Delta))
+
+
+def bsdf_uses_tangents(shape) -> bool:
+    """Whether the shape's BSDF depends on the surface's tangent directions, not only its
+    normal: an anisotropic lobe, or a normal or bump map (which reads dp/du, dp/dv), nested or
+    not. Unknown (instances): True (conservative)."""
+    bsdf = shape.bsdf() if hasattr(shape, "bsdf") else None
+    if bsdf is None:
+        return not hasattr(shape, "bsdf")
+    if mi.has_flag(bsdf.flags(), mi.BSDFFlags.Anisotropic) or bsdf.class_name() in ("NormalMap", "BumpMap"):
+        return True
+    parts = {part for key in mi.traverse(bsdf).keys() for part in key.split(".")}
+    return bool(parts & {"normalmap", "nested_texture"})
+
+
 def _all_zero(value) -> bool:
     try:
         import numpy as np
@@ -246,6 +266,9 @@ class SceneTraits:
     near_clip: float | None
     far_clip_problems: tuple[str, ...]
     mixed_bsdfs: tuple[str, ...] = ()  # shapes whose BSDF mixes delta and smooth lobes (e.g. plastic)
+    sensor_kinds: tuple[str, ...] = ()  # plugin class of each sensor (PerspectiveCamera, ThinLensCamera, ..)
+    delta_bsdf: bool = False           # some BSDF has a delta lobe (mirror, glass, null, plastic's)
+    tangent_bsdf: bool = True          # some BSDF depends on tangents (anisotropy, normal/bump maps)
 
     @staticmethod
     def from_scene(scene: mi.Scene) -> "SceneTraits":
@@ -275,7 +298,10 @@ class SceneTraits:
                            media=media, bbox_min=lo, bbox_max=hi, far_clip=far, near_clip=near,
                            far_clip_problems=problems,
                            mixed_bsdfs=tuple(_shape_name(s, i) for i, s in enumerate(shapes)
-                                             if bsdf_mixes_delta_and_smooth(s)))
+                                             if bsdf_mixes_delta_and_smooth(s)),
+                           sensor_kinds=tuple(sensor.class_name() for sensor in scene.sensors()),
+                           delta_bsdf=any(bsdf_has_delta_component(s) for s in shapes),
+                           tangent_bsdf=any(bsdf_uses_tangents(s) for s in shapes))
 
     # -- Derived facts ----------------------------------------------------------------
     @property

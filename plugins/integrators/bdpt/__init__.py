@@ -1,11 +1,14 @@
-"""``lab_bdpt`` (bidirectional path tracing), built in steps; not a plugin yet.
+"""``lab_bdpt``: bidirectional path tracing with every (s, t) strategy under one MIS.
 
-* ``weights``: the multiple-importance weights of every (s, t) strategy of a path, computed in
-  O(1) per connection from two running quantities per subpath vertex (Georgiev 2012), plus a
+* ``weights``: the multiple-importance weights of every strategy of a path, computed in O(1)
+  per connection from two running quantities per subpath vertex (Georgiev 2012), plus a
   brute-force reference; no Mitsuba variant needed, on numpy or Dr.Jit arrays.
-* ``light_subpath``: light subpaths in one symbolic loop and the t = 1 strategy (light
-  tracing), with ``render_light_tracing``; checked against Mitsuba's ``ptracer``.
-
-Still to come: storing light vertices, camera subpaths and their connections (s >= 1, t >= 2),
-exact emission and camera densities for the weights of those strategies, and the plugin.
+* ``endpoints``: the emitters' emission and emitter-sampling densities and the sensor's
+  direction density, which the weights need and Mitsuba does not return.
+* ``light_subpath``: light subpaths in one symbolic loop, the t = 1 strategy (light tracing)
+  splatted on the way (``splats``: the film block and its edge correction), and the storage of
+  connectable vertices (``vertices``); ``render_light_tracing`` renders light tracing alone.
+* ``camera_subpath``: camera subpaths and the s = 0, s = 1 and s, t >= 2 strategies.
+* ``integrator``: passes sized to ``max_vertices``, the two images, the plugin; ``estimator``:
+  what lab_bdpt can render, without a variant.
 """

@@ -1,4 +1,4 @@
-"""Light subpaths in one Dr.Jit symbolic loop, and the t = 1 strategy (light tracing).
+"""Light subpaths in one Dr.Jit symbolic loop, their stored vertices, and the t = 1 strategy.
 
 Each lane traces one light subpath x_0, x_1, .. from an emitter (chosen with the scene's
 emitter-sampling distribution, position and direction from ``Emitter.sample_ray``) with
@@ -17,15 +17,15 @@ position cannot be seen and is skipped, as Mitsuba's ``ptracer`` does).
 each carrying an estimate of the total emitted power, the splats of all N sum to spp times the
 image, so each is scaled by 1 / spp (Mitsuba's ``AdjointIntegrator`` normalisation).
 
-The MIS running quantities of ``weights.py`` (``SubpathMis``) are carried per vertex, and the
-splat is multiplied by ``light_to_camera`` / ``emitter_to_camera``. With
-``BdptWeights(strategies="light")`` every weight is 1; the plumbing is there for the full BDPT.
-Densities the light-only weights do not depend on are simplified (see ``_emission_pdfs`` and
-``_camera_pdf``); they must be made exact before other strategies are enabled.
+The MIS running quantities of ``weights.py`` (``SubpathMis``) are carried per vertex, with the
+exact densities of ``endpoints.py``: the emitted ray's position and direction densities, and
+the emitter-sampling density of x_0, which is known once x_1 is (a sphere light's depends on
+the reference point). All cosines in the weights are geometric (area measure), on both
+subpaths, so every strategy's density of a vertex is computed the same way. With ``vertices``
+given, the vertices a connection can end at (smooth BSDF, short enough for a camera vertex to
+join) are stored for the camera subpaths (``vertices.LightVertices``).
 """
 from __future__ import annotations
-
-import math
 
 import drjit as dr
 import mitsuba as mi
@@ -34,31 +34,65 @@ from mitsuba_lab.plugins.integrators import spawn
 from mitsuba_lab.plugins.integrators.photon.tracer import adjoint_correction
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 
+from . import splats
+from .endpoints import EmitterTable, camera_direction_pdf, nee_density
+from .vertices import NONE, LightVertices
 from .weights import BdptWeights, SubpathMis
 
 
-def _finite_or_zero(x):
+def finite_or_zero(x):
     """x where finite, else 0 (a 0 * inf density ratio must not turn a splat into NaN)."""
     return dr.select(dr.isfinite(x), x, 0.0)
 
 
-def _emission_pdfs(emitter, ps, pmf, cos_light):
-    """(pdf_emit, pdf_nee, delta) of an emitted ray, as ``BdptWeights.start_light`` wants them.
-
-    Exact for area emitters (cosine-weighted directions) and point lights (uniform sphere);
-    other emitters get the cosine density too (only other strategies than "light" use it).
-    """
-    delta = mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition)
-    pdf_pos = dr.select(delta, 1.0, ps.pdf)
-    pdf_nee = pmf * pdf_pos
-    pdf_dir = dr.select(delta, 1.0 / (4.0 * math.pi), cos_light / math.pi)
-    return pdf_nee * pdf_dir, pdf_nee, delta
+def check_variant() -> None:
+    """Refuse variants lab_bdpt cannot render yet (one line)."""
+    if mi.is_spectral or mi.is_polarized:
+        # Light and camera subpaths would need the same wavelengths (and Stokes vectors).
+        raise ValueError(f"lab_bdpt: variant '{mi.variant()}' is not supported yet: bidirectional paths "
+                         f"are traced in RGB and mono variants only (use llvm_ad_rgb or llvm_ad_mono)")
 
 
-def _camera_pdf(sensor_weight, dist2):
-    """The sensor's direction density towards a vertex, up to a constant (W_e cos / 1, from the
-    splat weight W_e cos / dist^2); only the light-only weights use it, where it cancels."""
-    return dr.max(mi.unpolarized_spectrum(sensor_weight)) * dist2
+def transported(bsdf, si: mi.SurfaceInteraction3f, wo, active):
+    """What a light-subpath vertex sends along ``wo`` (local) per unit of the flux that reached
+    it from ``si.wi``, the shading-normal correction included (Veach 1997, sec. 5.3):
+
+        f(wi -> wo) |wi . n_s| |wo . n_g| / |wi . n_g|
+
+    The first two factors are the radiance-mode BSDF evaluated with the directions swapped
+    (``si.wi`` = wo), so n_s is whatever normal the BSDF itself uses, a normal or bump map's
+    perturbed one included; an importance-mode evaluation times a correction built from
+    ``si.sh_frame`` would use the unperturbed normal there (2% too dark a floor under a bump
+    map, as Mitsuba's ptracer renders it)."""
+    swapped = mi.SurfaceInteraction3f(si)
+    swapped.wi = wo
+    value = bsdf.eval(mi.BSDFContext(mi.TransportMode.Radiance), swapped, si.wi, active)
+    cos_in = dr.abs(dr.dot(si.n, si.to_world(si.wi)))
+    ratio = dr.abs(dr.dot(si.n, si.to_world(wo))) / cos_in
+    return dr.select(cos_in > 0, value * ratio, 0.0)
+
+
+def reverse_pdf(bsdf, ctx, si: mi.SurfaceInteraction3f, wo, active):
+    """The density of sampling ``si.wi`` at ``si`` when arriving from ``wo`` (local): the
+    direction back along a subpath, as the other side would sample it (``ctx``: its mode)."""
+    si_rev = mi.SurfaceInteraction3f(si)
+    si_rev.wi = wo
+    return bsdf.pdf(ctx, si_rev, si.wi, active)
+
+
+def strategy_mask(only: tuple, s, t):
+    """True where strategy (s, t) is kept: every strategy when ``only`` is (), else only ``only``
+    (``s``, ``t``: Python ints or Dr.Jit UInt32 arrays)."""
+    if not only:
+        return True
+    keep = (s == only[0]) & (t == only[1])
+    return bool(keep) if isinstance(keep, bool) else keep
+
+
+def sensor_pdf(ds: mi.DirectionSample3f, importance):
+    """The sensor's direction density (``endpoints.camera_direction_pdf``) of the direction from
+    the sensor to the reference point of ``ds`` (``Sensor.sample_direction``'s result)."""
+    return camera_direction_pdf(importance, dr.square(ds.dist))
 
 
 class LightTracer:
@@ -70,41 +104,48 @@ class LightTracer:
     """
 
     def __init__(self, scene: mi.Scene, sensor: mi.Sensor, max_depth: int = -1, rr_depth: int = 5,
-                 weights: BdptWeights | None = None, offset_floor: float = 1.0):
+                 weights: BdptWeights | None = None, offset_floor: float = 1.0, only: tuple = (),
+                 hide_emitters: bool = False):
         if not isinstance(max_depth, int) or max_depth < -1 or max_depth == 0:
             raise ValueError(f"lab_bdpt: max_depth must be -1 (unbounded) or >= 1, got {max_depth!r}")
         if not isinstance(rr_depth, int) or rr_depth < 1:
             raise ValueError(f"lab_bdpt: rr_depth must be an integer >= 1, got {rr_depth!r}")
-        if mi.is_spectral or mi.is_polarized:
-            # The s = 1 splat evaluates L_e at the subpath's wavelengths without their density.
-            raise ValueError(f"lab_bdpt: light tracing supports RGB and mono variants only so far, "
-                             f"not {mi.variant()}")
-        if any(mi.has_flag(e.flags(), mi.EmitterFlags.Infinite) for e in scene.emitters()):
-            raise ValueError("lab_bdpt: light tracing does not support infinite emitters (envmap, "
-                             "constant, directional) yet")
+        check_variant()
         self.scene, self.sensor = scene, sensor
         self.max_depth = max_depth
         self.rr_depth = rr_depth
         self.weights = weights if weights is not None else BdptWeights(strategies="light")
         self.floor = offset_floor
-
-    @staticmethod
-    def _splat(block, ds, wavelengths, value, active):
-        """Add ``value`` to ``block`` at the sensor sample's film position (weight channel 0:
-        splats are not normalised per pixel, as in Mitsuba's ``ptracer``)."""
-        pos = ds.uv + mi.Vector2f(block.offset())
-        block.put(pos, wavelengths, value, dr.select(active, 1.0, 0.0), 0.0, active)
-
-    def _visible(self, it, ds, active):
-        """The sensor sample is usable and not occluded from ``it``."""
-        active = active & (ds.pdf > 0)
-        return active & ~self.scene.ray_test(spawn.spawn_ray_to(it, ds.p, self.floor), active)
+        self.table = EmitterTable(scene)
+        self.only = only                     # () or the one strategy (s, t) to splat
+        self.hide_emitters = hide_emitters   # camera rays pass through area emitters
 
     @dr.syntax
-    def trace(self, count: int, seed: int, block: mi.ImageBlock, sample_scale: float):
-        """Trace ``count`` light subpaths (PCG32 stream per lane from ``seed``) and splat every
-        t = 1 connection into ``block``. Returns the number of surface vertices reached."""
-        scene, sensor, w = self.scene, self.sensor, self.weights
+    def _visible(self, it, ds, active):
+        """The sensor sample is usable and not occluded from ``it`` (with ``hide_emitters``, area
+        emitters on the way do not occlude: the camera sees through them)."""
+        active = active & (ds.pdf > 0)
+        ray = spawn.spawn_ray_to(it, ds.p, self.floor)
+        if dr.hint(not self.hide_emitters, mode="scalar"):
+            return active & ~self.scene.ray_test(ray, active)
+        pi = self.scene.ray_intersect_preliminary(ray, coherent=False, active=active)
+        through = active & pi.is_valid() & (pi.shape.emitter() != None)  # noqa: E711 (pointer test)
+        while dr.hint(through, max_iterations=-1, label="lab_bdpt through emitters"):
+            si = pi.compute_surface_interaction(ray, mi.RayFlags.Minimal, through)
+            ray = spawn.spawn_ray_to(si, ds.p, self.floor)
+            pi = self.scene.ray_intersect_preliminary(ray, coherent=False, active=through)
+            through &= pi.is_valid() & (pi.shape.emitter() != None)  # noqa: E711
+        return active & ~pi.is_valid()
+
+    @dr.syntax
+    def trace(self, count: int, seed: int, block: mi.ImageBlock, sample_scale: float,
+              vertices: LightVertices | None = None):
+        """Trace ``count`` light subpaths (PCG32 stream per lane from ``seed``), splat every t = 1
+        connection into ``block`` and, with ``vertices``, store the connectable vertices.
+
+        Returns (surface vertices reached (UInt32[1]), stores attempted (UInt32[1]), each lane's
+        last stored slot (``vertices.NONE`` when none))."""
+        scene, sensor, w, table = self.scene, self.sensor, self.weights, self.table
         index = dr.arange(mi.UInt32, count)
         s = dr.opaque(mi.UInt32, seed & 0xFFFFFFFF)
         rng = mi.PCG32(count)
@@ -120,31 +161,36 @@ class LightTracer:
         sample_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
         sample_dir = mi.Point2f(rng.next_float32(), rng.next_float32())
         ray, ray_weight = emitter.sample_ray(time, u_wav, sample_pos, sample_dir)
-        # The same position sample gives x_0 again, with its area density and normal.
+        # The same position sample gives x_0 again, with its area density and normal (an
+        # emitter at infinity has no position: its x_0 is the direction, see endpoints.py).
         ps, pos_weight = emitter.sample_position(time, sample_pos)
         delta_pos = mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition)
-        cos_emit = dr.select(delta_pos, 1.0, dr.abs(dr.dot(ps.n, ray.d)))
-        pdf_emit, pdf_nee, delta = _emission_pdfs(emitter, ps, pmf, cos_emit)
-        mis0 = w.start_light(pdf_emit, pdf_nee, cos_emit, delta)
+        infinite = table.at_infinity(emitter)
+        on_surface = ~delta_pos & ~infinite
+        cos_emit = dr.select(on_surface, dr.abs(dr.dot(ps.n, ray.d)), 1.0)
+        pdf_pos, pdf_dir, delta = table.emission(emitter, cos_emit)
+        pdf_pos = dr.select(on_surface, pmf * ps.pdf, pdf_pos)        # what sample_ray used, exactly
         if dr.hint(self.floor < 1.0, mode="scalar"):
             # An area emitter's ray starts at Mitsuba's absolute offset: use the lab's instead.
             it0 = dr.zeros(mi.Interaction3f)
             it0.p, it0.n = ps.p, ps.n
-            ray.o = dr.select(delta_pos, ray.o, spawn.offset_point(it0, ray.d, self.floor))
+            ray.o = dr.select(on_surface, spawn.offset_point(it0, ray.d, self.floor), ray.o)
+        # x_0 as emitter sampling from x_1 would see it (its density needs x_1: set in the loop)
+        ds_0 = dr.zeros(mi.DirectionSample3f)
+        ds_0.p, ds_0.n, ds_0.uv, ds_0.time, ds_0.emitter = ps.p, ps.n, ps.uv, time, emitter
 
         # ---------------- s = 1, t = 1: the emitter point seen directly ----------------
         si0 = mi.SurfaceInteraction3f(ps, ray.wavelengths)
-        active0 = ~delta_pos & (pmf > 0)
+        active0 = on_surface & (pmf > 0) & strategy_mask(self.only, 1, 1) & (not self.hide_emitters)
         ds0, we0 = sensor.sample_direction(si0, mi.Point2f(rng.next_float32(), rng.next_float32()), active0)
         active0 = self._visible(si0, ds0, active0)
         si0.wi = si0.to_local(ds0.d)
         cos0 = mi.Frame3f.cos_theta(si0.wi)
         active0 &= cos0 > 0
         le0 = emitter.eval(si0, active0)
-        w0 = w.emitter_to_camera(_camera_pdf(we0, dr.square(ds0.dist)), cos0, dr.square(ds0.dist),
-                                 pmf * ps.pdf, delta)
-        value0 = le0 * cos0 * pos_weight * sel_weight * we0 * _finite_or_zero(w0) * scale
-        self._splat(block, ds0, si0.wavelengths, value0, active0)
+        w0 = w.emitter_to_camera(sensor_pdf(ds0, we0), cos0, dr.square(ds0.dist), pdf_pos, delta_pos)
+        value0 = le0 * cos0 * pos_weight * sel_weight * we0 * finite_or_zero(w0) * scale
+        splats.splat(block, ds0.uv, si0.wavelengths, value0, active0)
 
         # ---------------- x_1, x_2, ..: the light subpath ----------------
         beta = mi.Spectrum(ray_weight) * sel_weight
@@ -153,53 +199,80 @@ class LightTracer:
         rr_depth = dr.opaque(mi.UInt32, self.rr_depth)
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
         ctx_rad = mi.BSDFContext(mi.TransportMode.Radiance)
-        dvcm, dvc, first = mi.Float(mis0.dvcm), mi.Float(mis0.dvc), mi.Float(mis0.first)
+        storing = vertices is not None and "connect" in w.enabled
+        stores = dr.zeros(mi.UInt32, 1)
+        capacity = dr.opaque(mi.UInt32, vertices.capacity if storing else 0)
+        last = dr.full(mi.UInt32, NONE, count)
+        dvcm, dvc, first = mi.Float(0), mi.Float(0), mi.Float(1)
         depth = mi.UInt32(0)
-        vertices = mi.UInt32(0)
+        vertices_reached = mi.UInt32(0)
         active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_depth > 1)
         while dr.hint(active, max_iterations=-1, label="lab_bdpt light subpath"):
             si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
             active &= si.is_valid()
-            depth += 1
-            vertices += dr.select(active, 1, 0)
+            vertices_reached += dr.select(active, 1, 0)
             cos_in = dr.abs(dr.dot(si.n, ray.d))
-            mis = w.after_hit(SubpathMis(dvcm, dvc, first), dr.square(si.t), cos_in)
+            dist2 = dr.square(si.t)
+            if depth == 0:
+                # x_0's emitter-sampling density, from x_1 (exact for any shape's sampling)
+                ds_0.d = dr.select(infinite, -ray.d, dr.normalize(ds_0.p - si.p))
+                ds_0.dist = dr.select(infinite, dr.inf, dr.norm(ds_0.p - si.p))
+                pdf_nee = dr.select(delta, pmf, nee_density(scene, si, ds_0, infinite, active & ~delta))
+                pdf_dir_0 = table.emission(emitter, cos_emit, pdf_nee, active)[1]
+                start = w.start_light(pdf_pos * pdf_dir_0, pdf_nee, cos_emit, delta)
+                dvcm, dvc, first = mi.Float(start.dvcm), mi.Float(start.dvc), mi.Float(start.first)
+                dist2 = dr.select(infinite, 1.0, dist2)    # x_0 is a direction: no distance
+            depth += 1
+            mis = w.after_hit(SubpathMis(dvcm, dvc, first), dist2, cos_in)
             bsdf = si.bsdf()
             wi_world = -ray.d
+            smooth = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+            splat_on = smooth & strategy_mask(self.only, depth + 1, 1)
+            if dr.hint(self.hide_emitters, mode="scalar"):
+                splat_on &= si.emitter(scene) == None  # noqa: E711 (the camera sees through emitters)
+
+            # ---------- store x_depth for connections with camera vertices ----------
+            if dr.hint(storing, mode="scalar"):
+                store = smooth & (depth + 2 <= max_depth)
+                slot = dr.scatter_inc(stores, mi.UInt32(0), store)
+                kept = store & (slot < capacity)
+                vertices.store(slot, si, -ray.d, beta, mis, depth, last, kept)
+                last = dr.select(kept, slot, last)
 
             # ---------- t = 1: join x_depth to the sensor ----------
-            smooth = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            ds, we = sensor.sample_direction(si, mi.Point2f(rng.next_float32(), rng.next_float32()), smooth)
-            connect = self._visible(si, ds, smooth)
+            ds, we = sensor.sample_direction(si, mi.Point2f(rng.next_float32(), rng.next_float32()), splat_on)
+            connect = self._visible(si, ds, splat_on)
             wo_cam = si.to_local(ds.d)
-            f_cam = bsdf.eval(ctx, si, wo_cam, connect) * adjoint_correction(si, wi_world, wo_cam)
-            si_rev = mi.SurfaceInteraction3f(si)
-            si_rev.wi = wo_cam
-            pdf_rev_cam = bsdf.pdf(ctx_rad, si_rev, si.wi, connect)
-            dist2 = dr.square(ds.dist)
-            w_cam = w.light_to_camera(mis, _camera_pdf(we, dist2), dr.abs(dr.dot(si.n, ds.d)),
-                                      dist2, pdf_rev_cam)
-            value = beta * f_cam * we * _finite_or_zero(w_cam) * scale
-            self._splat(block, ds, si.wavelengths, value, connect)
+            f_cam = transported(bsdf, si, wo_cam, connect)
+            pdf_rev_cam = reverse_pdf(bsdf, ctx_rad, si, wo_cam, connect)
+            w_cam = w.light_to_camera(mis, sensor_pdf(ds, we), dr.abs(dr.dot(si.n, ds.d)),
+                                      dr.square(ds.dist), pdf_rev_cam)
+            value = beta * f_cam * we * finite_or_zero(w_cam) * scale
+            splats.splat(block, ds.uv, si.wavelengths, value, connect)
 
             # ---------- adjoint BSDF sampling ----------
             active &= depth + 1 < max_depth
             bs, bsdf_weight = bsdf.sample(ctx, si, rng.next_float32(),
                                           mi.Point2f(rng.next_float32(), rng.next_float32()), active)
-            beta *= bsdf_weight * adjoint_correction(si, wi_world, bs.wo)
-            si_rev = mi.SurfaceInteraction3f(si)
-            si_rev.wi = bs.wo
-            pdf_rev = bsdf.pdf(ctx_rad, si_rev, si.wi, active)
-            mis = w.scatter_light(mis, bs.pdf, pdf_rev, dr.abs(mi.Frame3f.cos_theta(bs.wo)),
-                                  mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta))
-            dvcm, dvc, first = _finite_or_zero(mis.dvcm), _finite_or_zero(mis.dvc), mi.Float(mis.first)
-            ray = spawn.spawn_ray(si, si.to_world(bs.wo), self.floor)
+            wo_world = si.to_world(bs.wo)
+            # smooth lobes: the exact transported value over the density; a delta lobe has no
+            # value to evaluate, and its sample weight with the correction is exact without maps
+            delta_lobe = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+            smooth_weight = transported(bsdf, si, bs.wo, active & ~delta_lobe) / dr.maximum(bs.pdf, 1e-30)
+            beta *= dr.select(delta_lobe, bsdf_weight * adjoint_correction(si, wi_world, bs.wo),
+                              dr.select(bs.pdf > 0, smooth_weight, 0.0))
+            pdf_rev = reverse_pdf(bsdf, ctx_rad, si, bs.wo, active)
+            mis = w.scatter_light(mis, bs.pdf, pdf_rev, dr.abs(dr.dot(si.n, wo_world)), delta_lobe)
+            dvcm, dvc, first = finite_or_zero(mis.dvcm), finite_or_zero(mis.dvc), mi.Float(mis.first)
+            ray = spawn.spawn_ray(si, wo_world, self.floor)
 
             beta_max = dr.max(mi.unpolarized_spectrum(beta))
             active &= (beta_max > 0) & dr.isfinite(beta_max)
             beta, survives = russian_roulette(beta, rng.next_float32(), depth >= rr_depth, start=beta_max0)
             active &= survives
-        return dr.sum(vertices)
+        reached = dr.zeros(mi.UInt32, 1)              # summed lazily: dr.sum would launch the loop alone
+        dr.scatter_reduce(dr.ReduceOp.Add, reached, vertices_reached, 0, mode=dr.ReduceMode.Local)
+        return reached, stores, last
 
 
 def render_light_tracing(scene: mi.Scene, sensor: mi.Sensor | int = 0, seed: int = 0, spp: int = 1,
@@ -217,15 +290,11 @@ def render_light_tracing(scene: mi.Scene, sensor: mi.Sensor | int = 0, seed: int
         raise ValueError(f"lab_bdpt: spp must be an integer >= 1, got {spp!r}")
     floor = spawn.offset_floor(SceneTraits.from_scene(scene))
     film = sensor.film()
-    film.prepare([])
-    block = film.create_block(mi.ScalarVector2u(0), True, False)
-    block.set_offset(film.crop_offset())
-    block.set_coalesce(False)
+    block = splats.new_block(film)
     if scene.emitters():
         tracer = LightTracer(scene, sensor, max_depth, rr_depth, weights, floor)
         film_size, crop_size = film.size(), film.crop_size()
         count = film_size[0] * film_size[1] * spp
         sample_scale = crop_size[0] * crop_size[1] / count
         tracer.trace(count, seed, block, sample_scale)
-    film.put_block(block)
-    return film.develop()
+    return splats.develop(film, block)

@@ -48,8 +48,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-KINDS = ("hit", "nee", "light", "connect")
-PRESETS = {"all": KINDS, "camera": ("hit", "nee"), "light": ("light",)}
+from mitsuba_lab.plugins.params import BDPT_KINDS as KINDS, BDPT_PRESETS as PRESETS, bdpt_strategy_kinds
 
 
 class SubpathMis(NamedTuple):
@@ -70,6 +69,14 @@ def _select(mask, a, b):
     import numpy as np
 
     return np.where(mask, a, b)
+
+
+def _gate(flag, x):
+    """flag * x, and exactly 0 where flag is 0 even if x is inf or NaN there (a density only a
+    disabled strategy needs may be unusable, and must not spoil the enabled ones' weights)."""
+    if isinstance(flag, (int, float)):
+        return flag * x if flag else 0.0
+    return _select(flag != 0, flag * x, 0.0 * flag)
 
 
 def strategy_kind(s: int, t: int) -> str:
@@ -98,8 +105,8 @@ class BdptWeights:
             raise ValueError(f"lab_bdpt: the power heuristic's exponent beta must be > 0, got {beta}")
         if not light_paths > 0:
             raise ValueError(f"lab_bdpt: light_paths must be > 0, got {light_paths}")
-        kinds = PRESETS.get(strategies, strategies) if isinstance(strategies, str) else tuple(strategies)
-        if isinstance(kinds, str) or not kinds or any(k not in KINDS for k in kinds):
+        kinds = bdpt_strategy_kinds(strategies) if isinstance(strategies, str) else tuple(strategies)
+        if kinds is None or not kinds or any(k not in KINDS for k in kinds):
             raise ValueError(f"lab_bdpt: strategies must be one of {', '.join(PRESETS)} or a non-empty "
                              f"subset of {', '.join(KINDS)}, got {strategies!r}")
         self.beta = 1.0 if heuristic == "balance" else float(beta)
@@ -125,6 +132,10 @@ class BdptWeights:
         """Enable factor of the innermost ratio ``state.dvcm`` stands for."""
         return state.first * self.e[start_kind] + (1.0 - state.first) * self.e["connect"]
 
+    def _gated(self, state: SubpathMis, start_kind: str):
+        """``state.dvcm`` times its enable factor (0 for a disabled kind, whatever dvcm is)."""
+        return _gate(self._flag(state, start_kind), state.dvcm)
+
     # -- starting and extending subpaths ---------------------------------------------------
 
     def start_light(self, pdf_emit, pdf_nee, cos_light, delta=False) -> SubpathMis:
@@ -138,7 +149,7 @@ class BdptWeights:
         camera subpath can hit it.
         """
         dvcm = self._m(pdf_nee / pdf_emit)
-        dvc = _select(delta, 0.0 * dvcm, self.e["hit"] * self._m(cos_light / pdf_emit))
+        dvc = _select(delta, 0.0 * dvcm, _gate(self.e["hit"], self._m(cos_light / pdf_emit)))
         return SubpathMis(dvcm, dvc, 1.0)
 
     def start_camera(self, pdf_cam) -> SubpathMis:
@@ -154,7 +165,7 @@ class BdptWeights:
 
     def _scatter(self, state, pdf_fwd, pdf_rev, cos_out, delta, start_kind):
         """Shared by both sides; only the kind of the subpath's first ratio differs."""
-        folded = self._m(cos_out / pdf_fwd) * (state.dvc * self._m(pdf_rev) + self._flag(state, start_kind) * state.dvcm)
+        folded = self._m(cos_out / pdf_fwd) * (state.dvc * self._m(pdf_rev) + self._gated(state, start_kind))
         dvc = _select(delta, state.dvc * self._m(cos_out), folded)
         dvcm = _select(delta, 0.0 * folded, self._m(1.0 / pdf_fwd))
         return SubpathMis(dvcm, dvc, 0.0 * state.first)
@@ -178,8 +189,9 @@ class BdptWeights:
         along the segment; ``pdf_pos``: the emission position density of the point (used when
         the emitter is the first camera vertex, where the competitor is light tracing)."""
         first = camera.first
-        inner = first * self.e["light"] * self._m(pdf_pos) + (1.0 - first) * self.e["nee"] * self._m(pdf_nee)
-        w_camera = inner * camera.dvcm + self._m(pdf_emit) * camera.dvc
+        inner = _gate(first * self.e["light"], self._m(pdf_pos)) + _gate((1.0 - first) * self.e["nee"],
+                                                                         self._m(pdf_nee))
+        w_camera = _gate(inner, camera.dvcm) + self._m(pdf_emit) * camera.dvc
         return self.e["hit"] / (1.0 + w_camera)
 
     def nee(self, camera: SubpathMis, pdf_nee, pdf_emit, cos_light, cos_cam, dist2,
@@ -190,8 +202,8 @@ class BdptWeights:
         of the direction to the emitter, ``pdf_cam_rev``: of the direction back along the camera
         subpath given the emitter's; ``delta``: delta emitter (it cannot be hit)."""
         p_cam0 = pdf_cam_fwd * cos_light / dist2
-        w_light = _select(delta, 0.0 * p_cam0, self.e["hit"] * self._m(p_cam0 / pdf_nee))
-        inner = self._flag(camera, "light") * camera.dvcm + camera.dvc * self._m(pdf_cam_rev)
+        w_light = _select(delta, 0.0 * p_cam0, _gate(self.e["hit"], self._m(p_cam0 / pdf_nee)))
+        inner = self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev)
         w_camera = self._m(pdf_emit * cos_cam / (dist2 * pdf_nee)) * inner
         return self.e["nee"] / (w_light + 1.0 + w_camera)
 
@@ -202,9 +214,9 @@ class BdptWeights:
         camera vertex, ``pdf_light_rev``: of the direction back along the light subpath given
         that one; ``pdf_cam_*`` likewise; ``cos_*``: |cos| at each end; ``dist2``."""
         w_light = self._m(pdf_cam_fwd * cos_light / dist2) * (
-            self._flag(light, "nee") * light.dvcm + light.dvc * self._m(pdf_light_rev))
+            self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
         w_camera = self._m(pdf_light_fwd * cos_cam / dist2) * (
-            self._flag(camera, "light") * camera.dvcm + camera.dvc * self._m(pdf_cam_rev))
+            self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev))
         return self.e["connect"] / (w_light + 1.0 + w_camera)
 
     def light_to_camera(self, light: SubpathMis, pdf_cam, cos_light, dist2, pdf_light_rev):
@@ -213,14 +225,14 @@ class BdptWeights:
         light vertex, ``pdf_light_rev``: density at the light vertex of the direction back along
         the light subpath given the sensor's."""
         w_light = self._m(pdf_cam * cos_light / (dist2 * self.light_paths)) * (
-            self._flag(light, "nee") * light.dvcm + light.dvc * self._m(pdf_light_rev))
+            self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
         return self.e["light"] / (1.0 + w_light)
 
     def emitter_to_camera(self, pdf_cam, cos_light, dist2, pdf_pos, delta=False):
         """t = 1, s = 1: an emitted point joined to the sensor directly (``pdf_pos``: its emission
         position density; infinite emitter: its direction density, with cos_light = dist2 = 1)."""
         ratio = pdf_cam * cos_light / (dist2 * self.light_paths * pdf_pos)
-        w_light = _select(delta, 0.0 * ratio, self.e["hit"] * self._m(ratio))
+        w_light = _select(delta, 0.0 * ratio, _gate(self.e["hit"], self._m(ratio)))
         return self.e["light"] / (1.0 + w_light)
 
 

@@ -151,6 +151,8 @@ def run(args, out) -> int:
     params = spec.params
     integrator = scenes.make_integrator(kind, params)
     notes, unsupported = render_warnings(scene, kind, params)
+    if unsupported and unsupported == cannot_run(scene, kind):
+        raise LabError(unsupported)                       # no light left out: nothing to render
     if unsupported and not args.allow_unsupported:
         raise LabError(f"{unsupported} (--allow-unsupported renders it anyway)")
     if unsupported:
@@ -186,6 +188,15 @@ def render_warnings(scene, kind: str, params: dict) -> tuple[list[str], str]:
     ok, reason = strategy_applicability(traits, kind, params)
     notes = traits.warnings(media=ok)           # an unsupported lab integrator names the media itself
     return notes, "" if ok else reason
+
+
+def cannot_run(scene, kind: str) -> str:
+    """Why a lab integrator cannot render the scene at all, even with light left out ('')."""
+    from ..plugins.integrators.estimator import lookup
+    from ..scene import SceneTraits
+
+    estimator = lookup(kind)
+    return estimator.unsupported(SceneTraits.from_scene(scene)) if estimator is not None else ""
 
 
 def describe_settings(settings: dict) -> str:

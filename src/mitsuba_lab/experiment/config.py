@@ -79,6 +79,17 @@ class ReferenceSpec:
 
 
 @dataclass(frozen=True)
+class StrategyGridSpec:
+    """``[report.strategy_grid]``: lab_bdpt's per-strategy (s, t) images of one scene for path
+    lengths k = 1..max_length (``strategy_grid``)."""
+    scene: str                      # a [scenes] name
+    strategy: str                   # a [strategies] name of type lab_bdpt
+    max_length: int                 # K: rows k = 1..K; the grid renders with max_depth = K
+    spp: int
+    resolution: int | None          # square film override, or None for the scene's
+
+
+@dataclass(frozen=True)
 class Config:
     name: str
     source: str
@@ -94,6 +105,7 @@ class Config:
     reference: ReferenceSpec
     metrics: tuple[str, ...]
     cluster: str | None = None      # Dask scheduler address; None = run in this process
+    strategy_grid: StrategyGridSpec | None = None
 
 
 class TableReader:
@@ -229,6 +241,36 @@ def _scenes(reader: TableReader, base_dir: str) -> tuple[SceneSpec, ...]:
     return tuple(scenes)
 
 
+#: Longest path length a strategy grid may show: K (K + 3) / 2 strategy renders (each compiles its own
+#: kernel) and the full image.
+GRID_MAX_LENGTH = 8
+GRID_INTEGRATOR = "lab_bdpt"
+
+
+def _strategy_grid(reader: TableReader, scenes, strategies) -> StrategyGridSpec | None:
+    """``[report.strategy_grid]``, checked against the config's scenes and strategies."""
+    if "strategy_grid" not in reader.table:
+        return None
+    grid = reader.sub("strategy_grid")
+    grid.unknown({"scene", "strategy", "max_length", "spp", "resolution"})
+    names = ", ".join(s.name for s in scenes)
+    scene = grid.get("scene", str, check=lambda v: v in {s.name for s in scenes},
+                     expected=f"the name of a [scenes] table ({names})")
+    bdpt = [s.name for s in strategies if s.type == GRID_INTEGRATOR]
+    strategy = grid.get("strategy", str, check=lambda v: v in bdpt,
+                        expected=f"the name of a [strategies] entry of type {GRID_INTEGRATOR} "
+                                 f"({', '.join(bdpt) or 'the config has none'})")
+    spec = next(s for s in strategies if s.name == strategy)
+    if "only_strategy" in spec.params:
+        grid.fail("strategy", f"a {GRID_INTEGRATOR} strategy without 'only_strategy' (the grid sets it per "
+                              f"image), but strategies.{strategy} sets it")
+    max_length = grid.get("max_length", int, check=lambda v: 1 <= v <= GRID_MAX_LENGTH,
+                          expected=f"an integer in [1, {GRID_MAX_LENGTH}] (rows k = 1..max_length)")
+    spp = grid.get("spp", int, 64, check=lambda v: v > 0, expected="a positive integer")
+    resolution = grid.get("resolution", int, None, check=lambda v: v > 0, expected="a positive integer")
+    return StrategyGridSpec(scene, strategy, max_length, spp, resolution)
+
+
 def read_toml(path: str) -> dict:
     """A TOML file's tables, or ConfigError naming the file and what is wrong."""
     if not os.path.isfile(path):
@@ -248,7 +290,7 @@ def load_config(path: str) -> Config:
 def parse_config(data: dict, source: str) -> Config:
     base_dir = os.path.dirname(os.path.abspath(source))
     top = TableReader(source, data, "")
-    top.unknown({"experiment", "reference", "scenes", "strategies", "samplers", "executor"})
+    top.unknown({"experiment", "reference", "scenes", "strategies", "samplers", "executor", "report"})
     exp = top.sub("experiment", {})
     exp.unknown({"name", "output", "spp", "time_budgets", "repetitions", "seed", "max_depth", "metrics"})
     name = exp.get("name", str, os.path.splitext(os.path.basename(source))[0])
@@ -292,12 +334,15 @@ def parse_config(data: dict, source: str) -> Config:
     _check_pass_parameters(top.sub("strategies"), strategies)
     samplers = _plugins(top.sub("samplers"), "sampler") if "samplers" in data else \
         (PluginSpec("independent", "independent", {}),)
+    report = top.sub("report", {})
+    report.unknown({"strategy_grid"})
+    grid = _strategy_grid(report, scenes, strategies)
     return Config(name=name, source=os.path.abspath(source), output=output, scenes=scenes,
                   strategies=strategies, samplers=samplers, spp=spp,
                   time_budgets=tuple(sorted(set(float(b) for b in budgets))), repetitions=repetitions,
                   seed=seed, max_depth=max_depth,
                   reference=ReferenceSpec(ref_plugin, ref_spp, chunks, cache), metrics=tuple(metrics),
-                  cluster=cluster)
+                  cluster=cluster, strategy_grid=grid)
 
 
 def with_depth(spec: PluginSpec, max_depth: int | None) -> PluginSpec:

@@ -23,6 +23,7 @@ from .reference import Reference
 from .report_sections import SectionTables
 from .spectrum import plot_error_spectra, slope_table
 from .store import ResultStore
+from .strategy_grid import grid_section
 
 CSV_COLUMNS = ("point", "scene", "strategy", "sampler", "spp", "budget_s", "seed", "wall_s", "kernel_s",
                "compile_s", "mse", "rel_mse", "flip", "ciede2000", "finite", "negative", "peak_rss_mib", "host",
@@ -72,6 +73,9 @@ class Report(SectionTables):
     def write(self) -> dict[str, str]:
         self.write_csv()
         md = "\n\n".join([self.header()] + [self.scene_section(scene) for scene in self.stats])
+        grid = grid_section(self.store, self.out)
+        if grid:
+            md += "\n" + "\n".join(grid)             # the section starts with an empty line
         paths = write_markdown_page(self.out, self.meta.get("name", "sweep"), md)
         return {"csv": os.path.join(self.folder, "results.csv"), **paths}
 

@@ -10,6 +10,7 @@ from .config import PASS_PARAMETER, PluginSpec, load_config, with_depth
 from .plan import build_plan, estimated_seconds
 from .reference import get_reference, load_cached, reference_key
 from .store import ResultStore
+from .strategy_grid import check_grid, estimated_grid_seconds, grid_renders, render_strategy_grid
 from .validate import validate
 
 
@@ -77,6 +78,7 @@ def sweep_command(config_path: str, output: str | None, dry_run: bool, out, clus
     config = load_config(config_path)
     validate(config)                  # every plugin and scene x sampler, before anything renders
     plan = build_plan(config, assess_scene)
+    check_grid(config, plan)
     folder = output or config.output
     if dry_run:
         print_plan(config, plan, out)
@@ -93,6 +95,12 @@ def sweep_command(config_path: str, output: str | None, dry_run: bool, out, clus
             ref = "cached" if name in cached else "to render"
             print(f"  estimated {duration(s)} for {name} (reference {ref}; pilot "
                   f"{rates[name] / 1e6:.2f} M samples/s with the reference integrator)", file=out)
+        grid = config.strategy_grid
+        if grid:
+            seconds["strategy grid"] = estimated_grid_seconds(config, rates[grid.scene], pixels[grid.scene])
+            print(f"  strategy grid: {grid_renders(config)} renders of {grid.strategy} on {grid.scene}, "
+                  f"{grid.spp} spp, path lengths 1..{grid.max_length}: estimated "
+                  f"{duration(seconds['strategy grid'])}", file=out)
         print(f"estimated total: {duration(sum(seconds.values()))} (lab integrators run at 0.7-1.1x the "
               f"speed of path; compile time not included)", file=out)
         return 0
@@ -117,6 +125,8 @@ def sweep_command(config_path: str, output: str | None, dry_run: bool, out, clus
             bar.begin(info["total"], f"{info['total']} points to run ({info['skipped']} already done)")
         elif event == "point_done":
             bar.step(info["point"])
+        elif event == "grid_cell":
+            bar.message(f"strategy grid: ({info['cell']}), {info['done']}/{info['total']}")
 
     from .report import build_report
     from .run import SweepRunner
@@ -130,6 +140,7 @@ def sweep_command(config_path: str, output: str | None, dry_run: bool, out, clus
         bar.message(f"running points on the Dask cluster at {address}")
     start = time.perf_counter()
     SweepRunner(config, plan, store, progress, executor).run()
+    render_strategy_grid(config, store, progress)      # here: its renders are few, and cheap
     paths = build_report(folder)
     print(f"sweep '{config.name}' done in {duration(time.perf_counter() - start)}; results in "
           f"{paths['csv']}; report: {paths['html']} (and {paths['md']})", file=out)

@@ -1,0 +1,217 @@
+"""Camera subpaths and every strategy with t >= 2 camera vertices, in one symbolic loop.
+
+A camera subpath x_k, x_{k-1}, .. (x_k on the sensor) is traced with BSDF sampling and the
+lab's Russian roulette, as ``lab_mis`` traces its paths. At each camera vertex, with beta the
+camera throughput and w the MIS weight of the strategy (``weights.BdptWeights``):
+
+* s = 0, the vertex lies on an emitter:          L += beta w L_e
+* s = 1, next-event estimation (one shadow ray): L += beta w f_s L_e G / p_nee
+* s >= 2, a connection to each stored vertex y of the lane's own light subpath
+  (``vertices.LightVertices``, walked from its end), one shadow ray each:
+                                                 L += beta f_s(x) G(x, y) f_s*(y) beta_y w
+
+f_s* is the adjoint BSDF at the light vertex (importance transport, with Veach's shading-normal
+correction), and G = 1 / |x - y|^2 (the cosines are in f_s and f_s*). The t = 1 strategy is
+traced on the light side (``light_subpath.py``). Camera lane i is paired with light subpath i
+of the same pass: subpaths of different lanes are independent, so every strategy's estimate is
+unbiased and the weights sum to 1 over the strategies of any path.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+
+from mitsuba_lab.plugins.integrators import spawn
+from mitsuba_lab.plugins.integrators.direct import finite_or_zero as spectrum_or_zero
+from mitsuba_lab.plugins.integrators.roulette import russian_roulette
+
+from .endpoints import EmitterTable, nee_density
+from .light_subpath import finite_or_zero, reverse_pdf, strategy_mask, transported
+from .vertices import NONE, LightVertices
+from .weights import BdptWeights, SubpathMis
+
+
+@dataclass
+class CameraPass:
+    """What the camera subpaths of one pass read: the pass's light vertices (``last``: each light
+    lane's last stored slot), the weights, the emitter table and the sensor's constants
+    (``inv_image_area``: 1 / A', its direction density on the optical axis; ``axis``: the
+    optical axis in world space); ``light_count``: the pass's light subpaths."""
+    vertices: LightVertices
+    last: mi.UInt32
+    weights: BdptWeights
+    table: EmitterTable
+    inv_image_area: float
+    axis: tuple
+    max_depth: int
+    rr_depth: int
+    hide_emitters: bool
+    offset_floor: float
+    emitter_hits: bool
+    only: tuple = ()
+    light_count: int = 0                 # light subpaths of the pass (camera lane i uses i mod it)
+
+
+def sensor_constants(sensor: mi.Sensor) -> tuple[float, tuple]:
+    """(1 / A', optical axis) of a pinhole sensor, from ``sample_direction`` at a point on its
+    axis, where the direction density 1 / (A' cos^3) is 1 / A'."""
+    to_world = sensor.world_transform()
+    near = float(sensor.near_clip()) if hasattr(sensor, "near_clip") else 1e-2
+    far = float(sensor.far_clip()) if hasattr(sensor, "far_clip") else 1e4
+    z = (near * far) ** 0.5
+    it = dr.zeros(mi.Interaction3f)
+    it.p = to_world @ mi.Point3f(0, 0, z)
+    ds, importance = sensor.sample_direction(it, mi.Point2f(0.5, 0.5))
+    value = float(dr.max(mi.unpolarized_spectrum(importance))[0]) * z * z
+    if not value > 0:
+        raise ValueError("lab_bdpt: the sensor's principal point lies outside its crop window, which is "
+                         "not supported")
+    axis = to_world @ mi.Vector3f(0, 0, 1)
+    axis = dr.normalize(axis)
+    return value, (float(axis.x[0]), float(axis.y[0]), float(axis.z[0]))
+
+
+@dr.syntax
+def connect_to_light_subpath(scene, cp: CameraPass, si, bsdf, beta, mis: SubpathMis, depth, head, active):
+    """The s >= 2 strategies at camera vertex ``si`` (``depth`` segments from the sensor): the
+    weighted contributions of its connections to every stored vertex of the light subpath that
+    ends at slot ``head``."""
+    w, floor = cp.weights, cp.offset_floor
+    ctx = mi.BSDFContext(mi.TransportMode.Radiance)
+    ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
+    max_depth = dr.opaque(mi.UInt32, cp.max_depth)
+    L = dr.zeros(mi.Spectrum, dr.width(head))
+    slot = dr.select(active, head, NONE)
+    while dr.hint(slot != NONE, max_iterations=-1, label="lab_bdpt connections"):
+        on = slot != NONE
+        y, bsdf_y, beta_y, mis_y, depth_y, prev = cp.vertices.load(slot, si.wavelengths, on)
+        use = on & (depth_y + 1 + depth <= max_depth) & strategy_mask(cp.only, depth_y + 1, depth + 1)
+        d = y.p - si.p
+        dist2 = dr.squared_norm(d)
+        d = d * dr.rsqrt(dist2)
+        wo_x, wo_y = si.to_local(d), y.to_local(-d)
+        f_x, pdf_x_fwd = bsdf.eval_pdf(ctx, si, wo_x, use)
+        pdf_x_rev = reverse_pdf(bsdf, ctx_imp, si, wo_x, use)
+        f_y = transported(bsdf_y, y, wo_y, use)
+        pdf_y_fwd = bsdf_y.pdf(ctx_imp, y, wo_y, use)
+        pdf_y_rev = reverse_pdf(bsdf_y, ctx, y, wo_y, use)
+        weight = w.connect(mis_y, mis, pdf_y_fwd, pdf_y_rev, pdf_x_fwd, pdf_x_rev,
+                           dr.abs(dr.dot(y.n, d)), dr.abs(dr.dot(si.n, d)), dist2)
+        value = spectrum_or_zero(beta * f_x * f_y * beta_y * (finite_or_zero(weight) / dist2))
+        use &= dr.max(mi.unpolarized_spectrum(value)) > 0
+        use &= ~scene.ray_test(spawn.spawn_ray_to(si, y.p, floor), use)
+        L += dr.select(use, value, 0.0)
+        slot = dr.select(on, prev, NONE)
+    return L
+
+
+@dr.syntax
+def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, ray: mi.Ray3f, active):
+    """(L, valid) of the camera subpaths of the lanes of ``ray``: every strategy with t >= 2."""
+    w, table, floor = cp.weights, cp.table, cp.offset_floor
+    ctx = mi.BSDFContext(mi.TransportMode.Radiance)
+    ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
+    max_depth = dr.opaque(mi.UInt32, cp.max_depth)
+    rr_depth = dr.opaque(mi.UInt32, cp.rr_depth)
+    emitter_hits, hide = cp.emitter_hits, cp.hide_emitters
+
+    lanes = dr.width(ray)
+    lane = dr.arange(mi.UInt32, lanes)
+    if dr.hint(cp.light_count < lanes, mode="scalar"):
+        lane = lane % dr.opaque(mi.UInt32, cp.light_count)   # fewer light subpaths: shared
+    head = dr.gather(mi.UInt32, cp.last, lane)
+    active = mi.Bool(active) & dr.full(mi.Bool, True, lanes)
+    cos_cam = dr.dot(ray.d, mi.Vector3f(*cp.axis))
+    start = w.start_camera(dr.opaque(mi.Float, cp.inv_image_area) / (cos_cam * dr.square(cos_cam)))
+    dvcm, dvc, first = mi.Float(start.dvcm), mi.Float(start.dvc), mi.Float(start.first)
+    L = mi.Spectrum(0)
+    beta = mi.Spectrum(1)
+    eta = mi.Float(1)
+    depth = mi.UInt32(0)
+    prev_it = dr.zeros(mi.Interaction3f)
+    # Mitsuba's meaning: with an environment every pixel is valid, unless hide_emitters
+    valid_ray = active & ((scene.environment() is not None) and not hide)
+    prev_p = mi.Point3f(ray.o)                 # where the segment to the next vertex starts
+    pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
+    if dr.hint(hide and emitter_hits, mode="scalar"):
+        ray, pi = spawn.pass_through_emitters(scene, ray, pi, active, floor)
+
+    if dr.hint(not w.enabled & {"hit", "nee", "connect"}, mode="scalar"):
+        # light tracing alone: the camera ray only tells which pixels see something (alpha)
+        return mi.Spectrum(0), valid_ray | (active & pi.is_valid())
+
+    while dr.hint(active, max_iterations=-1, label="lab_bdpt camera subpath"):
+        si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
+        depth += dr.select(active, 1, 0)       # an escaped ray's segment ends at the environment
+        escaped = active & ~si.is_valid()
+        # (the segment's length from its start: a camera ray that passed through emitters began
+        # at the sensor, not where it last left an emitter; to the environment: 1, see endpoints)
+        mis = w.after_hit(SubpathMis(dvcm, dvc, first), dr.select(escaped, 1.0, dr.squared_norm(si.p - prev_p)),
+                          dr.select(escaped, 1.0, dr.abs(dr.dot(si.n, ray.d))))
+
+        # ---------------- s = 0: the camera subpath hits an emitter ----------------
+        if dr.hint(emitter_hits, mode="scalar"):
+            emitter = si.emitter(scene)        # the environment for an escaped ray
+            hit = active & (emitter != None) & strategy_mask(cp.only, 0, depth + 1)  # noqa: E711 (pointer test)
+            if dr.hint(hide, mode="scalar"):
+                hit &= depth > 1               # the environment seen directly is hidden too
+            infinite = table.at_infinity(emitter, hit)
+            ds = mi.DirectionSample3f(scene, si=si, ref=prev_it)
+            pdf_nee = nee_density(scene, prev_it, ds, infinite, hit & (depth > 1))
+            cos_light = dr.select(infinite, 1.0, dr.abs(dr.dot(si.n, ray.d)))
+            pdf_pos, pdf_dir, _ = table.emission(emitter, cos_light, pdf_nee, hit)
+            # (light tracing never splats an emitter at infinity: no competitor for x_0 there)
+            w_hit = w.hit(mis, pdf_nee, pdf_pos * pdf_dir, dr.select(infinite, 0.0, pdf_pos))
+            L += beta * finite_or_zero(w_hit) * emitter.eval(si, hit)
+        active &= si.is_valid()
+
+        bsdf = si.bsdf(ray)
+        smooth = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+
+        # ---------------- s = 1: next-event estimation (+ the BSDF sample, one call) ----------------
+        active_next = active & (depth < max_depth)
+        nee_on = smooth & active_next & strategy_mask(cp.only, 1, depth + 1)
+        ds, em_weight = spawn.sample_visible_emitter(scene, si, sampler.next_2d(), floor, nee_on)
+        nee_on &= ds.pdf > 0
+        wo = si.to_local(ds.d)
+        f, pdf_fwd, bs, bsdf_weight = bsdf.eval_pdf_sample(ctx, si, wo, sampler.next_1d(), sampler.next_2d(),
+                                                           active_next)
+        pdf_rev = reverse_pdf(bsdf, ctx_imp, si, wo, nee_on)
+        infinite = table.at_infinity(ds.emitter, nee_on)
+        dist2 = dr.select(infinite, 1.0, dr.square(ds.dist))
+        cos_light = dr.select(ds.delta | infinite, 1.0, dr.abs(dr.dot(ds.n, ds.d)))
+        pdf_nee = dr.select(ds.delta, ds.pdf, ds.pdf * cos_light / dist2)   # area (at infinity: solid angle)
+        pdf_pos, pdf_dir, delta = table.emission(ds.emitter, cos_light, pdf_nee, nee_on)
+        w_nee = w.nee(mis, pdf_nee, pdf_pos * pdf_dir, cos_light, dr.abs(dr.dot(si.n, ds.d)), dist2,
+                      pdf_fwd, pdf_rev, delta)
+        L += dr.select(nee_on, spectrum_or_zero(beta * f * em_weight * finite_or_zero(w_nee)), 0.0)
+
+        # ---------------- s >= 2: connections to the light subpath ----------------
+        if dr.hint("connect" in w.enabled, mode="scalar"):
+            L += connect_to_light_subpath(scene, cp, si, bsdf, beta, mis, depth, head,
+                                          smooth & (depth + 2 <= max_depth))
+
+        # ---------------- BSDF sampling (sampled above) ----------------
+        wo_world = si.to_world(bs.wo)
+        pdf_rev = reverse_pdf(bsdf, ctx_imp, si, bs.wo, active_next)
+        mis = w.scatter_camera(mis, bs.pdf, pdf_rev, dr.abs(dr.dot(si.n, wo_world)),
+                               mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta))
+        dvcm, dvc, first = finite_or_zero(mis.dvcm), finite_or_zero(mis.dvc), mi.Float(mis.first)
+        valid_ray |= active & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
+        prev_it = dr.zeros(mi.Interaction3f)
+        prev_it.p, prev_it.n, prev_it.t, prev_it.time = si.p, si.n, si.t, si.time
+        prev_it.wavelengths = si.wavelengths
+        prev_p = mi.Point3f(si.p)
+        ray = spawn.spawn_ray(si, wo_world, floor)
+        beta *= bsdf_weight
+        eta *= bs.eta
+
+        beta_max = dr.max(mi.unpolarized_spectrum(beta))
+        active_next &= (beta_max != 0) & dr.isfinite(beta_max)
+        beta, survives = russian_roulette(beta, sampler.next_1d(), depth >= rr_depth, eta=eta)
+        active_next &= survives
+        pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
+        active = active_next
+    return L, valid_ray

@@ -1,0 +1,75 @@
+"""What ``lab_bdpt`` knows about itself without a Mitsuba variant (``estimator.Estimator``)."""
+from __future__ import annotations
+
+from mitsuba_lab.plugins import params as declarations
+from mitsuba_lab.plugins.integrators.estimator import Estimator
+from mitsuba_lab.plugins.params import bdpt_strategy_kinds
+
+#: Delta emitters whose densities ``endpoints.py`` knows (plugin names, as users write them).
+SUPPORTED_DELTA_EMITTERS = ("point", "spot", "directional")
+
+
+class Bidirectional(Estimator):
+    """lab_bdpt's estimator: bidirectional path tracing with MIS over the enabled strategies."""
+    plugin_name = "lab_bdpt"
+    PARAMETERS = declarations.LAB_BDPT
+    OWN_PARAMETERS = ("heuristic", "beta", "strategies", "max_vertices", "only_strategy")
+
+    @classmethod
+    def applicability(cls, traits, params: dict) -> tuple[bool, str]:
+        """Left out of scenes it cannot render correctly, with the reason:
+
+        * participating media (neither subpath sees them);
+        * emitters whose emission densities ``endpoints.py`` does not know (``projector``, and
+          any plugin of unknown kind);
+        * sensors other than the pinhole ``perspective`` (thin lens, orthographic, ...);
+        * a ``strategies`` subset without the strategies some light of the scene needs: an
+          emitter seen directly needs ``hit`` or ``light`` (an environment: ``hit``), light
+          from delta emitters ``nee`` or ``light`` for its direct part, a scene whose BSDFs
+          are all delta ``hit`` (every other strategy joins at a smooth vertex), and what the
+          camera sees through a delta lobe a camera-side strategy (light tracing alone
+          cannot reach the sensor through one). Within
+          what it can reach a subset is unbiased (the weights are renormalised over it).
+        """
+        problem = cls.media_problem(traits) or cls.unsupported(traits)
+        if problem:
+            return False, problem
+        missing = cls._subset_problem(traits, bdpt_strategy_kinds(params.get("strategies", "all")) or ())
+        if missing:
+            return False, f"lab_bdpt with strategies={params['strategies']} {missing}"
+        return True, ""
+
+    @classmethod
+    def unsupported(cls, traits) -> str:
+        """Why lab_bdpt cannot run on the scene at all ('' if it can): an emitter or sensor
+        whose densities it does not know. (Media and strategy subsets only leave light out.)"""
+        if traits.other_emitters:
+            return ("lab_bdpt does not support emitters of unknown kind (only area, point, spot, "
+                    "directional, constant and envmap)")
+        unsupported = sorted(set(traits.delta_emitters) - set(SUPPORTED_DELTA_EMITTERS))
+        if unsupported:
+            return f"lab_bdpt does not support {', '.join(unsupported)} emitters yet"
+        sensors = getattr(traits, "sensor_kinds", ())
+        if sensors and sensors[0] != "PerspectiveCamera":
+            return f"lab_bdpt supports pinhole (perspective) sensors only so far, not {sensors[0]}"
+        return ""
+
+    @staticmethod
+    def _subset_problem(traits, kinds) -> str:
+        """What light of the scene the enabled strategy kinds cannot reach ('' if none)."""
+        kinds = set(kinds)
+        if not traits.emits_light:
+            return ""
+        if traits.environment_emitters and "hit" not in kinds:
+            return "cannot render the environment seen directly (that needs 'hit')"
+        if traits.area_emitters and not kinds & {"hit", "light"}:
+            return "cannot render emitters seen directly (that needs 'hit' or 'light')"
+        if traits.delta_emitters and not kinds & {"nee", "light"}:
+            return "cannot render direct light from delta emitters (that needs 'nee' or 'light')"
+        if not traits.smooth_bsdf and "hit" not in kinds:
+            return "cannot render a scene whose BSDFs are all delta (that needs 'hit')"
+        if getattr(traits, "delta_bsdf", False) and not kinds & {"hit", "nee", "connect"}:
+            return ("cannot render what the camera sees in mirrors or through glass (light "
+                    "tracing cannot reach the sensor through a delta lobe; that needs 'hit', 'nee' "
+                    "or 'connect')")
+        return ""

@@ -1,0 +1,275 @@
+"""``lab_bdpt``: the driver (passes, the light-vertex buffer, the two images) and the plugin."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+
+import drjit as dr
+import mitsuba as mi
+
+from mitsuba_lab.plugins.integrators import spawn
+from mitsuba_lab.plugins.integrators.support import warn_if_unsupported
+from mitsuba_lab.plugins.params import UNBOUNDED, bdpt_only_strategy
+from mitsuba_lab.plugins.samplers.layout import bind_film_layout
+from mitsuba_lab.plugins.variant import plugin_settings
+from mitsuba_lab.scene import SceneTraits
+
+from . import splats
+from .camera_subpath import CameraPass, sensor_constants, trace_camera_subpaths
+from .estimator import Bidirectional
+from .light_subpath import LightTracer, check_variant
+from .vertices import NONE, LightVertices, vertex_bytes
+from .weights import BdptWeights
+
+#: max_depth = -1 (unbounded) as the loops hold it.
+DEPTH_UNBOUNDED = 0xFFFFFFFF
+#: First guess of stored light vertices per light subpath (then learnt from each pass).
+FIRST_GUESS_VERTICES = 3.0
+
+
+@dataclass
+class BdptStats:
+    """What the last render did (times in seconds, after dr.eval + dr.sync_thread)."""
+    passes: int = 0
+    retraces: int = 0
+    light_subpaths: int = 0
+    light_vertices_reached: int = 0
+    light_vertices_stored: int = 0
+    peak_vertex_bytes: int = 0
+    light_s: float = 0.0
+    camera_s: float = 0.0
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def pass_seed(seed: int, index: int) -> int:
+    """Seed of pass ``index`` (pass 0 keeps the render's seed)."""
+    if index == 0:
+        return seed & 0xFFFFFFFF
+    return int(mi.sample_tea_32(mi.UInt32(seed & 0xFFFFFFFF), mi.UInt32(index))[0][0])
+
+
+class LabBDPTIntegrator(mi.SamplingIntegrator):
+    r"""Bidirectional path tracing (:monosp:`lab_bdpt`)
+
+    Per pass, every pixel sample traces one camera subpath and one light subpath, each with
+    BSDF sampling and Russian roulette (Veach & Guibas 1994; Lafortune & Willems 1993), and
+    every way of building a path from them is a strategy (s light vertices, t camera vertices):
+    s = 0 (the camera subpath hits an emitter), s = 1 (next-event estimation), s >= 2 and t >= 2
+    (a connection between a light and a camera vertex, with a shadow ray), and t = 1 (light
+    tracing: a light vertex joined to the sensor and splatted into the film, as Mitsuba's
+    ``ptracer`` does). Each contribution is weighted by the balance or power heuristic over all
+    strategies of its path (Veach 1997, ch. 10), computed in O(1) per connection from running
+    quantities carried along both subpaths (Georgiev 2012, "Implementing vertex connection and
+    merging"; ``weights.py``), with delta lobes and delta lights handled exactly. Unbiased.
+
+    ============= ====== ========================================================
+    max_depth     int    Longest path in segments, -1 = unbounded, >= 1 otherwise
+                         (1: emitters seen directly) (Default: -1)
+    rr_depth      int    Depth at which Russian roulette starts, on both subpaths,
+                         >= 1 (Default: 5)
+    hide_emitters bool   Mitsuba's meaning: camera rays pass through area emitters
+                         (and so do light tracing's rays to the sensor); emitters
+                         are not seen directly by any strategy (Default: false)
+    heuristic     string ``balance`` | ``power`` (Default: ``power``)
+    beta          float  Exponent of the power heuristic, > 0 (Default: 2)
+    strategies    string ``all``, ``camera`` (s <= 1: unidirectional path tracing
+                         with MIS, lab_mis's estimator), ``light`` (t = 1: light
+                         tracing alone), or kinds from ``hit`` (s = 0), ``nee``
+                         (s = 1), ``light`` (t = 1), ``connect`` (s, t >= 2)
+                         joined by '+'. The weights are renormalised over the
+                         enabled ones, so a subset is unbiased for the light it
+                         can reach. (Default: ``all``)
+    max_vertices  int    Most light-subpath vertices held at once (>= 1024; 88
+                         bytes each in RGB, 124 where a BSDF is anisotropic or
+                         has a normal or bump map). A render whose light subpaths need
+                         more is split into passes of fewer samples per pixel;
+                         when even one sample per pixel does not fit, a pass
+                         traces fewer light subpaths than camera subpaths and
+                         camera sample i uses light subpath i mod N (still
+                         unbiased; neighbouring passes share nothing).
+                         (Default: 2^21, 176-248 MiB)
+    only_strategy string ``s,t``: the image of strategy (s, t) alone, with its
+                         MIS weight (Veach's per-strategy images: over all (s, t)
+                         the images sum to the full one). Empty: all strategies.
+                         (Default: empty)
+    ============= ====== ========================================================
+
+    Handles: area lights (any shape, textured or not), point and spot lights; smooth,
+    delta and mixed BSDFs (``plastic``: connections use the smooth lobes, the delta lobes
+    are followed); shading normals (the adjoint correction on the light side); the
+    pinhole ``perspective`` sensor with any film size and crop window. Refused in one line:
+    spectral and polarized variants, emitters at infinity (``constant``, ``envmap``,
+    ``directional``), other sensors, ``render(develop=False)``, ``samples_per_pass``.
+    Participating media are ignored (one warning). Light-subpath seeds come from the
+    render's seed; each pass has its own.
+
+    Statistics of the last render: ``bdpt_stats()``.
+
+    .. code-block:: python
+
+        {'type': 'lab_bdpt', 'max_depth': 8, 'heuristic': 'power', 'strategies': 'all'}
+    """
+    ESTIMATOR = Bidirectional
+    PARAMETERS = Bidirectional.PARAMETERS
+
+    def __init__(self, props: mi.Properties):
+        name = self.ESTIMATOR.plugin_name
+        values = plugin_settings(name, props, self.PARAMETERS, "integrator")
+        check_variant()
+        if "samples_per_pass" in props:
+            raise ValueError("lab_bdpt: parameter 'samples_per_pass' is not supported: light subpaths are "
+                             "traced per pass, and passes are sized by 'max_vertices'")
+        super().__init__(props)
+        self.values = values
+        self.estimator = self.ESTIMATOR(values)
+        self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
+        self.stats = BdptStats()
+        self.vertices_per_path = FIRST_GUESS_VERTICES
+        self._pass = None                     # CameraPass while a pass's camera subpaths run
+
+    # -- Driver -------------------------------------------------------------------
+
+    def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
+               evaluate: bool = True):
+        if self._pass is not None:
+            # Mitsuba's render(sensor index) calls render(sensor object) back: the pass is set up
+            return mi.SamplingIntegrator.render(self, scene, sensor, seed, spp, develop, evaluate)
+        if not develop:
+            raise ValueError("lab_bdpt: render(develop=False) is not supported: light tracing splats "
+                             "into a film of its own, added to the camera image when developed")
+        traits = SceneTraits.from_scene(scene)
+        problem = self.ESTIMATOR.unsupported(traits)
+        if problem:
+            raise ValueError(problem)
+        warn_if_unsupported(self, traits)         # media, or light a strategy subset cannot reach
+        if isinstance(sensor, int):
+            sensor = scene.sensors()[sensor]
+        seed = int(seed[0]) if hasattr(seed, "__len__") and not isinstance(seed, int) else int(seed)
+        spp = spp or sensor.sampler().sample_count()
+        bind_film_layout(scene, sensor)
+        film = sensor.film()
+        film_px = int(film.size()[0]) * int(film.size()[1])
+        crop_px = int(film.crop_size()[0]) * int(film.crop_size()[1])
+        v = self.values
+        floor = spawn.offset_floor(traits)
+        light_depth = -1 if self.max_depth == DEPTH_UNBOUNDED else self.max_depth
+        only = bdpt_only_strategy(v["only_strategy"])
+        tracer = LightTracer(scene, sensor, light_depth, v["rr_depth"], None, floor, only, v["hide_emitters"])
+        inv_area, axis = sensor_constants(sensor)
+        self.stats = stats = BdptStats()
+        total, done, index = None, 0, 0
+        while done < spp:
+            # light subpaths that fit in max_vertices: film pixels x spp_pass, or fewer, shared
+            fit = max(1, int(v["max_vertices"] / (1.25 * self.vertices_per_path)))
+            spp_pass = max(1, min(spp - done, fit // film_px))
+            count = min(film_px * spp_pass, fit)
+            camera_lanes = crop_px * spp_pass
+            tracer.weights = BdptWeights(v["heuristic"], v["beta"], v["strategies"],
+                                         light_paths=count / camera_lanes)
+            # (opaque: a ratio that changes from pass to pass must not be compiled into the kernels)
+            tracer.weights.light_paths = dr.opaque(mi.Float, count / camera_lanes)
+            light = self._light_pass(tracer, film, count, crop_px / count, pass_seed(seed, index), stats,
+                                     traits.tangent_bsdf)
+            if light is None:                          # did not fit: fewer light subpaths
+                continue
+            block, vertices, last = light
+            self._pass = CameraPass(vertices, last, tracer.weights, tracer.table, inv_area, axis,
+                                    self.max_depth, v["rr_depth"], v["hide_emitters"], floor,
+                                    traits.hittable_emitters, only, count)
+            start = time.perf_counter()
+            try:
+                image = mi.SamplingIntegrator.render(self, scene, sensor, pass_seed(seed, index), spp_pass,
+                                                     True, True)
+            finally:
+                self._pass = None
+            dr.eval(image)
+            dr.sync_thread()
+            stats.camera_s += time.perf_counter() - start
+            image = _add_colour(image, splats.develop(film, block))
+            total = image * (spp_pass / spp) if total is None else total + image * (spp_pass / spp)
+            dr.eval(total)
+            done += spp_pass
+            index += 1
+            stats.passes += 1
+        return total
+
+    def _light_pass(self, tracer, film, count: int, sample_scale: float, seed: int, stats, tangents: bool):
+        """Trace ``count`` light subpaths: (splat block, vertices, last slots), or None when they
+        needed more than ``max_vertices`` (``vertices_per_path`` is updated; the caller retries
+        with fewer)."""
+        if not tracer.weights.enabled & {"light", "connect"}:      # (s <= 1 only: no light subpath)
+            return splats.new_block(film), LightVertices(1), dr.full(mi.UInt32, NONE, count)
+        max_vertices = self.values["max_vertices"]
+        capacity = int(min(max_vertices, math.ceil(1.25 * self.vertices_per_path * count) + 1024))
+        light_seed = seed ^ 0x5BD1E995
+        while True:
+            start = time.perf_counter()
+            block = splats.new_block(film)
+            vertices = LightVertices(capacity, tangents)
+            reached, stores, last = tracer.trace(count, light_seed, block, sample_scale, vertices)
+            dr.eval(block.tensor(), *vertices.arrays(), last, reached, stores)
+            dr.sync_thread()
+            stats.light_s += time.perf_counter() - start
+            n = int(stores[0])
+            stats.peak_vertex_bytes = max(stats.peak_vertex_bytes, capacity * vertex_bytes(tangents))
+            if n <= capacity:
+                break
+            stats.retraces += 1
+            self.vertices_per_path = max(0.25, n / count)
+            if n > max_vertices:
+                if count == 1:
+                    raise ValueError(f"lab_bdpt: one light subpath stored {n} vertices, more than "
+                                     f"max_vertices = {max_vertices}: raise max_vertices or set max_depth")
+                return None
+            capacity = n                               # same seed, same subpaths: now they fit
+        self.vertices_per_path = max(0.25, n / count)
+        stats.light_subpaths += count
+        stats.light_vertices_reached += int(reached[0])
+        stats.light_vertices_stored += n
+        return block, vertices, last
+
+    # -- Camera subpaths ---------------------------------------------------------------
+
+    def sample(self, scene, sampler, ray, medium=None, active=True):
+        """The t >= 2 strategies of one pass (called by Mitsuba's render inside ``render``)."""
+        if self._pass is None:
+            raise ValueError("lab_bdpt: cannot be nested inside another integrator (such as aov or moment) "
+                             "that calls its sample(): its light subpaths are traced per pass by its own "
+                             "render(); render the scene with lab_bdpt directly")
+        L, valid = trace_camera_subpaths(scene, self._pass, sampler, mi.Ray3f(ray), active)
+        return L, valid, []
+
+    # -- Reporting --------------------------------------------------------------------
+
+    def bdpt_stats(self) -> dict:
+        """Statistics of the last render (``BdptStats``), as plain values."""
+        return self.stats.as_dict()
+
+    def settings(self) -> dict:
+        return dict(self.values)
+
+    def to_string(self):
+        fields = ", ".join(f"{k}={v}" for k, v in self.settings().items())
+        return f"LabBDPTIntegrator[{fields}]"
+
+    def aov_names(self):
+        return []
+
+
+def _add_colour(image, splats):
+    """``image`` with the colour channels of the light-tracing ``splats`` added (alpha and any
+    other channel of the film are the camera image's)."""
+    channels = 1 if mi.is_monochromatic else 3
+    if image.shape[2] == channels:
+        return image + splats
+    import numpy as np
+
+    out = np.array(image)
+    out[:, :, :channels] += np.array(splats)[:, :, :channels]
+    return mi.TensorXf(out)
+
+
+mi.register_integrator("lab_bdpt", lambda props: LabBDPTIntegrator(props))

@@ -1,0 +1,318 @@
+"""lab_bdpt (bidirectional path tracing) against Mitsuba, strategy by strategy.
+
+Exact checks (same seed, float rounding): ``strategies="camera"`` (s <= 1) draws the same random
+numbers as lab_mis and reproduces its image; the per-strategy images (``only_strategy``) sum to
+the full image.
+
+Statistical checks: z-scores of 8x8 block means and image means (tests/agreement.py) over 16
+renders a side with disjoint fixed seeds; under agreement each z is about standard normal and
+the bound is |z| <= 5 (at most ~50 z's per comparison: a false failure has probability < 3e-5
+per comparison). Power: the deliberately wrong weight (t = 1 strategy x 1.03) fails the same
+test against a 1024-spp reference (measured: max |z| 12.5; the connection weight x 1.03: 6.2).
+
+Scenes left out of the agreement tests, by design: near_delta_glossy (a GGX 1e-4 lobe: the
+reference's variance is not estimable from 16 renders, as in test_stiff), closed_box_albedo_099
+(unbounded depth in a box of albedo 0.99: the reference's mean is heavy-tailed at any affordable
+spp; only its pixels are checked), and tiny_bright_light against `path` directly: Mitsuba 3.9's
+sphere-light sampling rounds the cone of a sphere of radius 5e-4 seen from 2 units in float32
+(cos theta_max = 1 - 3e-8), and `path` renders it ~28% too bright (twice too bright under the
+light); lab_bdpt is compared with its twin of radius 5e-3 and the same power instead.
+"""
+import os
+import re
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from agreement import pixel_problem, renders, z_scores
+from mitsuba_lab.scene import load_scene, make_integrator
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+Z_BOUND = 5.0
+RES = 24
+SEEDS_LAB = range(16)
+SEEDS_REF = range(1000, 1016)
+MAX_DEPTH = 8
+
+
+def scene_path(name):
+    return os.path.join(ROOT, "scenes", name)
+
+
+def bdpt(**params):
+    return make_integrator("lab_bdpt", {"max_depth": MAX_DEPTH, **params})
+
+
+def path_stack(scene, spp, max_depth=MAX_DEPTH, **params):
+    return renders(scene, make_integrator("path", {"max_depth": max_depth, **params}), spp, SEEDS_REF)
+
+
+def assert_agrees(lab, ref, what):
+    assert pixel_problem(lab, False) == "", f"{what}: {pixel_problem(lab, False)}"
+    result = z_scores(lab, ref)
+    assert result.max_abs_z <= Z_BOUND, (f"{what}: max |z| {result.max_abs_z:.2f}, image z {result.image_z}, "
+                                         f"relative difference {result.rel_diff}")
+
+
+# ---------------------------------------------------------------------------
+# Exact: s <= 1 is lab_mis, and the strategies sum to the image
+# ---------------------------------------------------------------------------
+EXACT_SCENES = ["cornell_box.xml", "veach_mis.xml", "caustic.xml", "stiff/environment_only.xml",
+                "stiff/delta_lights_only.xml", "stiff/light_in_glass.xml"]
+
+
+@pytest.mark.parametrize("name", EXACT_SCENES)
+def test_camera_strategies_reproduce_lab_mis(name):
+    """With s <= 1 only, the camera subpath is lab_mis's path: same sampler dimensions, same
+    Russian roulette, and weights equal to the power heuristic over BSDF and emitter sampling."""
+    scene = load_scene(scene_path(name), res=RES)
+    ours = np.array(mi.render(scene, integrator=bdpt(strategies="camera"), spp=8, seed=3))
+    theirs = np.array(mi.render(scene, integrator=make_integrator("lab_mis", {"max_depth": MAX_DEPTH}),
+                                spp=8, seed=3))
+    np.testing.assert_allclose(ours, theirs, rtol=2e-4, atol=1e-5)
+
+
+def test_strategy_images_sum_to_the_full_image():
+    """Veach's decomposition: over all (s, t) with s + t - 1 = k <= max_depth, the images of
+    ``only_strategy`` (each with its MIS weight) add up to the full render, same seed."""
+    scene = load_scene(scene_path("cornell_box.xml"), res=RES)
+    depth = 3
+    full = np.array(mi.render(scene, integrator=bdpt(max_depth=depth), spp=4, seed=1))
+    total = np.zeros_like(full)
+    for k in range(1, depth + 1):
+        for s in range(k + 1):
+            part = np.array(mi.render(scene, integrator=bdpt(max_depth=depth, only_strategy=f"{s},{k + 1 - s}"),
+                                      spp=4, seed=1))
+            assert (part >= 0).all()
+            total += part
+    np.testing.assert_allclose(total, full, rtol=1e-4, atol=1e-5)
+
+
+# ---------------------------------------------------------------------------
+# In expectation: every strategy, and the subsets, against Mitsuba
+# ---------------------------------------------------------------------------
+AGREEMENT_SCENES = ["cornell_box.xml", "caustic.xml", "veach_mis.xml", "glossy_small_light.xml",
+                    "stiff/all_specular.xml", "stiff/delta_lights_only.xml", "stiff/environment_only.xml",
+                    "stiff/grazing_camera.xml", "stiff/huge_dim_light.xml", "stiff/light_in_glass.xml",
+                    "stiff/scaled_1e4.xml", "stiff/zero_emitters.xml"]
+
+
+@pytest.mark.parametrize("name", AGREEMENT_SCENES)
+def test_agrees_with_mitsuba_path(name):
+    scene = load_scene(scene_path(name), res=RES)
+    lab = renders(scene, bdpt(), 16, SEEDS_LAB)
+    assert_agrees(lab, path_stack(scene, 64), f"lab_bdpt on {name}")
+
+
+USER_SCENES = ["textured_mesh_room", "principled_and_blend", "spot_and_directional", "normal_bump_maps"]
+
+
+@pytest.fixture(scope="module")
+def user_assets(tmp_path_factory):
+    import user_scenes
+
+    return user_scenes.write_assets(str(tmp_path_factory.mktemp("bdpt_user_scenes")))
+
+
+@pytest.mark.parametrize("name", USER_SCENES)
+def test_users_scenes_agree_with_mitsuba_path(user_assets, name):
+    """tests/user_scenes.py's scenes with a pinhole camera: OBJ/PLY meshes, textures, a textured
+    area light, principled and blended BSDFs, spot and directional lights, normal and bump maps
+    (where the light side's shading-normal correction must use the map's normal:
+    ``light_subpath.transported``), non-square films and a crop window."""
+    import user_scenes
+
+    scene = user_scenes.load(user_assets, name)
+    depth = user_scenes.max_depth(name)
+    lab = renders(scene, bdpt(max_depth=depth), 16, SEEDS_LAB)
+    assert_agrees(lab, path_stack(scene, 64, max_depth=depth), f"lab_bdpt on {name}")
+
+
+def test_tiny_scene_agrees_with_its_unscaled_twin():
+    """scenes/stiff/scaled_1e-4.xml is the Cornell box scaled by 1e-4, where Mitsuba's own
+    offsets fail; the lab's shrink with the scene, so lab_bdpt renders it like the box."""
+    tiny = load_scene(scene_path("stiff/scaled_1e-4.xml"), res=RES)
+    box = load_scene(scene_path("cornell_box.xml"), res=RES)
+    assert_agrees(renders(tiny, bdpt(), 16, SEEDS_LAB), path_stack(box, 64), "lab_bdpt on scaled_1e-4")
+
+
+def test_tiny_light_agrees_with_its_larger_twin():
+    """A sphere light of radius 5e-4 against the same light at radius 5e-3 and 1/100 the
+    radiance (same power, same pixel footprint): Mitsuba's `path` samples the tiny one wrongly
+    (see the module docstring), so the twin is the reference. lab_bdpt's emitter sampling
+    (s = 1) uses Mitsuba's too, so it is switched off here: light tracing and connections reach
+    the whole image on their own."""
+    with open(scene_path("stiff/tiny_bright_light.xml")) as f:
+        text = f.read()
+    twin_text = re.sub(r'name="radius" value="0.0005"', 'name="radius" value="0.005"', text)
+    twin_text = twin_text.replace('value="6000000"', 'value="60000"')
+    assert twin_text != text and "0.005" in twin_text
+    tiny = load_scene(scene_path("stiff/tiny_bright_light.xml"), res=RES)
+    twin = mi.load_string(twin_text, res=RES)
+    lab = renders(tiny, bdpt(strategies="hit+light+connect"), 16, SEEDS_LAB)
+    assert_agrees(lab, path_stack(twin, 64), "lab_bdpt on tiny_bright_light")
+    mitsuba = path_stack(tiny, 64)
+    assert z_scores(mitsuba, path_stack(twin, 64)).max_abs_z > 20   # Mitsuba's bias, documented
+
+
+SUBSETS = [("cornell_box.xml", s) for s in ("light", "hit+connect", "nee+light", "hit+nee+connect", "light+connect")]
+SUBSETS += [("stiff/environment_only.xml", "hit+light"), ("stiff/delta_lights_only.xml", "light")]
+
+
+@pytest.mark.parametrize("name, strategies", SUBSETS)
+def test_strategy_subsets_agree_with_mitsuba_path(name, strategies):
+    """A subset of strategies renormalises the weights over itself: unbiased for the light it
+    can reach. On the Cornell box (a smooth BSDF everywhere) a subset reaches every path if it
+    has ``hit`` or ``light`` (the only strategies of an emitter seen directly) and one of
+    ``hit``, ``nee`` or ``light`` for direct light (``connect`` needs 3 segments). An
+    environment seen directly needs ``hit``; delta lights need ``nee`` or ``light``."""
+    scene = load_scene(scene_path(name), res=RES)
+    lab = renders(scene, bdpt(strategies=strategies), 16, SEEDS_LAB)
+    assert_agrees(lab, path_stack(scene, 64), f"lab_bdpt strategies={strategies} on {name}")
+
+
+def test_light_tracing_alone_agrees_with_ptracer():
+    """``strategies="light"`` is light tracing (t = 1) only: Mitsuba's ptracer in expectation,
+    emitters seen directly included."""
+    scene = load_scene(scene_path("caustic.xml"), res=RES)
+    lab = renders(scene, bdpt(strategies="light"), 16, SEEDS_LAB)
+    ref = renders(scene, make_integrator("ptracer", {"max_depth": MAX_DEPTH}), 16, SEEDS_REF)
+    assert_agrees(lab, ref, "lab_bdpt strategies=light against ptracer")
+
+
+@pytest.fixture(scope="module")
+def cornell_reference():
+    scene = load_scene(scene_path("cornell_box.xml"), res=32)
+    return scene, path_stack(scene, 1024)
+
+
+def test_a_wrong_weight_is_caught(cornell_reference, monkeypatch):
+    """Power of the agreement test: the t = 1 weight multiplied by 1.03 fails it."""
+    from mitsuba_lab.plugins.integrators.bdpt import integrator
+    from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights
+
+    scene, ref = cornell_reference
+    assert_agrees(renders(scene, bdpt(), 64, SEEDS_LAB), ref, "lab_bdpt on the Cornell box, 64 spp")
+
+    class Perturbed(BdptWeights):
+        def light_to_camera(self, *args, **kwargs):
+            return 1.03 * super().light_to_camera(*args, **kwargs)
+
+    monkeypatch.setattr(integrator, "BdptWeights", Perturbed)
+    wrong = renders(scene, bdpt(), 64, SEEDS_LAB)
+    assert z_scores(wrong, ref).max_abs_z > 2 * Z_BOUND
+
+
+def test_hide_emitters_agrees_with_mitsuba_path():
+    """Camera rays and light tracing's rays to the sensor pass through area emitters."""
+    scene = load_scene(scene_path("cornell_box.xml"), res=RES)
+    lab = renders(scene, bdpt(hide_emitters=True), 16, SEEDS_LAB)
+    assert_agrees(lab, path_stack(scene, 64, hide_emitters=True), "lab_bdpt hide_emitters")
+
+
+def test_film_shape_crop_and_mono_agree_with_mitsuba_path():
+    """A non-square film with a crop window (more light subpaths than camera samples: the
+    weights count them), in the mono variant too."""
+    import mitsuba_lab
+
+    with open(scene_path("cornell_box.xml")) as f:
+        text = f.read()
+    film = ('<integer name="width" value="40"/><integer name="height" value="24"/>'
+            '<integer name="crop_width" value="24"/><integer name="crop_height" value="16"/>'
+            '<integer name="crop_offset_x" value="8"/><integer name="crop_offset_y" value="4"/>'
+            '<rfilter type="gaussian"/>')
+    cropped = re.sub(r'<integer name="width" value="\$res"/>\s*<integer name="height" value="\$res"/>', film, text)
+    cropped = re.sub(r'<rfilter type="box"\s*/>', "", cropped)
+    assert cropped.count("crop_width") == 1
+
+    try:
+        for variant in ("llvm_ad_rgb", "llvm_ad_mono"):
+            mitsuba_lab.use_variant(variant)
+            sc = mi.load_string(cropped)
+            lab = renders(sc, bdpt(), 16, SEEDS_LAB)
+            assert lab.shape[1:3] == (16, 24)
+            assert_agrees(lab, path_stack(sc, 64), f"lab_bdpt, cropped non-square film, {variant}")
+    finally:
+        mitsuba_lab.use_variant("llvm_ad_rgb")
+
+
+# ---------------------------------------------------------------------------
+# Memory, safety, refusals
+# ---------------------------------------------------------------------------
+def test_memory_bound_splits_passes_and_shares_light_subpaths():
+    """max_vertices bounds the light-vertex buffer: fewer samples per pass, and below one sample
+    per pixel fewer light subpaths than camera samples (still unbiased)."""
+    from mitsuba_lab.plugins.integrators.bdpt.vertices import vertex_bytes
+
+    scene = load_scene(scene_path("cornell_box.xml"), res=RES)
+    ref = path_stack(scene, 64)
+    for max_vertices, spp, passes in ((4096, 16, 16), (1024, 4, 4)):
+        integrator = bdpt(max_vertices=max_vertices)
+        lab = renders(scene, integrator, spp, SEEDS_LAB)
+        stats = integrator.bdpt_stats()
+        assert stats["passes"] >= passes
+        assert stats["peak_vertex_bytes"] <= max_vertices * vertex_bytes()
+        if max_vertices == 1024:
+            assert stats["light_subpaths"] < spp * RES * RES         # shared light subpaths
+        assert_agrees(lab, ref, f"lab_bdpt max_vertices={max_vertices}")
+
+
+STIFF = sorted(f for f in os.listdir(os.path.join(ROOT, "scenes", "stiff")) if f.endswith(".xml"))
+
+
+@pytest.mark.parametrize("name", STIFF)
+def test_no_nan_inf_or_negative_on_stiff_scenes(name):
+    scene = load_scene(scene_path(f"stiff/{name}"), res=16)
+    depth = -1 if name == "closed_box_albedo_099.xml" else MAX_DEPTH
+    image = np.array(mi.render(scene, integrator=bdpt(max_depth=depth), spp=8, seed=7))[None]
+    assert pixel_problem(image, False) == "", f"{name}: {pixel_problem(image, False)}"
+
+
+def test_refusals_are_one_line():
+    import mitsuba_lab
+
+    scene = load_scene(scene_path("cornell_box.xml"), res=16)
+    for params, match in (({"strategies": "hit+bogus"}, "parameter 'strategies' must be"),
+                          ({"only_strategy": "2"}, "parameter 'only_strategy' must be"),
+                          ({"heuristic": "max"}, "parameter 'heuristic' must be one of balance, power"),
+                          ({"max_vertices": 10}, "parameter 'max_vertices' must be an integer >= 1024"),
+                          ({"samples_per_pass": 4}, "'samples_per_pass' is not supported")):
+        with pytest.raises(Exception, match=match):
+            make_integrator("lab_bdpt", params)
+    with pytest.raises(ValueError, match="develop=False"):
+        bdpt().render(scene, develop=False)
+    thin = mi.load_dict({"type": "scene", "sensor": {"type": "thinlens", "aperture_radius": 0.1,
+                                                      "focus_distance": 3.0},
+                         "light": {"type": "point", "position": [0, 0, 1]}, "floor": {"type": "rectangle"}})
+    with pytest.raises(ValueError, match="perspective"):
+        bdpt().render(thin, spp=1)
+    aov = mi.load_dict({"type": "aov", "aovs": "d:depth", "inner": {"type": "lab_bdpt"}})
+    with pytest.raises(Exception, match="cannot be nested"):
+        aov.render(scene, spp=1)
+    try:
+        mitsuba_lab.use_variant("llvm_ad_spectral")
+        with pytest.raises(Exception, match="variant 'llvm_ad_spectral' is not supported yet"):
+            mi.load_dict({"type": "lab_bdpt"})
+    finally:
+        mitsuba_lab.use_variant("llvm_ad_rgb")
+
+
+def test_the_planner_knows_what_a_subset_cannot_render():
+    """A strategy subset that cannot reach some of a scene's light is left out of sweeps (and
+    warned about when rendered anyway), with the reason."""
+    from mitsuba_lab.scene import SceneTraits, strategy_applicability
+
+    def verdict(name, strategies):
+        traits = SceneTraits.from_scene(load_scene(scene_path(name), res=8))
+        return strategy_applicability(traits, "lab_bdpt", {"strategies": strategies})
+
+    assert verdict("cornell_box.xml", "light") == (True, "")
+    assert verdict("cornell_box.xml", "all") == (True, "")
+    for name, strategies, needs in (("cornell_box.xml", "nee+connect", "'hit' or 'light'"),
+                                    ("stiff/environment_only.xml", "light+nee", "'hit'"),
+                                    ("stiff/delta_lights_only.xml", "hit+connect", "'nee' or 'light'"),
+                                    ("stiff/all_specular.xml", "light+nee+connect", "'hit'"),
+                                    ("caustic.xml", "light", "'hit', 'nee' or 'connect'")):
+        ok, reason = verdict(name, strategies)
+        assert not ok and f"strategies={strategies} cannot render" in reason and needs in reason, reason
