@@ -7,6 +7,9 @@ subpath as the integrator will, and by the products of per-vertex area densities
 the two agree to a relative 1e-9 (RTOL); weights of the strategies that can build a path sum to
 1, over all kinds and over restricted subsets; a deliberately wrong update (a missing cosine, a
 swapped reverse density) is caught; Dr.Jit arrays give numpy's numbers to float32 precision.
+With merging (lab_vcm's extra technique at every interior vertex, density
+p_light(x_0..x_i) p_camera(x_i..x_k) pi r^2 N_light) the same holds over connections and merges
+together, and a connection that leaves out merging at its own vertex is caught.
 """
 import numpy as np
 import pytest
@@ -226,4 +229,79 @@ def test_a_wrong_restriction_is_caught(monkeypatch, subset):
     with np.errstate(all="ignore"):
         err = _max_rel(recursive_weights(g, mis), _reference(g, 2.0, subset))
     print(f"flag, {'+'.join(subset)}: max relative error {err:.2e}")
+    assert err > 1e3 * RTOL
+
+
+# -- Merging (lab_vcm): one more technique per interior vertex ----------------------------------
+MERGE_SUBSETS = [("hit", "nee", "light", "connect", "merge"), ("merge",), ("light", "merge"),
+                 ("hit", "nee", "merge"), ("connect", "merge")]
+
+
+def recursive_weights_with_merging(g, mis):
+    """``recursive_weights`` plus, for each interior vertex x_i (i = 1 .. k - 1), the weight of
+    merging a light vertex with a camera vertex there (rows k + 1 ..): the camera vertex's BSDF
+    gives both directions' densities (``to_light`` and ``to_cam`` at x_i)."""
+    k = g["d2"].shape[0]
+    d2, cl, cc, fw, rv, delta = g["d2"], g["cos_l"], g["cos_c"], g["to_cam"], g["to_light"], g["delta"]
+    light, state = {}, mis.start_light(g["pos"] * fw[0], g["nee"], cc[0], delta[0])
+    for i in range(1, k):
+        state = mis.after_hit(state, d2[i - 1], cl[i])
+        light[i] = state
+        state = mis.scatter_light(state, fw[i], rv[i], cc[i], delta[i])
+    camera, state = {}, mis.start_camera(rv[k])
+    for i in range(k - 1, 0, -1):
+        state = mis.after_hit(state, d2[i], cc[i])
+        camera[i] = state
+        state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i])
+    merges = [np.where(delta[i], 0.0, mis.merge(light[i], camera[i], rv[i], fw[i])) for i in range(1, k)]
+    return np.concatenate([recursive_weights(g, mis), np.array(merges).reshape(-1, N)])
+
+
+@pytest.mark.parametrize("subset", MERGE_SUBSETS)
+@pytest.mark.parametrize("beta", [1.0, 2.0])
+def test_merging_weights_equal_brute_force_and_sum_to_one(subset, beta):
+    """Vertex connection and merging (Georgiev et al. 2012): merging at x_i has density
+    p_light(x_0..x_i) p_camera(x_i..x_k) pi r^2 N_light, and the recursion (a third running
+    quantity, dVM) weights it, and every connection, against all the others."""
+    worst = 0.0
+    for k in range(1, 8):
+        g = random_paths(k, seed=900 * k + int(beta))
+        area = float(np.exp(np.random.default_rng(k).uniform(np.log(1e-4), np.log(1e4))))
+        mis = BdptWeights("power", beta, strategies=subset, light_paths=g["light_paths"], merge_area=area)
+        p_light, p_camera = area_densities(g)
+        with np.errstate(all="ignore"):
+            got = recursive_weights_with_merging(g, mis)
+            ref = brute_force_weights(p_light, p_camera, g["delta"], beta, subset, g["nee"], g["light_paths"],
+                                      area)
+        worst = max(worst, _max_rel(got, ref))
+        reach = ref.sum(axis=0) > 0
+        np.testing.assert_allclose(got.sum(axis=0)[reach], 1.0, rtol=RTOL)
+        assert np.all(got.sum(axis=0)[~reach] == 0.0)
+    print(f"{'+'.join(subset)}, beta {beta}: max relative error {worst:.2e}")
+    assert worst < RTOL
+
+
+def test_merging_off_changes_nothing():
+    """Without ``merge`` the recursion is bit for bit the connections-only one (lab_bdpt)."""
+    g = random_paths(5, seed=3)
+    plain = BdptWeights("power", 2.0, light_paths=g["light_paths"])
+    with_area = BdptWeights("power", 2.0, light_paths=g["light_paths"], merge_area=0.5)
+    with np.errstate(all="ignore"):
+        np.testing.assert_array_equal(recursive_weights(g, plain), recursive_weights(g, with_area))
+    with pytest.raises(ValueError, match="merge_area"):
+        BdptWeights(strategies=("merge",))
+
+
+def test_a_missing_merge_term_is_caught():
+    """Power: connections that forget merging at their own vertex (the eta term) are wrong."""
+    g = random_paths(4, seed=12)
+    area = 3.0
+    mis = BdptWeights("power", 2.0, strategies=MERGE_SUBSETS[0], light_paths=g["light_paths"], merge_area=area)
+    p_light, p_camera = area_densities(g)
+    with np.errstate(all="ignore"):
+        ref = brute_force_weights(p_light, p_camera, g["delta"], 2.0, MERGE_SUBSETS[0], g["nee"],
+                                  g["light_paths"], area)
+        mis.eta = 0.0                                  # the deliberate mistake
+        err = _max_rel(recursive_weights_with_merging(g, mis), ref)
+    print(f"missing eta: max relative error {err:.2e}")
     assert err > 1e3 * RTOL

@@ -41,6 +41,14 @@ kinds become known: a ratio's kind depends only on whether it is its subpath's f
 (light side: nee, camera side: light tracing) or not (connect); only the emitter hit needs the
 nee flag for a ratio the camera subpath carries, which ``first`` tells apart.
 
+**Merging** (vertex merging, for lab_vcm; Georgiev, Krivanek, Davidovic & Slusallek 2012):
+with ``merge`` among the strategies and ``merge_area`` = eta = pi r^2 N_light, merging a light
+vertex with a camera vertex at an interior path vertex x_i is one more technique, of density
+p_light(x_0 .. x_i) p_camera(x_i .. x_k) eta. Each subpath then carries a third quantity,
+``dvm`` (SmallVCM's ``dVM``: the techniques with fewer vertices on its side, relative to
+merging at its current vertex), every connection's sums gain eta (merging at the vertices it
+joins), and ``merge`` gives the merging weight. Without ``merge`` nothing changes.
+
 Every function works on numpy arrays (or floats) and on Dr.Jit arrays, element-wise; it uses
 arithmetic operators, ``select`` and ``power``, and imports no Mitsuba, Dr.Jit or numpy at load.
 """
@@ -50,12 +58,18 @@ from typing import NamedTuple
 
 from mitsuba_lab.plugins.params import BDPT_KINDS as KINDS, BDPT_PRESETS as PRESETS, bdpt_strategy_kinds
 
+#: Every kind, merging (vertex merging, lab_vcm) included.
+ALL_KINDS = KINDS + ("merge",)
+
 
 class SubpathMis(NamedTuple):
-    """The MIS quantities a subpath carries at its current vertex (store them per light vertex)."""
+    """The MIS quantities a subpath carries at its current vertex (store them per light vertex);
+    ``dvm`` only with merging (SmallVCM's ``dVM``: the sum over the techniques with fewer
+    vertices on this side, relative to merging at the current vertex)."""
     dvcm: object
     dvc: object
     first: object
+    dvm: object = 0.0
 
 
 def _select(mask, a, b):
@@ -98,7 +112,7 @@ class BdptWeights:
     """
 
     def __init__(self, heuristic: str = "power", beta: float = 2.0, strategies="all",
-                 light_paths: float = 1.0):
+                 light_paths: float = 1.0, merge_area: float = 0.0):
         if heuristic not in ("balance", "power"):
             raise ValueError(f"lab_bdpt: heuristic must be 'balance' or 'power', got '{heuristic}'")
         if heuristic == "power" and not beta > 0:
@@ -106,13 +120,20 @@ class BdptWeights:
         if not light_paths > 0:
             raise ValueError(f"lab_bdpt: light_paths must be > 0, got {light_paths}")
         kinds = bdpt_strategy_kinds(strategies) if isinstance(strategies, str) else tuple(strategies)
-        if kinds is None or not kinds or any(k not in KINDS for k in kinds):
+        if kinds is None or not kinds or any(k not in ALL_KINDS for k in kinds):
             raise ValueError(f"lab_bdpt: strategies must be one of {', '.join(PRESETS)} or a non-empty "
-                             f"subset of {', '.join(KINDS)}, got {strategies!r}")
+                             f"subset of {', '.join(ALL_KINDS)}, got {strategies!r}")
+        if "merge" in kinds and not merge_area > 0:
+            raise ValueError(f"lab_vcm: merging needs merge_area = pi r^2 N_light > 0, got {merge_area}")
         self.beta = 1.0 if heuristic == "balance" else float(beta)
         self.enabled = frozenset(kinds)
         self.light_paths = float(light_paths)
-        self.e = {k: 1.0 if k in self.enabled else 0.0 for k in KINDS}
+        self.e = {k: 1.0 if k in self.enabled else 0.0 for k in ALL_KINDS}
+        # eta = pi r^2 N_light: merging at a vertex over connecting there (Georgiev 2012's eta_VCM);
+        # the merge terms are left out entirely without merging (as if eta = 0)
+        self.merging = "merge" in self.enabled
+        self.eta = self._m(float(merge_area)) if self.merging else 0.0
+        self.inv_eta = self._m(1.0 / float(merge_area)) if self.merging else 0.0
 
     def _m(self, x):
         """x^beta (the heuristic applied to a density ratio)."""
@@ -150,25 +171,31 @@ class BdptWeights:
         """
         dvcm = self._m(pdf_nee / pdf_emit)
         dvc = _select(delta, 0.0 * dvcm, _gate(self.e["hit"], self._m(cos_light / pdf_emit)))
-        return SubpathMis(dvcm, dvc, 1.0)
+        return SubpathMis(dvcm, dvc, 1.0, dvc * self.inv_eta)
 
     def start_camera(self, pdf_cam) -> SubpathMis:
         """State at the sensor after sampling a ray; ``pdf_cam``: the sensor's direction density
         of it (solid angle, per unit film area as the t = 1 strategy's splat uses it)."""
-        return SubpathMis(self._m(self.light_paths / pdf_cam), 0.0 * pdf_cam, 1.0)
+        return SubpathMis(self._m(self.light_paths / pdf_cam), 0.0 * pdf_cam, 1.0, 0.0 * pdf_cam)
 
     def after_hit(self, state: SubpathMis, dist2, cos_in) -> SubpathMis:
         """State at a new vertex: ``dist2`` the squared segment length, ``cos_in`` |cos| at the new
         vertex (both 1 on a segment to or from an infinite emitter)."""
         inv_cos = self._m(1.0 / cos_in)
-        return SubpathMis(state.dvcm * self._m(dist2) * inv_cos, state.dvc * inv_cos, state.first)
+        return SubpathMis(state.dvcm * self._m(dist2) * inv_cos, state.dvc * inv_cos, state.first,
+                          state.dvm * inv_cos)
 
     def _scatter(self, state, pdf_fwd, pdf_rev, cos_out, delta, start_kind):
         """Shared by both sides; only the kind of the subpath's first ratio differs."""
-        folded = self._m(cos_out / pdf_fwd) * (state.dvc * self._m(pdf_rev) + self._gated(state, start_kind))
+        ratio, rev, inner = self._m(cos_out / pdf_fwd), self._m(pdf_rev), self._gated(state, start_kind)
+        folded = ratio * (state.dvc * rev + inner + self.eta)       # eta: merging at this vertex
         dvc = _select(delta, state.dvc * self._m(cos_out), folded)
         dvcm = _select(delta, 0.0 * folded, self._m(1.0 / pdf_fwd))
-        return SubpathMis(dvcm, dvc, 0.0 * state.first)
+        dvm = state.dvm
+        if self.merging:
+            folded_vm = ratio * (state.dvm * rev + inner * self.inv_eta + 1.0)
+            dvm = _select(delta, state.dvm * self._m(cos_out), folded_vm)
+        return SubpathMis(dvcm, dvc, 0.0 * state.first, dvm)
 
     def scatter_light(self, state, pdf_fwd, pdf_rev, cos_out, delta=False) -> SubpathMis:
         """State after sampling the next direction at a light-subpath vertex: ``pdf_fwd`` the
@@ -203,7 +230,7 @@ class BdptWeights:
         subpath given the emitter's; ``delta``: delta emitter (it cannot be hit)."""
         p_cam0 = pdf_cam_fwd * cos_light / dist2
         w_light = _select(delta, 0.0 * p_cam0, _gate(self.e["hit"], self._m(p_cam0 / pdf_nee)))
-        inner = self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev)
+        inner = self.eta + self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev)
         w_camera = self._m(pdf_emit * cos_cam / (dist2 * pdf_nee)) * inner
         return self.e["nee"] / (w_light + 1.0 + w_camera)
 
@@ -214,9 +241,9 @@ class BdptWeights:
         camera vertex, ``pdf_light_rev``: of the direction back along the light subpath given
         that one; ``pdf_cam_*`` likewise; ``cos_*``: |cos| at each end; ``dist2``."""
         w_light = self._m(pdf_cam_fwd * cos_light / dist2) * (
-            self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
+            self.eta + self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
         w_camera = self._m(pdf_light_fwd * cos_cam / dist2) * (
-            self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev))
+            self.eta + self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev))
         return self.e["connect"] / (w_light + 1.0 + w_camera)
 
     def light_to_camera(self, light: SubpathMis, pdf_cam, cos_light, dist2, pdf_light_rev):
@@ -225,7 +252,7 @@ class BdptWeights:
         light vertex, ``pdf_light_rev``: density at the light vertex of the direction back along
         the light subpath given the sensor's."""
         w_light = self._m(pdf_cam * cos_light / (dist2 * self.light_paths)) * (
-            self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
+            self.eta + self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
         return self.e["light"] / (1.0 + w_light)
 
     def emitter_to_camera(self, pdf_cam, cos_light, dist2, pdf_pos, delta=False):
@@ -234,6 +261,16 @@ class BdptWeights:
         ratio = pdf_cam * cos_light / (dist2 * self.light_paths * pdf_pos)
         w_light = _select(delta, 0.0 * ratio, _gate(self.e["hit"], self._m(ratio)))
         return self.e["light"] / (1.0 + w_light)
+
+
+    def merge(self, light: SubpathMis, camera: SubpathMis, pdf_cam_fwd, pdf_cam_rev):
+        """Merging a light vertex with a camera vertex at (about) the same point x_i, neither a
+        delta lobe (``light`` and ``camera``: their states after ``after_hit``). The camera
+        vertex's BSDF stands for both: ``pdf_cam_fwd`` its density of the light vertex's
+        incoming direction (towards x_{i-1}) given the camera's, ``pdf_cam_rev`` the reverse."""
+        w_light = self._gated(light, "nee") * self.inv_eta + light.dvm * self._m(pdf_cam_fwd)
+        w_camera = self._gated(camera, "light") * self.inv_eta + camera.dvm * self._m(pdf_cam_rev)
+        return self.e["merge"] / (w_light + 1.0 + w_camera)
 
 
 def feasible(delta):
@@ -253,22 +290,26 @@ def feasible(delta):
 
 
 def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies="all",
-                        p_nee=None, light_paths: float = 1.0):
-    """The weights of strategies s = 0 .. k computed directly from the path's densities (numpy).
+                        p_nee=None, light_paths: float = 1.0, merge_area: float = 0.0):
+    """The weights of every technique computed directly from the path's densities (numpy).
 
     ``p_light[i]``: area density of x_i generated from the light side (``p_light[0]`` the
     emission position density), ``p_camera[i]``: from the camera side (``p_camera[k]`` the
     sensor's own, common to all strategies); shape (k + 1,) or (k + 1, n paths). ``p_nee``: the
     density of x_0 under emitter sampling (s = 1, t >= 2; default ``p_light[0]``); the t = 1
-    strategy's density is multiplied by ``light_paths``. ``delta`` as in ``feasible``. Returns
-    p_s^beta / sum over enabled feasible j of p_j^beta, 0 for a disabled or infeasible s.
-    Computed in logarithms, so densities may span any range.
+    strategy's density is multiplied by ``light_paths``. ``delta`` as in ``feasible``.
+    Merging at x_i (i = 1 .. k - 1, not a delta vertex), when ``strategies`` has ``merge``: the
+    light subpath builds x_0 .. x_i, the camera subpath x_k .. x_i, density
+    p_light[0..i] p_camera[i..k] ``merge_area`` (pi r^2 N_light). Returns p^beta / sum over the
+    enabled feasible techniques of p^beta, 0 for a disabled or infeasible one: rows s = 0 .. k,
+    then (with merging) rows for merging at x_1 .. x_{k-1}. Computed in logarithms, so densities
+    may span any range.
     """
     import numpy as np
 
     p_light, p_camera = np.asarray(p_light, dtype=np.float64), np.asarray(p_camera, dtype=np.float64)
     k = p_light.shape[0] - 1
-    enabled = BdptWeights(strategies=strategies).enabled
+    enabled = BdptWeights(strategies=strategies, merge_area=merge_area or 1.0).enabled
     log_l, log_c = np.log(p_light), np.log(p_camera)
     log_nee = log_l[0] if p_nee is None else np.log(np.asarray(p_nee, dtype=np.float64))
     ok = feasible(delta)
@@ -282,6 +323,11 @@ def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies=
             log_p = log_p + np.log(light_paths)
         usable = ok[s] & (kind in enabled)
         logs.append(np.where(usable, beta * log_p, -np.inf))
+    if "merge" in enabled:
+        delta = np.asarray(delta, dtype=bool)
+        for i in range(1, k):
+            log_p = log_l[:i + 1].sum(axis=0) + log_c[i:].sum(axis=0) + np.log(merge_area)
+            logs.append(np.where(~delta[i], beta * log_p, -np.inf))
     logs = np.array(logs)
     top = logs.max(axis=0)
     top = np.where(np.isfinite(top), top, 0.0)
