@@ -94,9 +94,8 @@ def connect_to_light_subpath(scene, cp: CameraPass, si, bsdf, beta, mis: Subpath
         wo_x, wo_y = si.to_local(d), y.to_local(-d)
         f_x, pdf_x_fwd = bsdf.eval_pdf(ctx, si, wo_x, use)
         pdf_x_rev = reverse_pdf(bsdf, ctx_imp, si, wo_x, use)
-        f_y = transported(bsdf_y, y, wo_y, use)
+        f_y, pdf_y_rev = transported(bsdf_y, y, wo_y, use)
         pdf_y_fwd = bsdf_y.pdf(ctx_imp, y, wo_y, use)
-        pdf_y_rev = reverse_pdf(bsdf_y, ctx, y, wo_y, use)
         weight = w.connect(mis_y, mis, pdf_y_fwd, pdf_y_rev, pdf_x_fwd, pdf_x_rev,
                            dr.abs(dr.dot(y.n, d)), dr.abs(dr.dot(si.n, d)), dist2)
         value = spectrum_or_zero(beta * f_x * f_y * beta_y * (finite_or_zero(weight) / dist2))

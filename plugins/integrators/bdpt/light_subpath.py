@@ -54,8 +54,10 @@ def check_variant() -> None:
 
 
 def transported(bsdf, si: mi.SurfaceInteraction3f, wo, active):
-    """What a light-subpath vertex sends along ``wo`` (local) per unit of the flux that reached
-    it from ``si.wi``, the shading-normal correction included (Veach 1997, sec. 5.3):
+    """(value, reverse density) of a light-subpath vertex sending flux along ``wo`` (local).
+
+    value: what goes out along ``wo`` per unit of the flux that reached the vertex from
+    ``si.wi``, the shading-normal correction included (Veach 1997, sec. 5.3):
 
         f(wi -> wo) |wi . n_s| |wo . n_g| / |wi . n_g|
 
@@ -63,13 +65,14 @@ def transported(bsdf, si: mi.SurfaceInteraction3f, wo, active):
     (``si.wi`` = wo), so n_s is whatever normal the BSDF itself uses, a normal or bump map's
     perturbed one included; an importance-mode evaluation times a correction built from
     ``si.sh_frame`` would use the unperturbed normal there (2% too dark a floor under a bump
-    map, as Mitsuba's ptracer renders it)."""
+    map, as Mitsuba's ptracer renders it). The same call gives the reverse density: that of
+    sampling ``si.wi`` from ``wo`` (what ``reverse_pdf`` would return in radiance mode)."""
     swapped = mi.SurfaceInteraction3f(si)
     swapped.wi = wo
-    value = bsdf.eval(mi.BSDFContext(mi.TransportMode.Radiance), swapped, si.wi, active)
+    value, pdf_rev = bsdf.eval_pdf(mi.BSDFContext(mi.TransportMode.Radiance), swapped, si.wi, active)
     cos_in = dr.abs(dr.dot(si.n, si.to_world(si.wi)))
     ratio = dr.abs(dr.dot(si.n, si.to_world(wo))) / cos_in
-    return dr.select(cos_in > 0, value * ratio, 0.0)
+    return dr.select(cos_in > 0, value * ratio, 0.0), pdf_rev
 
 
 def reverse_pdf(bsdf, ctx, si: mi.SurfaceInteraction3f, wo, active):
@@ -198,7 +201,6 @@ class LightTracer:
         max_depth = dr.opaque(mi.UInt32, self.max_depth if self.max_depth > 0 else 0xFFFFFFFF)
         rr_depth = dr.opaque(mi.UInt32, self.rr_depth)
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
-        ctx_rad = mi.BSDFContext(mi.TransportMode.Radiance)
         storing = vertices is not None and "connect" in w.enabled
         stores = dr.zeros(mi.UInt32, 1)
         capacity = dr.opaque(mi.UInt32, vertices.capacity if storing else 0)
@@ -243,8 +245,7 @@ class LightTracer:
             ds, we = sensor.sample_direction(si, mi.Point2f(rng.next_float32(), rng.next_float32()), splat_on)
             connect = self._visible(si, ds, splat_on)
             wo_cam = si.to_local(ds.d)
-            f_cam = transported(bsdf, si, wo_cam, connect)
-            pdf_rev_cam = reverse_pdf(bsdf, ctx_rad, si, wo_cam, connect)
+            f_cam, pdf_rev_cam = transported(bsdf, si, wo_cam, connect)
             w_cam = w.light_to_camera(mis, sensor_pdf(ds, we), dr.abs(dr.dot(si.n, ds.d)),
                                       dr.square(ds.dist), pdf_rev_cam)
             value = beta * f_cam * we * finite_or_zero(w_cam) * scale
@@ -258,10 +259,10 @@ class LightTracer:
             # smooth lobes: the exact transported value over the density; a delta lobe has no
             # value to evaluate, and its sample weight with the correction is exact without maps
             delta_lobe = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-            smooth_weight = transported(bsdf, si, bs.wo, active & ~delta_lobe) / dr.maximum(bs.pdf, 1e-30)
+            sent, pdf_rev = transported(bsdf, si, bs.wo, active & ~delta_lobe)    # (0 for delta lobes)
+            smooth_weight = sent / dr.maximum(bs.pdf, 1e-30)
             beta *= dr.select(delta_lobe, bsdf_weight * adjoint_correction(si, wi_world, bs.wo),
                               dr.select(bs.pdf > 0, smooth_weight, 0.0))
-            pdf_rev = reverse_pdf(bsdf, ctx_rad, si, bs.wo, active)
             mis = w.scatter_light(mis, bs.pdf, pdf_rev, dr.abs(dr.dot(si.n, wo_world)), delta_lobe)
             dvcm, dvc, first = finite_or_zero(mis.dvcm), finite_or_zero(mis.dvc), mi.Float(mis.first)
             ray = spawn.spawn_ray(si, wo_world, self.floor)
