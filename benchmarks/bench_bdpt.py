@@ -37,7 +37,6 @@ import argparse
 import os
 import statistics
 import sys
-import time
 
 import drjit as dr
 import mitsuba as mi
@@ -47,6 +46,7 @@ from mitsuba_lab.plugins.integrators import spawn
 from mitsuba_lab.plugins.integrators.bdpt.light_subpath import LightTracer, render_light_tracing
 from mitsuba_lab.plugins.integrators.bdpt.vertices import vertex_bytes
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
+from mitsuba_lab.render import timed_kernels
 from mitsuba_lab.runtime import versions
 from mitsuba_lab.scene import SceneTraits, load_scene, make_integrator
 
@@ -64,20 +64,8 @@ def log(*args):
 
 def timed(fn):
     """(result, wall seconds, kernels compiled, [(size, execution seconds)] of the JIT kernels in
-    launch order): the clock starts and stops synchronised."""
-    dr.sync_thread()
-    was_on = dr.flag(dr.JitFlag.KernelHistory)
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    dr.kernel_history()                                   # drop older entries
-    try:
-        start = time.perf_counter()
-        out = fn()
-        dr.eval(out)
-        dr.sync_thread()
-        wall = time.perf_counter() - start
-        history = dr.kernel_history()
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, was_on)
+    launch order): the clock starts and stops synchronised (``render.timed_kernels``)."""
+    out, wall, history = timed_kernels(fn)
     jit = [(k["size"], k["execution_time"] / 1e3) for k in history if k["type"] == dr.KernelType.JIT]
     return out, wall, sum(1 for k in history if "cache_hit" in k and not k["cache_hit"]), jit
 

@@ -50,6 +50,26 @@ def _kernel_times(history: list[dict]) -> tuple[float, float, int, int]:
     return compile_ms / 1e3, exec_ms / 1e3, len(history), misses
 
 
+def timed_kernels(fn):
+    """(result, wall seconds, Dr.Jit kernel history) of ``fn()``: the clock starts after
+    ``dr.sync_thread()`` (nothing earlier leaks in) and stops after ``dr.eval`` of the result
+    and ``dr.sync_thread()``; the history holds this call's kernels only."""
+    dr.sync_thread()
+    history_was_on = dr.flag(dr.JitFlag.KernelHistory)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()                                # drop older entries
+    try:
+        start = time.perf_counter()
+        out = fn()
+        dr.eval(out)
+        dr.sync_thread()
+        wall = time.perf_counter() - start
+        history = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, history_was_on)
+    return out, wall, history
+
+
 def render(scene: mi.Scene, integrator: mi.Integrator | None = None, spp: int = 0, seed: int = 0,
            sensor: int = 0) -> tuple[np.ndarray, RenderStats]:
     """Render and wait for the result. Returns (H x W x C float32 image, stats).
@@ -63,19 +83,8 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, spp: int = 
     bind_film_layout(scene, sensor)
     sampler = scene.sensors()[sensor].sampler()
     spp_used = spp or sampler.sample_count()
-    dr.sync_thread()                                   # nothing earlier leaks into the clock
-    history_was_on = dr.flag(dr.JitFlag.KernelHistory)
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    dr.kernel_history()                                # drop older entries
-    try:
-        start = time.perf_counter()
-        image = mi.render(scene, integrator=integrator, spp=spp, seed=seed, sensor=sensor)
-        dr.eval(image)
-        dr.sync_thread()
-        wall = time.perf_counter() - start
-        history = dr.kernel_history()
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, history_was_on)
+    image, wall, history = timed_kernels(
+        lambda: mi.render(scene, integrator=integrator, spp=spp, seed=seed, sensor=sensor))
     compile_s, kernel_s, kernels, misses = _kernel_times(history)
     rays = integrator.ray_counts() if hasattr(integrator, "ray_counts") else {}
     pixels = np.array(image, dtype=np.float32)

@@ -49,7 +49,7 @@ class Bidirectional(Estimator):
         unsupported = sorted(set(traits.delta_emitters) - set(SUPPORTED_DELTA_EMITTERS))
         if unsupported:
             return f"lab_bdpt does not support {', '.join(unsupported)} emitters yet"
-        sensors = getattr(traits, "sensor_kinds", ())
+        sensors = traits.sensor_kinds
         if sensors and sensors[0] != "PerspectiveCamera":
             return f"lab_bdpt supports pinhole (perspective) sensors only so far, not {sensors[0]}"
         return ""
@@ -68,7 +68,7 @@ class Bidirectional(Estimator):
             return "cannot render direct light from delta emitters (that needs 'nee' or 'light')"
         if not traits.smooth_bsdf and "hit" not in kinds:
             return "cannot render a scene whose BSDFs are all delta (that needs 'hit')"
-        if getattr(traits, "delta_bsdf", False) and not kinds & {"hit", "nee", "connect"}:
+        if traits.delta_bsdf and not kinds & {"hit", "nee", "connect"}:
             return ("cannot render what the camera sees in mirrors or through glass (light "
                     "tracing cannot reach the sensor through a delta lobe; that needs 'hit', 'nee' "
                     "or 'connect')")
