@@ -207,6 +207,29 @@ LAB_BDPT = (
           expected="empty or 's,t' with s >= 0, t >= 1 and s + t >= 2"),
 )
 
+#: lab_vcm's modes: the strategy kinds each enables (SmallVCM's estimators behind one MIS).
+VCM_MODES = {
+    "vcm": BDPT_KINDS + ("merge",),          # vertex connection and merging: every technique
+    "bpt": BDPT_KINDS,                       # connections only: lab_bdpt
+    "bpm": ("hit", "merge"),                 # bidirectional photon mapping: merges at every vertex
+    "ppm": ("hit", "merge"),                 # progressive photon mapping: the first smooth vertex only
+    "lt": ("light",),                        # light tracing
+    "pt": ("hit", "nee"),                    # camera side only: lab_mis's estimator
+}
+
+#: lab_vcm (vertex connection and merging).
+LAB_VCM = (
+    Param("mode", str, "vcm", "which techniques: vcm (all), bpt (connections: lab_bdpt), bpm (merging), "
+          "ppm (merging at the first smooth camera vertex), lt (light tracing), pt (path tracing: lab_mis)",
+          choices=tuple(VCM_MODES)),
+    Param("radius", float, 0.0, "first iteration's merging radius r_1 in scene units; 0 = automatic "
+          "(the scene's bounding-box diagonal over the film's larger side)",
+          check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
+    Param("alpha", float, 0.75, "radius schedule r_i = r_1 i^((alpha - 1) / 2), iteration i = sample i",
+          check=lambda v: 0.0 < v < 1.0, expected="a number in (0, 1)"),
+) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
+                                            "max_vertices"))
+
 #: Shared by every lab sampler (``LabSampler``).
 SAMPLER = (
     Param("sample_count", int, 4, "samples per pixel", **_int_at_least(1)),
@@ -236,6 +259,7 @@ _DECLARED: dict[str, tuple[Param, ...]] = {
     "lab_mis": LAB_MIS,
     "lab_photon": LAB_PHOTON,
     "lab_bdpt": LAB_BDPT,
+    "lab_vcm": LAB_VCM,
     "lab_independent": SAMPLER,
     "lab_stratified": LAB_STRATIFIED,
     "lab_halton": LAB_HALTON,
@@ -256,7 +280,7 @@ def plugin_kind(plugin_type: str) -> str | None:
     """'integrator' or 'sampler' for a lab plugin, None for any other name."""
     if plugin_type not in _DECLARED:
         return None
-    return "integrator" if plugin_type in ("lab_naive", "lab_nee", "lab_mis", "lab_photon", "lab_bdpt") else "sampler"
+    return "sampler" if _DECLARED[plugin_type][0].name == SAMPLER[0].name else "integrator"
 
 
 # ---------------------------------------------------------------------------

@@ -103,6 +103,13 @@ class Estimator:
         return ""
 
     @classmethod
+    def separate_reason(cls, params: dict) -> str:
+        """Why renders of different seeds, averaged weighted by their spp, are not this estimator
+        at the total spp ('' when they are, as for every unbiased estimator: the runner's
+        progressive runs accumulate such renders)."""
+        return ""
+
+    @classmethod
     def equivalence(cls, traits, params: dict) -> tuple[tuple, str]:
         """(key, reason): strategies with equal keys are provably the same estimator on a scene
         with these traits (same distribution of every pixel); ``reason`` says why."""

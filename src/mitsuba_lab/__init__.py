@@ -6,6 +6,9 @@ it points Dr.Jit at a usable libLLVM, selects a variant when none is set yet
 integrator and sampler for that variant. The ``mitsuba-lab`` command defers
 this to after it has read ``--variant``, so that a bad environment is reported
 in one line and a GPU-only machine never has to start the LLVM backend.
+
+``mitsuba_lab.sweep(config)`` runs a strategy sweep from Python and returns its results
+table (``mitsuba_lab.experiment.api``; imported on first use).
 """
 from __future__ import annotations
 
@@ -13,7 +16,7 @@ import os as _os
 import sys as _sys
 
 __version__ = "0.1.0"
-__all__ = ["activate", "use_variant", "register_all", "bind_film_layout"]
+__all__ = ["activate", "use_variant", "register_all", "bind_film_layout", "sweep"]
 
 
 def activate(variant: str | None = None) -> str:
@@ -22,17 +25,9 @@ def activate(variant: str | None = None) -> str:
     Keeps an already selected Mitsuba variant when ``variant`` is None.
     Raises ``LabError`` with one line when the environment cannot run it.
     """
-    from . import runtime
+    from .runtime import activate as _activate
 
-    runtime.configure_llvm()
-    import mitsuba as mi
-
-    if variant is not None or not mi.variant():
-        runtime.set_variant(runtime.requested_variant(variant))
-    from .plugins import register_all
-
-    register_all()
-    return mi.variant()
+    return _activate(variant)
 
 
 def use_variant(name: str) -> str:
@@ -53,6 +48,17 @@ def bind_film_layout(scene_or_sensor, sensor=0):
     from .plugins.samplers.layout import bind_film_layout as _bind
 
     return _bind(scene_or_sensor, sensor)
+
+
+def __getattr__(name: str):
+    """``mitsuba_lab.sweep`` (experiment.api.sweep), imported on first use so that importing the
+    package stays cheap."""
+    if name == "sweep":
+        import importlib
+
+        # (by name: the package's own modules import it, and only this attribute needs the api)
+        return importlib.import_module(".experiment.api", __name__).sweep
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _invoked_as_cli() -> bool:

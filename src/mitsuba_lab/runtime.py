@@ -108,6 +108,20 @@ def set_variant(name: str) -> str:
     return name
 
 
+def activate(variant: str | None = None) -> str:
+    """``mitsuba_lab.activate``: configure libLLVM, select ``variant`` (or the default; an
+    already selected one is kept when None) and register the lab plugins for it."""
+    configure_llvm()
+    import mitsuba as mi
+
+    if variant is not None or not mi.variant():
+        set_variant(requested_variant(variant))
+    from .plugins import register_all
+
+    register_all()
+    return mi.variant()
+
+
 def versions() -> dict[str, str]:
     """Versions worth writing next to every number this lab produces."""
     import drjit as dr

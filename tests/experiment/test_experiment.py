@@ -22,6 +22,7 @@ TINY = """
 name = "tiny"
 spp = [2, 8]
 repetitions = 2
+progressive = false        # one render per spp (progressive runs: test_progressive.py)
 max_depth = 4
 metrics = ["flip", "ciede2000"]
 
@@ -285,5 +286,5 @@ def test_plan_uses_scene_traits():
     aliases = {(a["scene"], a["strategy"]): a["same_as"] for a in plan.aliases}
     assert aliases == {("delta_lights_only", "mis"): "nee", ("all_specular", "nee"): "naive",
                        ("all_specular", "mis"): "naive"}
-    assert sorted(p.id for p in plan.points) == ["all_specular/naive/independent/spp4",
-                                                 "delta_lights_only/nee/independent/spp4"]
+    assert sorted(p.id for p in plan.points) == ["all_specular/naive/independent/spp4-4",   # progressive
+                                                 "delta_lights_only/nee/independent/spp4-4"]

@@ -18,6 +18,7 @@ CONFIG = """
 name = "ident"
 spp = [2]
 repetitions = 2
+progressive = false
 seed = {seed}
 max_depth = {max_depth}
 metrics = []

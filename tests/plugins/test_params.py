@@ -15,7 +15,7 @@ from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.params import declared, resolve
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis", "lab_photon", "lab_bdpt")
+LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis", "lab_photon", "lab_bdpt", "lab_vcm")
 LAB_SAMPLERS = ("lab_independent", "lab_stratified", "lab_halton", "lab_sobol", "lab_zsobol")
 MIS_VALID = "beta, count_rays, emitter_samples, heuristic, hide_emitters, max_depth, rr_depth"
 

@@ -18,7 +18,7 @@ unbiased and the weights sum to 1 over the strategies of any path.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import drjit as dr
 import mitsuba as mi
@@ -28,7 +28,7 @@ from mitsuba_lab.plugins.integrators.direct import finite_or_zero as spectrum_or
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 
 from .endpoints import EmitterTable, nee_density
-from .light_subpath import finite_or_zero, reverse_pdf, strategy_mask, transported
+from .light_subpath import carried, finite_or_zero, reverse_pdf, strategy_mask, transported
 from .vertices import NONE, LightVertices
 from .weights import BdptWeights, SubpathMis
 
@@ -52,6 +52,7 @@ class CameraPass:
     emitter_hits: bool
     only: tuple = ()
     light_count: int = 0                 # light subpaths of the pass (camera lane i uses i mod it)
+    grid: object = None                  # lab_vcm: the light vertices' grid (``merge``), else None
 
 
 def sensor_constants(sensor: mi.Sensor) -> tuple[float, tuple]:
@@ -109,15 +110,17 @@ def connect_to_light_subpath(scene, cp: CameraPass, si, bsdf, beta, mis: Subpath
 @dr.syntax
 def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, ray: mi.Ray3f, active):
     """(L, valid) of the camera subpaths of the lanes of ``ray``: every strategy with t >= 2."""
+    lanes = dr.width(ray)
+    lane = dr.arange(mi.UInt32, lanes)
+    iteration = cp.weights.lane_iteration(lane)              # (lab_vcm: the lane's merging iteration)
+    cp = replace(cp, weights=cp.weights.at_lanes(lane))
     w, table, floor = cp.weights, cp.table, cp.offset_floor
     ctx = mi.BSDFContext(mi.TransportMode.Radiance)
     ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
     max_depth = dr.opaque(mi.UInt32, cp.max_depth)
     rr_depth = dr.opaque(mi.UInt32, cp.rr_depth)
-    emitter_hits, hide = cp.emitter_hits, cp.hide_emitters
+    emitter_hits, hide = cp.emitter_hits and "hit" in w.enabled, cp.hide_emitters
 
-    lanes = dr.width(ray)
-    lane = dr.arange(mi.UInt32, lanes)
     if dr.hint(cp.light_count < lanes, mode="scalar"):
         lane = lane % dr.opaque(mi.UInt32, cp.light_count)   # fewer light subpaths: shared
     head = dr.gather(mi.UInt32, cp.last, lane)
@@ -125,6 +128,8 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
     cos_cam = dr.dot(ray.d, mi.Vector3f(*cp.axis))
     start = w.start_camera(dr.opaque(mi.Float, cp.inv_image_area) / (cos_cam * dr.square(cos_cam)))
     dvcm, dvc, first = mi.Float(start.dvcm), mi.Float(start.dvc), mi.Float(start.first)
+    merging = cp.grid is not None
+    dvm = mi.Float(start.dvm) if merging else 0.0
     L = mi.Spectrum(0)
     beta = mi.Spectrum(1)
     eta = mi.Float(1)
@@ -137,7 +142,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
     if dr.hint(hide and emitter_hits, mode="scalar"):
         ray, pi = spawn.pass_through_emitters(scene, ray, pi, active, floor)
 
-    if dr.hint(not w.enabled & {"hit", "nee", "connect"}, mode="scalar"):
+    if dr.hint(not w.enabled & {"hit", "nee", "connect", "merge"}, mode="scalar"):
         # light tracing alone: the camera ray only tells which pixels see something (alpha)
         return mi.Spectrum(0), valid_ray | (active & pi.is_valid())
 
@@ -147,7 +152,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         escaped = active & ~si.is_valid()
         # (the segment's length from its start: a camera ray that passed through emitters began
         # at the sensor, not where it last left an emitter; to the environment: 1, see endpoints)
-        mis = w.after_hit(SubpathMis(dvcm, dvc, first), dr.select(escaped, 1.0, dr.squared_norm(si.p - prev_p)),
+        mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dr.select(escaped, 1.0, dr.squared_norm(si.p - prev_p)),
                           dr.select(escaped, 1.0, dr.abs(dr.dot(si.n, ray.d))))
 
         # ---------------- s = 0: the camera subpath hits an emitter ----------------
@@ -171,7 +176,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
 
         # ---------------- s = 1: next-event estimation (+ the BSDF sample, one call) ----------------
         active_next = active & (depth < max_depth)
-        nee_on = smooth & active_next & strategy_mask(cp.only, 1, depth + 1)
+        nee_on = smooth & active_next & strategy_mask(cp.only, 1, depth + 1) & ("nee" in w.enabled)
         ds, em_weight = spawn.sample_visible_emitter(scene, si, sampler.next_2d(), floor, nee_on)
         nee_on &= ds.pdf > 0
         wo = si.to_local(ds.d)
@@ -192,12 +197,17 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
             L += connect_to_light_subpath(scene, cp, si, bsdf, beta, mis, depth, head,
                                           smooth & (depth + 2 <= max_depth))
 
+        # ---------------- merging with the light vertices around (lab_vcm) ----------------
+        if dr.hint(merging, mode="scalar"):
+            L += cp.grid.merge(cp, si, bsdf, beta, mis, depth, iteration, smooth & (depth < max_depth))
+
         # ---------------- BSDF sampling (sampled above) ----------------
         wo_world = si.to_world(bs.wo)
         pdf_rev = reverse_pdf(bsdf, ctx_imp, si, bs.wo, active_next)
         mis = w.scatter_camera(mis, bs.pdf, pdf_rev, dr.abs(dr.dot(si.n, wo_world)),
                                mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta))
         dvcm, dvc, first = finite_or_zero(mis.dvcm), finite_or_zero(mis.dvc), mi.Float(mis.first)
+        dvm = carried(merging, mis.dvm, dvm)
         valid_ray |= active & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
         prev_it = dr.zeros(mi.Interaction3f)
         prev_it.p, prev_it.n, prev_it.t, prev_it.time = si.p, si.n, si.t, si.time
@@ -211,6 +221,9 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         active_next &= (beta_max != 0) & dr.isfinite(beta_max)
         beta, survives = russian_roulette(beta, sampler.next_1d(), depth >= rr_depth, eta=eta)
         active_next &= survives
+        if dr.hint(merging and cp.grid.first_only, mode="scalar"):
+            # lab_vcm's ppm: the merge took the smooth lobes' light; only a delta lobe goes on
+            active_next &= ~smooth | mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
         pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
         active = active_next
     return L, valid_ray

@@ -15,6 +15,10 @@ class Bidirectional(Estimator):
     PARAMETERS = declarations.LAB_BDPT
     OWN_PARAMETERS = ("heuristic", "beta", "strategies", "max_vertices", "only_strategy")
 
+    def kinds(self) -> tuple[str, ...]:
+        """The strategy kinds this estimator's parameters enable."""
+        return bdpt_strategy_kinds(self.strategies)
+
     @classmethod
     def applicability(cls, traits, params: dict) -> tuple[bool, str]:
         """Left out of scenes it cannot render correctly, with the reason:
@@ -64,11 +68,11 @@ class Bidirectional(Estimator):
             return "cannot render the environment seen directly (that needs 'hit')"
         if traits.area_emitters and not kinds & {"hit", "light"}:
             return "cannot render emitters seen directly (that needs 'hit' or 'light')"
-        if traits.delta_emitters and not kinds & {"nee", "light"}:
+        if traits.delta_emitters and not kinds & {"nee", "light", "merge"}:
             return "cannot render direct light from delta emitters (that needs 'nee' or 'light')"
         if not traits.smooth_bsdf and "hit" not in kinds:
             return "cannot render a scene whose BSDFs are all delta (that needs 'hit')"
-        if traits.delta_bsdf and not kinds & {"hit", "nee", "connect"}:
+        if traits.delta_bsdf and not kinds & {"hit", "nee", "connect", "merge"}:
             return ("cannot render what the camera sees in mirrors or through glass (light "
                     "tracing cannot reach the sensor through a delta lobe; that needs 'hit', 'nee' "
                     "or 'connect')")

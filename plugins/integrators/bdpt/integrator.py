@@ -39,9 +39,24 @@ class BdptStats:
     peak_vertex_bytes: int = 0
     light_s: float = 0.0
     camera_s: float = 0.0
+    grid_s: float = 0.0               # lab_vcm: building the light vertices' grids
+    radius_first: float = 0.0         # lab_vcm: the merging radius of the first and last pass
+    radius_last: float = 0.0
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+@dataclass
+class PassPlan:
+    """One pass of a render: its ``index``, the samples per pixel before it (``done``) and in it
+    (``spp``: lab_vcm's iterations, sample k of every pixel in iteration done + k + 1), its light
+    subpaths and camera lanes (light and camera lane i belong to sample i mod spp)."""
+    index: int
+    done: int
+    spp: int
+    light_subpaths: int
+    camera_lanes: int
 
 
 def pass_seed(seed: int, index: int) -> int:
@@ -125,6 +140,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         super().__init__(props)
         self.values = values
         self.estimator = self.ESTIMATOR(values)
+        self.kinds = self.estimator.kinds()             # the enabled strategy kinds
+        self.only = bdpt_only_strategy(values.get("only_strategy", ""))
         self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
         self.stats = BdptStats()
         self.vertices_per_path = FIRST_GUESS_VERTICES
@@ -156,7 +173,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         v = self.values
         floor = spawn.offset_floor(traits)
         light_depth = -1 if self.max_depth == DEPTH_UNBOUNDED else self.max_depth
-        only = bdpt_only_strategy(v["only_strategy"])
+        only = self.only
         tracer = LightTracer(scene, sensor, light_depth, v["rr_depth"], None, floor, only, v["hide_emitters"])
         inv_area, axis = sensor_constants(sensor)
         self.stats = stats = BdptStats()
@@ -164,21 +181,19 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         while done < spp:
             # light subpaths that fit in max_vertices: film pixels x spp_pass, or fewer, shared
             fit = max(1, int(v["max_vertices"] / (1.25 * self.vertices_per_path)))
-            spp_pass = max(1, min(spp - done, fit // film_px))
+            spp_pass = max(1, min(spp - done, fit // film_px, self.pass_spp_limit(film_px)))
             count = min(film_px * spp_pass, fit)
-            camera_lanes = crop_px * spp_pass
-            tracer.weights = BdptWeights(v["heuristic"], v["beta"], v["strategies"],
-                                         light_paths=count / camera_lanes)
-            # (opaque: a ratio that changes from pass to pass must not be compiled into the kernels)
-            tracer.weights.light_paths = dr.opaque(mi.Float, count / camera_lanes)
+            plan = PassPlan(index, done, spp_pass, count, crop_px * spp_pass)
+            tracer.weights = self.pass_weights(plan)
             light = self._light_pass(tracer, film, count, crop_px / count, pass_seed(seed, index), stats,
                                      traits.tangent_bsdf)
             if light is None:                          # did not fit: fewer light subpaths
                 continue
-            block, vertices, last = light
+            block, vertices, last, stored = light
             self._pass = CameraPass(vertices, last, tracer.weights, tracer.table, inv_area, axis,
                                     self.max_depth, v["rr_depth"], v["hide_emitters"], floor,
-                                    traits.hittable_emitters, only, count)
+                                    traits.hittable_emitters, only, count,
+                                    self.pass_grid(vertices, stored, plan, stats))
             start = time.perf_counter()
             try:
                 image = mi.SamplingIntegrator.render(self, scene, sensor, pass_seed(seed, index), spp_pass,
@@ -196,25 +211,50 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             stats.passes += 1
         return total
 
+    # -- What a pass uses (lab_vcm overrides these) -------------------------------------
+
+    def pass_spp_limit(self, film_pixels: int) -> int:
+        """Most samples per pixel in one pass besides ``max_vertices`` (lab_vcm: a bound)."""
+        return 1 << 30
+
+    def pass_weights(self, plan: PassPlan) -> BdptWeights:
+        """The MIS weights of a pass (lab_vcm adds merging)."""
+        v = self.values
+        ratio = plan.light_subpaths / plan.camera_lanes
+        weights = BdptWeights(v["heuristic"], v["beta"], self.kinds, light_paths=ratio,
+                              merge_area=self.merge_area(plan))
+        # (opaque: a ratio that changes from pass to pass must not be compiled into the kernels)
+        weights.light_paths = dr.opaque(mi.Float, ratio)
+        return weights
+
+    def merge_area(self, plan: PassPlan) -> float:
+        """pi r^2 N of the pass's merging (lab_vcm; per iteration: its ``lane_tables``), else 0."""
+        return 0.0
+
+    def pass_grid(self, vertices, stored: int, plan: PassPlan, stats):
+        """What the camera subpaths merge with (lab_vcm); None: no merging."""
+        return None
+
     def _light_pass(self, tracer, film, count: int, sample_scale: float, seed: int, stats, tangents: bool):
-        """Trace ``count`` light subpaths: (splat block, vertices, last slots), or None when they
-        needed more than ``max_vertices`` (``vertices_per_path`` is updated; the caller retries
-        with fewer)."""
-        if not tracer.weights.enabled & {"light", "connect"}:      # (s <= 1 only: no light subpath)
-            return splats.new_block(film), LightVertices(1), dr.full(mi.UInt32, NONE, count)
+        """Trace ``count`` light subpaths: (splat block, vertices, last slots, stored vertices), or
+        None when they needed more than ``max_vertices`` (``vertices_per_path`` is updated; the
+        caller retries with fewer)."""
+        if not tracer.weights.enabled & {"light", "connect", "merge"}:   # (s <= 1 only: no light subpath)
+            return splats.new_block(film), LightVertices(1), dr.full(mi.UInt32, NONE, count), 0
         max_vertices = self.values["max_vertices"]
         capacity = int(min(max_vertices, math.ceil(1.25 * self.vertices_per_path * count) + 1024))
         light_seed = seed ^ 0x5BD1E995
         while True:
             start = time.perf_counter()
             block = splats.new_block(film)
-            vertices = LightVertices(capacity, tangents)
+            vertices = LightVertices(capacity, tangents, tracer.weights.merging)
             reached, stores, last = tracer.trace(count, light_seed, block, sample_scale, vertices)
             dr.eval(block.tensor(), *vertices.arrays(), last, reached, stores)
             dr.sync_thread()
             stats.light_s += time.perf_counter() - start
             n = int(stores[0])
-            stats.peak_vertex_bytes = max(stats.peak_vertex_bytes, capacity * vertex_bytes(tangents))
+            stats.peak_vertex_bytes = max(stats.peak_vertex_bytes,
+                                          capacity * vertex_bytes(tangents, tracer.weights.merging))
             if n <= capacity:
                 break
             stats.retraces += 1
@@ -229,7 +269,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         stats.light_subpaths += count
         stats.light_vertices_reached += int(reached[0])
         stats.light_vertices_stored += n
-        return block, vertices, last
+        return block, vertices, last, n
 
     # -- Camera subpaths ---------------------------------------------------------------
 

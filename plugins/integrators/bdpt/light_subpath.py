@@ -75,6 +75,12 @@ def transported(bsdf, si: mi.SurfaceInteraction3f, wo, active):
     return dr.select(cos_in > 0, value * ratio, 0.0), pdf_rev
 
 
+def carried(merging: bool, value, old):
+    """``value`` with vertex merging, else ``old`` itself (dvm stays a constant 0 without it, so
+    lab_bdpt's kernels do not carry it)."""
+    return finite_or_zero(value) if merging else old
+
+
 def reverse_pdf(bsdf, ctx, si: mi.SurfaceInteraction3f, wo, active):
     """The density of sampling ``si.wi`` at ``si`` when arriving from ``wo`` (local): the
     direction back along a subpath, as the other side would sample it (``ctx``: its mode)."""
@@ -148,8 +154,9 @@ class LightTracer:
 
         Returns (surface vertices reached (UInt32[1]), stores attempted (UInt32[1]), each lane's
         last stored slot (``vertices.NONE`` when none))."""
-        scene, sensor, w, table = self.scene, self.sensor, self.weights, self.table
+        scene, sensor, table = self.scene, self.sensor, self.table
         index = dr.arange(mi.UInt32, count)
+        w = self.weights.at_lanes(index)          # (lab_vcm: each lane's iteration's merging terms)
         s = dr.opaque(mi.UInt32, seed & 0xFFFFFFFF)
         rng = mi.PCG32(count)
         rng.seed(mi.sample_tea_64(s, index), mi.sample_tea_64(index, s ^ 0x9E3779B9))
@@ -183,17 +190,21 @@ class LightTracer:
         ds_0.p, ds_0.n, ds_0.uv, ds_0.time, ds_0.emitter = ps.p, ps.n, ps.uv, time, emitter
 
         # ---------------- s = 1, t = 1: the emitter point seen directly ----------------
-        si0 = mi.SurfaceInteraction3f(ps, ray.wavelengths)
-        active0 = on_surface & (pmf > 0) & strategy_mask(self.only, 1, 1) & (not self.hide_emitters)
-        ds0, we0 = sensor.sample_direction(si0, mi.Point2f(rng.next_float32(), rng.next_float32()), active0)
-        active0 = self._visible(si0, ds0, active0)
-        si0.wi = si0.to_local(ds0.d)
-        cos0 = mi.Frame3f.cos_theta(si0.wi)
-        active0 &= cos0 > 0
-        le0 = emitter.eval(si0, active0)
-        w0 = w.emitter_to_camera(sensor_pdf(ds0, we0), cos0, dr.square(ds0.dist), pdf_pos, delta_pos)
-        value0 = le0 * cos0 * pos_weight * sel_weight * we0 * finite_or_zero(w0) * scale
-        splats.splat(block, ds0.uv, si0.wavelengths, value0, active0)
+        # (light tracing disabled, e.g. lab_vcm's bpm: nothing splatted, the same random numbers)
+        tracing = "light" in w.enabled
+        u0 = mi.Point2f(rng.next_float32(), rng.next_float32())
+        if dr.hint(tracing, mode="scalar"):
+            si0 = mi.SurfaceInteraction3f(ps, ray.wavelengths)
+            active0 = on_surface & (pmf > 0) & strategy_mask(self.only, 1, 1) & (not self.hide_emitters)
+            ds0, we0 = sensor.sample_direction(si0, u0, active0)
+            active0 = self._visible(si0, ds0, active0)
+            si0.wi = si0.to_local(ds0.d)
+            cos0 = mi.Frame3f.cos_theta(si0.wi)
+            active0 &= cos0 > 0
+            le0 = emitter.eval(si0, active0)
+            w0 = w.emitter_to_camera(sensor_pdf(ds0, we0), cos0, dr.square(ds0.dist), pdf_pos, delta_pos)
+            value0 = le0 * cos0 * pos_weight * sel_weight * we0 * finite_or_zero(w0) * scale
+            splats.splat(block, ds0.uv, si0.wavelengths, value0, active0)
 
         # ---------------- x_1, x_2, ..: the light subpath ----------------
         beta = mi.Spectrum(ray_weight) * sel_weight
@@ -201,11 +212,14 @@ class LightTracer:
         max_depth = dr.opaque(mi.UInt32, self.max_depth if self.max_depth > 0 else 0xFFFFFFFF)
         rr_depth = dr.opaque(mi.UInt32, self.rr_depth)
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
-        storing = vertices is not None and "connect" in w.enabled
+        storing = vertices is not None and bool(w.enabled & {"connect", "merge"})
+        # a merge needs one camera segment after the light vertex, a connection two
+        camera_segments = 1 if w.merging else 2
         stores = dr.zeros(mi.UInt32, 1)
         capacity = dr.opaque(mi.UInt32, vertices.capacity if storing else 0)
         last = dr.full(mi.UInt32, NONE, count)
         dvcm, dvc, first = mi.Float(0), mi.Float(0), mi.Float(1)
+        dvm = mi.Float(0) if w.merging else 0.0
         depth = mi.UInt32(0)
         vertices_reached = mi.UInt32(0)
         active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_depth > 1)
@@ -223,9 +237,10 @@ class LightTracer:
                 pdf_dir_0 = table.emission(emitter, cos_emit, pdf_nee, active)[1]
                 start = w.start_light(pdf_pos * pdf_dir_0, pdf_nee, cos_emit, delta)
                 dvcm, dvc, first = mi.Float(start.dvcm), mi.Float(start.dvc), mi.Float(start.first)
+                dvm = carried(w.merging, start.dvm, dvm)
                 dist2 = dr.select(infinite, 1.0, dist2)    # x_0 is a direction: no distance
             depth += 1
-            mis = w.after_hit(SubpathMis(dvcm, dvc, first), dist2, cos_in)
+            mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dist2, cos_in)
             bsdf = si.bsdf()
             wi_world = -ray.d
             smooth = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
@@ -235,21 +250,24 @@ class LightTracer:
 
             # ---------- store x_depth for connections with camera vertices ----------
             if dr.hint(storing, mode="scalar"):
-                store = smooth & (depth + 2 <= max_depth)
+                store = smooth & (depth + camera_segments <= max_depth)
                 slot = dr.scatter_inc(stores, mi.UInt32(0), store)
                 kept = store & (slot < capacity)
-                vertices.store(slot, si, -ray.d, beta, mis, depth, last, kept)
+                vertices.store(slot, si, -ray.d, beta, mis, depth, last, kept,
+                               self.weights.lane_iteration(index))
                 last = dr.select(kept, slot, last)
 
             # ---------- t = 1: join x_depth to the sensor ----------
-            ds, we = sensor.sample_direction(si, mi.Point2f(rng.next_float32(), rng.next_float32()), splat_on)
-            connect = self._visible(si, ds, splat_on)
-            wo_cam = si.to_local(ds.d)
-            f_cam, pdf_rev_cam = transported(bsdf, si, wo_cam, connect)
-            w_cam = w.light_to_camera(mis, sensor_pdf(ds, we), dr.abs(dr.dot(si.n, ds.d)),
-                                      dr.square(ds.dist), pdf_rev_cam)
-            value = beta * f_cam * we * finite_or_zero(w_cam) * scale
-            splats.splat(block, ds.uv, si.wavelengths, value, connect)
+            u_sensor = mi.Point2f(rng.next_float32(), rng.next_float32())
+            if dr.hint(tracing, mode="scalar"):
+                ds, we = sensor.sample_direction(si, u_sensor, splat_on)
+                connect = self._visible(si, ds, splat_on)
+                wo_cam = si.to_local(ds.d)
+                f_cam, pdf_rev_cam = transported(bsdf, si, wo_cam, connect)
+                w_cam = w.light_to_camera(mis, sensor_pdf(ds, we), dr.abs(dr.dot(si.n, ds.d)),
+                                          dr.square(ds.dist), pdf_rev_cam)
+                value = beta * f_cam * we * finite_or_zero(w_cam) * scale
+                splats.splat(block, ds.uv, si.wavelengths, value, connect)
 
             # ---------- adjoint BSDF sampling ----------
             active &= depth + 1 < max_depth
@@ -265,6 +283,7 @@ class LightTracer:
                               dr.select(bs.pdf > 0, smooth_weight, 0.0))
             mis = w.scatter_light(mis, bs.pdf, pdf_rev, dr.abs(dr.dot(si.n, wo_world)), delta_lobe)
             dvcm, dvc, first = finite_or_zero(mis.dvcm), finite_or_zero(mis.dvc), mi.Float(mis.first)
+            dvm = carried(w.merging, mis.dvm, dvm)
             ray = spawn.spawn_ray(si, wo_world, self.floor)
 
             beta_max = dr.max(mi.unpolarized_spectrum(beta))

@@ -14,7 +14,8 @@ BSDFs need them (``tangents``: anisotropic lobes, normal and bump maps), the sha
 tangent and dp/du, dp/dv, which otherwise cost more to compute and store than the rest (a
 mesh's tangents are derived per hit); and what the estimate needs: the throughput (emitted
 power over the subpath's density), the MIS quantities (``weights.SubpathMis``; ``first`` is
-depth == 1, not stored) and its depth.
+depth == 1, not stored; ``dvm`` only with vertex merging, ``merging``, which also keeps the
+lane's iteration: lab_vcm merges within an iteration) and its depth.
 """
 from __future__ import annotations
 
@@ -30,37 +31,43 @@ _FIELDS = (("p", "Point3f"), ("n", "Normal3f"), ("sh_n", "Normal3f"), ("uv", "Po
            ("beta", "Spectrum"), ("dvcm", "Float"), ("dvc", "Float"), ("depth", "UInt32"), ("prev", "UInt32"),
            ("bsdf", "BSDFPtr"))
 _TANGENT_FIELDS = (("sh_s", "Vector3f"), ("dp_du", "Vector3f"), ("dp_dv", "Vector3f"))
+_MERGE_FIELDS = (("dvm", "Float"), ("iteration", "UInt32"))
 
 
-def vertex_bytes(tangents: bool = False) -> int:
-    """Bytes per stored vertex in the current variant (``tangents``: with the tangent fields)."""
+def vertex_bytes(tangents: bool = False, merging: bool = False) -> int:
+    """Bytes per stored vertex in the current variant (``tangents``: with the tangent fields;
+    ``merging``: with dvm)."""
     channels = dr.size_v(mi.Spectrum) if not mi.is_polarized else 16
-    return 4 * (3 * 4 + 2 + channels + 2 + 3 + 9 * tangents)
+    return 4 * (3 * 4 + 2 + channels + 2 + 3 + 9 * tangents + 2 * merging)
 
 
 class LightVertices:
     """A buffer of ``capacity`` light vertices (structure of arrays)."""
 
-    def __init__(self, capacity: int, tangents: bool = False):
+    def __init__(self, capacity: int, tangents: bool = False, merging: bool = False):
         self.capacity = capacity
-        self.fields = _FIELDS + (_TANGENT_FIELDS if tangents else ())
+        self.merging = merging
+        self.fields = _FIELDS + (_TANGENT_FIELDS if tangents else ()) + (_MERGE_FIELDS if merging else ())
         for name, kind in self.fields:   # (only slots below the store count are ever read)
             setattr(self, name, dr.empty(getattr(mi, kind), max(capacity, 1)))
 
     @property
     def tangents(self) -> bool:
-        return len(self.fields) > len(_FIELDS)
+        return _TANGENT_FIELDS[0] in self.fields
 
     def arrays(self) -> tuple:
         return tuple(getattr(self, name) for name, _ in self.fields)
 
-    def store(self, slot, si: mi.SurfaceInteraction3f, wi_world, beta, mis: SubpathMis, depth, prev, active):
+    def store(self, slot, si: mi.SurfaceInteraction3f, wi_world, beta, mis: SubpathMis, depth, prev, active,
+              iteration=0):
         """Scatter one vertex per active lane to ``slot`` (``wi_world``: the direction it was
         reached from, in world space: converting ``si.wi`` would need the tangent frame)."""
         values = {"p": si.p, "n": si.n, "sh_n": si.sh_frame.n, "uv": si.uv, "wi": wi_world, "beta": beta,
                   "dvcm": mis.dvcm, "dvc": mis.dvc, "depth": depth, "prev": prev, "bsdf": si.bsdf()}
         if self.tangents:
             values.update(sh_s=si.sh_frame.s, dp_du=si.dp_du, dp_dv=si.dp_dv)
+        if self.merging:
+            values.update(dvm=mis.dvm, iteration=mi.UInt32(iteration))
         for name, _ in self.fields:
             dr.scatter(getattr(self, name), values[name], slot, active)
 
@@ -83,5 +90,6 @@ class LightVertices:
         si.wavelengths = wavelengths
         si.t = mi.Float(1.0)                     # a valid hit
         depth = get("depth", "UInt32")
-        mis = SubpathMis(get("dvcm", "Float"), get("dvc", "Float"), dr.select(depth == 1, 1.0, 0.0))
+        mis = SubpathMis(get("dvcm", "Float"), get("dvc", "Float"), dr.select(depth == 1, 1.0, 0.0),
+                         get("dvm", "Float") if self.merging else 0.0)
         return si, get("bsdf", "BSDFPtr"), get("beta", "Spectrum"), mis, depth, get("prev", "UInt32")

@@ -62,6 +62,20 @@ from mitsuba_lab.plugins.params import BDPT_KINDS as KINDS, BDPT_PRESETS as PRES
 ALL_KINDS = KINDS + ("merge",)
 
 
+#: Lanes per block of one iteration (``BdptWeights.lane_iteration``).
+LANE_BLOCK = 64
+
+
+def iteration_sizes(lanes: int, iterations: int) -> list[int]:
+    """How many of ``lanes`` lanes each iteration holds (``BdptWeights.lane_iteration``)."""
+    blocks, rest = divmod(lanes, LANE_BLOCK)
+    sizes = [LANE_BLOCK * (blocks // iterations)] * iterations
+    for k in range(blocks % iterations):
+        sizes[k] += LANE_BLOCK
+    sizes[blocks % iterations] += rest
+    return sizes
+
+
 class SubpathMis(NamedTuple):
     """The MIS quantities a subpath carries at its current vertex (store them per light vertex);
     ``dvm`` only with merging (SmallVCM's ``dVM``: the sum over the techniques with fewer
@@ -134,6 +148,33 @@ class BdptWeights:
         self.merging = "merge" in self.enabled
         self.eta = self._m(float(merge_area)) if self.merging else 0.0
         self.inv_eta = self._m(1.0 / float(merge_area)) if self.merging else 0.0
+
+    #: lab_vcm: (eta table, 1 / eta table, iterations), one entry per iteration of a pass, each
+    #: to the power beta (Dr.Jit arrays; see ``at_lanes``); None: ``eta`` holds for every lane.
+    lane_tables = None
+
+    def at_lanes(self, lane):
+        """These weights for the lanes ``lane`` (Dr.Jit UInt32) of a pass: with ``lane_tables``,
+        lane i merges in iteration i mod iterations and takes that iteration's eta (lab_vcm
+        runs several iterations, each with its own radius, in one pass); else ``self``."""
+        if self.lane_tables is None:
+            return self
+        import copy
+
+        import drjit as dr
+
+        eta, inv_eta, _ = self.lane_tables
+        k = self.lane_iteration(lane)
+        lanes = copy.copy(self)
+        lanes.eta, lanes.inv_eta = dr.gather(type(eta), eta, k), dr.gather(type(inv_eta), inv_eta, k)
+        lanes.lane_tables = None
+        return lanes
+
+    def lane_iteration(self, lane):
+        """The iteration of the pass that lanes ``lane`` belong to (0 without ``lane_tables``):
+        blocks of ``LANE_BLOCK`` lanes in turn (``iteration_sizes``), so that neighbouring lanes,
+        which run together, merge in the same iteration's cells (3x faster than lane mod K)."""
+        return 0 if self.lane_tables is None else (lane // LANE_BLOCK) % self.lane_tables[2]
 
     def _m(self, x):
         """x^beta (the heuristic applied to a density ratio)."""

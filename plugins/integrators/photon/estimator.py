@@ -10,6 +10,11 @@ class PhotonMapping(Estimator):
     passes, each with its own photon map (see ``integrator.LabPhotonIntegrator``)."""
     plugin_name = "lab_photon"
     PARAMETERS = declarations.LAB_PHOTON
+
+    @classmethod
+    def separate_reason(cls, params: dict) -> str:
+        return ("lab_photon shrinks its radius from one of its passes to the next: averaged renders "
+                "would each restart the schedule (another, more biased estimator)")
     #: A sweep's sample count N renders N passes of one camera sample per pixel each, like
     #: SPPM's one eye ray per pixel per pass (Hachisuka & Jensen 2009): more time buys more
     #: photon maps and a smaller final radius, which is what makes the estimator converge;

@@ -55,7 +55,7 @@ from mitsuba_lab.plugins.integrators.counters import RayCounters
 from mitsuba_lab.plugins.integrators.mis import MIS
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 
-from .grid import NEIGHBOURS, PhotonGrid, cell_of, hash_cell
+from .grid import NEIGHBOURS, PhotonGrid, cell_of, hash_cell, neighbour_cell
 
 #: Photons whose geometric normal is more than ~37 degrees off x's are rejected.
 NORMAL_COS = 0.8
@@ -81,7 +81,7 @@ def density_estimate(grid: PhotonGrid, si: mi.SurfaceInteraction3f, bsdf: mi.BSD
     k = mi.UInt32(0)
     active = mi.Bool(active)
     while dr.hint(active & (k < NEIGHBOURS), label="lab_photon gather cells"):
-        cell = home + mi.Vector3i(mi.Int32(k % 3) - 1, mi.Int32((k // 3) % 3) - 1, mi.Int32(k // 9) - 1)
+        cell = neighbour_cell(home, k)
         bucket = hash_cell(cell, grid.mask)
         j = dr.gather(mi.UInt32, grid.start, bucket, active)
         end = j + dr.gather(mi.UInt32, grid.count, bucket, active)

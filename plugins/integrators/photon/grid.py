@@ -25,6 +25,8 @@ import mitsuba as mi
 from .records import PhotonRecords
 
 HASH_PRIMES = (73856093, 19349663, 83492791)
+#: Mixes a separate index (lab_vcm's iteration) into a cell's hash.
+SALT_PRIME = 2654435761
 #: Neighbour cells visited by a query (cell size = radius).
 NEIGHBOURS = 27
 
@@ -34,10 +36,18 @@ def cell_of(p, inv_cell_size):
     return mi.Vector3i(dr.floor(p * inv_cell_size))
 
 
-def hash_cell(cell, mask):
-    """Bucket index of an integer cell: XOR of the coordinates times large primes, mod T."""
+def neighbour_cell(home, k):
+    """The k-th (0 .. NEIGHBOURS - 1) of the 3 x 3 x 3 cells around integer cell ``home``."""
+    return home + mi.Vector3i(mi.Int32(k % 3) - 1, mi.Int32((k // 3) % 3) - 1, mi.Int32(k // 9) - 1)
+
+
+def hash_cell(cell, mask, salt=None):
+    """Bucket index of an integer cell: XOR of the coordinates times large primes, mod T
+    (``salt``: a UInt32 mixed in the same way, so equal cells of different grids differ)."""
     u = [dr.reinterpret_array(mi.UInt32, cell[i]) for i in range(3)]
     h = (u[0] * HASH_PRIMES[0]) ^ (u[1] * HASH_PRIMES[1]) ^ (u[2] * HASH_PRIMES[2])
+    if salt is not None:
+        h ^= mi.UInt32(salt) * SALT_PRIME
     return h & mask
 
 
@@ -47,6 +57,19 @@ def table_size_for(count: int) -> int:
     while size < 2 * count:
         size *= 2
     return size
+
+
+def counting_sort(bucket, size: int):
+    """(slot, start, count) of points in buckets ``bucket`` of a table of ``size``: each point's
+    place in the bucket-sorted order; each bucket's first place and its size."""
+    count = dr.zeros(mi.UInt32, size)
+    dr.scatter_reduce(dr.ReduceOp.Add, count, mi.UInt32(1), bucket)
+    start = dr.prefix_sum(count)                     # exclusive
+    fill = dr.zeros(mi.UInt32, size)
+    rank = dr.scatter_inc(fill, bucket)              # rank of the point inside its bucket
+    slot = dr.gather(mi.UInt32, start, bucket) + rank
+    dr.eval(slot, count, start)
+    return slot, start, count
 
 
 class PhotonGrid:
@@ -79,13 +102,7 @@ class PhotonGrid:
             self.slot = mi.UInt32()
             return
         bucket = hash_cell(cell_of(records.p, self.inv_cell_size), self.mask)
-        count = dr.zeros(mi.UInt32, size)
-        dr.scatter_reduce(dr.ReduceOp.Add, count, mi.UInt32(1), bucket)
-        start = dr.prefix_sum(count)                     # exclusive
-        fill = dr.zeros(mi.UInt32, size)
-        rank = dr.scatter_inc(fill, bucket)              # rank of the photon inside its bucket
-        slot = dr.gather(mi.UInt32, start, bucket) + rank
-        dr.eval(slot, count, start)
+        slot, start, count = counting_sort(bucket, size)
         self.records = records.scattered(slot).eval()
         self.start, self.count = start, count
         self.bucket, self.slot = bucket, slot            # kept for tests and statistics

@@ -43,6 +43,13 @@ class _PassParameters(Mapping):
 
 
 PASS_PARAMETER = _PassParameters()
+#: ``[experiment] progressive`` when a config leaves it out: strategies that can accumulate render
+#: one progressive run per seed (plan.ladder_passes, experiment/progressive.py), not one render
+#: per spp (measured on the quick and veach_mis sweeps: the same MSE at each spp, fewer render
+#: seconds, more curve points; experiments/README.md).
+DEFAULT_PROGRESSIVE = True
+#: ``[experiment] checkpoints``: where a progressive run's passes end (plan.ladder_passes).
+CHECKPOINTS = ("doubling", "ladder")
 DEFAULT_CACHE = os.path.join("~", ".cache", "mitsuba_lab", "references")
 
 
@@ -106,6 +113,8 @@ class Config:
     metrics: tuple[str, ...]
     cluster: str | None = None      # Dask scheduler address; None = run in this process
     strategy_grid: StrategyGridSpec | None = None
+    progressive: bool = DEFAULT_PROGRESSIVE     # one accumulating render per seed (experiment.progressive)
+    checkpoints: str = "doubling"   # progressive passes: "doubling" or "ladder" (plan.ladder_passes)
 
 
 class TableReader:
@@ -282,18 +291,52 @@ def read_toml(path: str) -> dict:
             raise ConfigError(f"{path}: not valid TOML: {err}") from err
 
 
-def load_config(path: str) -> Config:
-    """Read and validate a sweep configuration (see experiments/README.md)."""
+#: How messages name a config given as a dict (``mitsuba_lab.sweep({...})``).
+DICT_SOURCE = "config dict"
+
+
+def load_config(source) -> Config:
+    """Read and validate a sweep configuration (see experiments/README.md): the path of a TOML
+    file, or a dict of the same tables (``load_config_dict``)."""
+    if isinstance(source, Mapping):
+        return load_config_dict(source)
+    if not isinstance(source, (str, os.PathLike)):
+        raise ConfigError("a sweep config is the path of a TOML file or a dict of its tables, got "
+                          f"{type(source).__name__}")
+    path = os.fspath(source)
     return parse_config(read_toml(path), path)
 
 
-def parse_config(data: dict, source: str) -> Config:
-    base_dir = os.path.dirname(os.path.abspath(source))
+def _plain(value):
+    """A dict config as TOML would have given it: mappings as dicts, tuples as lists, paths as str."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    return value
+
+
+def load_config_dict(data: Mapping, source: str = DICT_SOURCE) -> Config:
+    """Validate a configuration given as a dict with the TOML file's tables. Relative paths in it
+    (scenes, regions files) resolve against the current directory; messages name it ``source``;
+    ``experiment.name`` defaults to "sweep" (so the output folder to out/sweep)."""
+    return parse_config(_plain(data), source, base_dir=os.getcwd())
+
+
+def parse_config(data: dict, source: str, base_dir: str | None = None) -> Config:
+    """``data`` (a TOML file's tables) validated. ``source`` names it in messages; it is the
+    file's path unless ``base_dir`` is given, the folder relative paths resolve against (by
+    default the file's folder), in which case it is only a label."""
+    from_file = base_dir is None
+    base_dir = os.path.dirname(os.path.abspath(source)) if from_file else base_dir
     top = TableReader(source, data, "")
     top.unknown({"experiment", "reference", "scenes", "strategies", "samplers", "executor", "report"})
     exp = top.sub("experiment", {})
-    exp.unknown({"name", "output", "spp", "time_budgets", "repetitions", "seed", "max_depth", "metrics"})
-    name = exp.get("name", str, os.path.splitext(os.path.basename(source))[0])
+    exp.unknown({"name", "output", "spp", "time_budgets", "repetitions", "seed", "max_depth", "metrics",
+                 "progressive", "checkpoints"})
+    name = exp.get("name", str, os.path.splitext(os.path.basename(source))[0] if from_file else "sweep")
     output = exp.get("output", str, os.path.join("out", name))
     spp = _positive_ints(exp, "spp", [])
     budgets = exp.get("time_budgets", list, [], expected="a list of positive numbers (seconds)")
@@ -306,6 +349,11 @@ def parse_config(data: dict, source: str) -> Config:
     seed = exp.get("seed", int, 0, check=lambda v: 0 <= v < 2 ** 20, expected="an integer in [0, 2^20)")
     max_depth = exp.get("max_depth", int, None, check=lambda v: v == -1 or v >= 1,
                         expected="-1 (unbounded) or an integer >= 1")
+    progressive = exp.get("progressive", bool, DEFAULT_PROGRESSIVE,
+                          expected="true (one accumulating render per seed) or false (one render per spp)")
+    checkpoints = exp.get("checkpoints", str, CHECKPOINTS[0], check=lambda v: v in CHECKPOINTS,
+                          expected='"doubling" (passes P, P, 2P, 4P, ...) or "ladder" (passes end at the '
+                                   'spp ladder\'s values only)')
     metrics = exp.get("metrics", list, list(OPTIONAL_METRICS),
                       expected=f"a list drawn from {', '.join(OPTIONAL_METRICS)}")
     if not all(m in OPTIONAL_METRICS for m in metrics):
@@ -337,12 +385,13 @@ def parse_config(data: dict, source: str) -> Config:
     report = top.sub("report", {})
     report.unknown({"strategy_grid"})
     grid = _strategy_grid(report, scenes, strategies)
-    return Config(name=name, source=os.path.abspath(source), output=output, scenes=scenes,
+    return Config(name=name, source=os.path.abspath(source) if from_file else source, output=output, scenes=scenes,
                   strategies=strategies, samplers=samplers, spp=spp,
                   time_budgets=tuple(sorted(set(float(b) for b in budgets))), repetitions=repetitions,
                   seed=seed, max_depth=max_depth,
                   reference=ReferenceSpec(ref_plugin, ref_spp, chunks, cache), metrics=tuple(metrics),
-                  cluster=cluster, strategy_grid=grid)
+                  cluster=cluster, strategy_grid=grid, progressive=progressive,
+                  checkpoints=checkpoints)
 
 
 def with_depth(spec: PluginSpec, max_depth: int | None) -> PluginSpec:

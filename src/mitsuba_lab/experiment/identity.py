@@ -5,9 +5,9 @@ would give it now: the scene's content (the file and the files it references),
 its resolution override and ``<default>`` values; the integrator and sampler with
 their fully resolved parameters (defaults filled in, so writing a default out
 does not count as a change); the sample count or time budget; the reference it
-is measured against; and the versions of Mitsuba, Dr.Jit, the variant and the
-lab's plugin code. The seed is part of a run's key in the store, so it is not
-repeated here.
+is measured against; the pass sizes of a progressive run; and the versions of
+Mitsuba, Dr.Jit, the variant and the lab's plugin code. The seed is part of a
+run's key in the store, so it is not repeated here.
 """
 from __future__ import annotations
 
@@ -70,14 +70,20 @@ def sampler_identity(spec: PluginSpec) -> dict:
 
 def point_identity(scene, strategy: PluginSpec, sampler: PluginSpec, point, reference_key: str,
                    scene_digest: str) -> dict:
-    """Identity of a point's runs (``scene`` a config.SceneSpec, ``point`` a plan.Point)."""
-    return {"scene": {"digest": scene_digest, "resolution": scene.resolution,
-                      "defaults": dict(scene.defaults)},
-            "integrator": integrator_identity(strategy),
-            "sampler": sampler_identity(sampler),
-            "spp": point.spp, "budget_s": point.budget_s,
-            "reference": reference_key,
-            "versions": versions_identity()}
+    """Identity of a point's runs (``scene`` a config.SceneSpec, ``point`` a plan.Point). A
+    progressive point adds its pass sizes (a budget's are fitted by its first run: "fitted");
+    a point of separate renders has no such key, so its identity is what it was before
+    progressive runs existed."""
+    ident = {"scene": {"digest": scene_digest, "resolution": scene.resolution,
+                       "defaults": dict(scene.defaults)},
+             "integrator": integrator_identity(strategy),
+             "sampler": sampler_identity(sampler),
+             "spp": point.spp, "budget_s": point.budget_s,
+             "reference": reference_key,
+             "versions": versions_identity()}
+    if point.progressive:
+        ident["progressive"] = {"passes": list(point.passes) if point.passes else "fitted"}
+    return ident
 
 
 def identity_hash(identity: dict) -> str:
@@ -97,7 +103,7 @@ def _flatten(value, prefix="") -> dict:
 #: How a changed field is named in messages (flattened key -> words).
 _LABELS = {"scene.digest": "scene file content", "reference": "reference",
            "versions.lab_plugins": "lab plugin code", "integrator.type": "integrator",
-           "sampler.type": "sampler"}
+           "sampler.type": "sampler", "progressive.passes": "progressive pass sizes"}
 
 
 def _label(key: str) -> str:

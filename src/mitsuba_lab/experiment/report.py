@@ -1,7 +1,8 @@
 """The sweep report, built from stored results only (it never renders).
 
 Writes ``OUTDIR/results.csv`` (one row per render), ``OUTDIR/report/index.html``
-(self-contained: plots and images embedded as data URIs, opens offline),
+(self-contained: plots and images embedded as data URIs, opens offline; per scene a
+comparison viewer, ``viewer``, with the renders as half-float HDR data),
 ``OUTDIR/report/summary.md`` and the plot / image PNGs beside them. The tables of each
 scene's section are in ``report_sections``; page, table, number and figure helpers are
 the shared ones of ``mitsuba_lab.reporting``.
@@ -16,8 +17,9 @@ from collections import defaultdict
 import numpy as np
 
 from .. import images
-from ..reporting import dict_rows, fmt, markdown_table, pyplot, save_figure, save_loglog, write_csv, \
+from ..reporting import block_marker, dict_rows, fmt, markdown_table, pyplot, save_figure, save_loglog, write_csv, \
     write_markdown_page
+from . import viewer
 from .analysis import FLOOR_WARNING_FACTOR, PointStats, curve, equal_time_budgets, point_stats, run_image
 from .reference import Reference
 from .report_sections import SectionTables
@@ -48,6 +50,7 @@ class Report(SectionTables):
         os.makedirs(self.out, exist_ok=True)
         self.references = self._references()
         self.stats = self._stats()
+        self.blocks: dict[str, str] = {}             # HTML blocks of the page (the viewers)
 
     # -- loading -------------------------------------------------------------------
     def _references(self) -> dict[str, Reference]:
@@ -76,7 +79,9 @@ class Report(SectionTables):
         grid = grid_section(self.store, self.out)
         if grid:
             md += "\n" + "\n".join(grid)             # the section starts with an empty line
-        paths = write_markdown_page(self.out, self.meta.get("name", "sweep"), md)
+        script = viewer.script() if self.blocks else ""
+        paths = write_markdown_page(self.out, self.meta.get("name", "sweep"), md, blocks=self.blocks,
+                                    style=viewer.STYLE if self.blocks else "", script=script)
         return {"csv": os.path.join(self.folder, "results.csv"), **paths}
 
     def write_csv(self) -> None:
@@ -121,6 +126,7 @@ class Report(SectionTables):
         if near:
             md += ["", f"**Warning:** {len(near)} point(s) measured an MSE within {FLOOR_WARNING_FACTOR:g}x of "
                        f"the reference floor (their errors are mostly the reference's): {', '.join(near)}."]
+        md += self.viewer_marker(scene, stats)
         plot = self.plot_curves(scene, groups, label)
         md += ["", f"![relMSE against time]({os.path.basename(plot)})"]
         md += self.efficiency_table(groups, label)
@@ -140,6 +146,16 @@ class Report(SectionTables):
         if strip:
             md += ["", f"![reference, each strategy at about equal time, error maps]({os.path.basename(strip)})"]
         return "\n".join(md)
+
+    def viewer_marker(self, scene, stats) -> list[str]:
+        """The scene's comparison viewer (HTML only: summary.md gets an invisible marker)."""
+        ref = self.references[scene]
+        data = viewer.scene_data(self.folder, scene, stats, ref,
+                                 self._regions(scene, ref.image.shape[1], ref.image.shape[0]))
+        if data is None:
+            return []
+        self.blocks[f"viewer-{scene}"] = viewer.viewer_block(data)
+        return ["", block_marker(f"viewer-{scene}")]
 
     # -- figures -------------------------------------------------------------------------
     def plot_curves(self, scene, groups, label) -> str:
@@ -167,7 +183,7 @@ class Report(SectionTables):
                         yerr=[min(r["bias2_se"], 0.999 * r["bias2"]) for r in shown], fmt="o-", color=colour,
                         capsize=3, label=f"{name}: bias^2 (+- se)")
         return save_loglog(fig, ax, os.path.join(self.out, f"{scene}_passes.png"),
-                           "passes (one photon map and one camera sample per pixel each)",
+                           "passes or iterations (one light-vertex map and one camera sample per pixel each)",
                            "part of relMSE", f"{scene}: bias^2 and variance against passes", legend_size=7)
 
     def image_strip(self, scene, groups, label) -> str | None:

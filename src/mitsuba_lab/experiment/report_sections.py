@@ -35,7 +35,26 @@ class SectionTables:
                  fmt(p.ciede2000),
                  f"{fmt(p.rays_per_sample.get('extension'))}, {fmt(p.rays_per_sample.get('shadow'))}"]
                 for rank, (_, key, p, s) in enumerate(rows, 1)]
-        return ["", "### Efficiency (largest sample count), ranked", "", *markdown_table(header, body)]
+        return ["", "### Efficiency (largest sample count), ranked", "", *markdown_table(header, body),
+                *self.progressive_note(groups, label)]
+
+    def progressive_note(self, groups, label) -> list[str]:
+        """Whether the scene's curves come from progressive runs (experiment/progressive.py) and
+        how their times are measured, or why a progressive sweep rendered the scene separately."""
+        points = [p for group in groups.values() for p in group]
+        if not points:
+            return []
+        if any(self._run_row(p).get("progressive_run") for p in points):
+            return ["", "Progressive runs: one render per seed whose passes accumulate; each point is the image "
+                        "after a pass, its time the synchronised elapsed time of the passes so far (compile time "
+                        "excluded: a warm-up, and a run that compiled is rendered again). Points of one seed "
+                        "share its earlier passes, so they are not independent."]
+        blocking = [f"{s['strategy']} / {s['sampler']}: {s['reason']}" for s in self.meta.get("separate", [])
+                    if s.get("scene") == points[0].scene]
+        if not blocking:
+            return []
+        return ["", "One render per spp on this scene (not progressive, so that every curve has the same time "
+                    "base) because " + "; ".join(blocking) + "."]
 
     def equal_time_table(self, groups, label) -> list[str]:
         curves = {key: curve(points) for key, points in groups.items()}
@@ -114,12 +133,19 @@ class SectionTables:
         return md
 
     def passes_section(self, scene, groups, label) -> list[str]:
-        """Bias^2 and variance against passes for pass-scaled strategies (lab_photon): a biased,
-        consistent estimator should show bias^2 falling as passes grow."""
+        """Bias^2 and variance against passes for the biased, consistent strategies (lab_photon's
+        passes, lab_vcm's iterations when it merges, one per spp): bias^2 should fall as they grow."""
+        from ..plugins.integrators.estimator import lookup
+
         md, curves = [], {}
         rel_floor = self.references[scene].rel_mse_floor()
         for key, points in groups.items():
-            unit = PASS_PARAMETER.get(self._integrator(points[0]))
+            integrator = self._integrator(points[0])
+            unit = PASS_PARAMETER.get(integrator)
+            estimator = lookup(integrator)
+            if unit is None and estimator is not None and estimator.separate_reason(self._run_row(points[0])
+                                                                                   .get("params", {})):
+                unit = "spp"                           # (one iteration per sample: lab_vcm)
             if unit is None or len(points) < 2:
                 continue
             result = bias_by_passes(points, lambda p: int(self._param(p, unit, p.spp)))

@@ -5,7 +5,9 @@ sample count is part of the compiled kernel), then R timed renders with
 distinct seeds, each synchronised before the clock stops (``worker.execute``).
 Points run in this process or on a Dask cluster (``executors``); either way
 only this process writes the store. Rows already in the store are skipped, so
-a killed sweep resumes where it was.
+a killed sweep resumes where it was. A progressive point (``experiment.progressive``)
+renders one accumulating run per seed instead (``progressive``), stored as one row
+with its checkpoints.
 """
 from __future__ import annotations
 
@@ -63,7 +65,8 @@ class SweepRunner:
     def run(self) -> None:
         self.store.append({"kind": "meta", "config": self.config.source, "name": self.config.name,
                            "started": time.time(), "machine": machine_info(),
-                           "left_out": self.plan.left_out, "aliases": self.plan.aliases})
+                           "left_out": self.plan.left_out, "aliases": self.plan.aliases,
+                           "progressive": self.config.progressive, "separate": self.plan.separate})
         for scene in self.config.scenes:
             self.references[scene.name] = self.reference(scene)
         self.identities = self.point_identities()
@@ -96,7 +99,7 @@ class SweepRunner:
         in the store; resumes and reports skip it). Returns {(what changed, still planned): runs}."""
         seeds = {p.id: set(p.seeds) for p in self.plan.points}
         counts: dict[tuple[str, bool], int] = {}
-        for row in self.store.current_runs():
+        for row in self.store.stored_runs():
             planned = self.identities.get(row["point"])
             if planned is None:
                 changes = "not in this sweep's plan any more"
@@ -151,7 +154,7 @@ class SweepRunner:
         scenes = {s.name: s for s in self.config.scenes}
         samplers = {s.name: s for s in self.config.samplers}
         strategies = {s.name: s for s in self.config.strategies}
-        calibrated = {row["point"]: row["spp"] for row in self.store.of_kind("calibration")
+        calibrated = {row["point"]: row for row in self.store.of_kind("calibration")
                       if row.get("identity_hash") == self.identities.get(row["point"], (None, "-"))[1]}
         for point in todo:
             identity, ident_hash = self.identities[point.id]
@@ -160,18 +163,31 @@ class SweepRunner:
             yield PointTask(point=point, scene=scenes[point.scene], sampler=samplers[point.sampler],
                             strategy=with_depth(strategies[point.strategy], self.config.max_depth),
                             seeds=tuple(s for s in point.seeds if done.get((point.id, s)) != ident_hash),
-                            spp=point.spp or calibrated.get(point.id), reference_image=ref.image,
+                            spp=point.spp or calibrated.get(point.id, {}).get("spp"), reference_image=ref.image,
                             regions=pixel_regions(scenes[point.scene], width, height),
                             metrics=self.config.metrics, variant=mi.variant(),
-                            identity=identity, identity_hash=ident_hash)
+                            identity=identity, identity_hash=ident_hash,
+                            passes=point.passes or tuple(calibrated.get(point.id, {}).get("passes", ())))
 
     def record(self, result: PointResult) -> None:
         """Store one finished point: calibration, then each image before the row naming it."""
         if result.calibration:
             self.store.append(result.calibration)
         for row, image in result.runs:
-            path = self.store.image_path(row["point"], row["seed"], row.get("identity_hash"))
-            os.makedirs(os.path.dirname(path), exist_ok=True)
-            images.write_exr(path, image, {"mitsuba_lab.point": row["point"], "mitsuba_lab.seed": str(row["seed"])})
-            self.store.append({**row, "image": os.path.relpath(path, self.store.folder)})
+            if "checkpoints" in row:                # a progressive run: every checkpoint's image first
+                row = {**row, "checkpoints": [{**cp, "image": self.write_image(row, pass_image, cp["spp"])}
+                                              for cp, pass_image in zip(row["checkpoints"], image)]}
+                self.store.append({**row, "image": row["checkpoints"][-1]["image"]})
+            else:
+                self.store.append({**row, "image": self.write_image(row, image)})
         self.progress("point_done", point=result.task.point.id)
+
+    def write_image(self, row: dict, image, checkpoint_spp: int | None = None) -> str:
+        """Write a run's image (or a progressive run's checkpoint image); its path in the folder."""
+        path = self.store.image_path(row["point"], row["seed"], row.get("identity_hash"), checkpoint_spp)
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        tags = {"mitsuba_lab.point": row["point"], "mitsuba_lab.seed": str(row["seed"])}
+        if checkpoint_spp is not None:
+            tags["mitsuba_lab.checkpoint_spp"] = str(checkpoint_spp)
+        images.write_exr(path, image, tags)
+        return os.path.relpath(path, self.store.folder)

@@ -5,6 +5,12 @@ line; opening the store cuts it off, so a resumed sweep finds every finished
 row exactly once and redoes only what is missing. Images are written next to
 it under temporary names and renamed (images.atomic_path), and a run's row is
 appended only after its image exists, so a row never points at a missing file.
+
+A progressive run (experiment/progressive.py) is one row too, with its checkpoints inside it
+(``checkpoints``: spp, elapsed time, metrics and image after each pass), appended only after
+every checkpoint image exists: a run killed halfway leaves no row and is rendered again, whole.
+Readers (the report, results.csv) see each checkpoint as a run row of its own point
+(``current_runs``); the runner's resume and retirement work on the stored rows (``stored_runs``).
 """
 from __future__ import annotations
 
@@ -65,10 +71,10 @@ class ResultStore:
     def of_kind(self, kind: str) -> list[dict]:
         return [r for r in self.rows if r.get("kind") == kind]
 
-    def current_runs(self) -> list[dict]:
-        """Run rows in force: the latest row of each (point, seed), unless a later
+    def stored_runs(self) -> list[dict]:
+        """Stored run rows in force: the latest row of each (point, seed), unless a later
         ``superseded`` row retired it (its identity no longer matched the sweep's).
-        Superseded rows stay in the file; reports and resumes read only these."""
+        Superseded rows stay in the file; resumes read only these."""
         if self._current is not None and self._current[0] == len(self.rows):
             return list(self._current[1])          # rows only grow: same length, same answer
         current: dict[tuple[str, int], dict] = {}
@@ -83,13 +89,32 @@ class ResultStore:
         self._current = (len(self.rows), list(current.values()))
         return list(self._current[1])
 
-    def done_runs(self) -> dict[tuple[str, int], str | None]:
-        """(point, seed) -> identity hash of the run in force (None for rows stored before
-        run identities existed)."""
-        return {(r["point"], r["seed"]): r.get("identity_hash") for r in self.current_runs()}
+    def current_runs(self) -> list[dict]:
+        """Run rows in force as reports read them: ``stored_runs``, each progressive run
+        replaced by one row per checkpoint that stands for a point (``checkpoint_rows``)."""
+        return [r for row in self.stored_runs() for r in checkpoint_rows(row)]
 
-    def image_path(self, point_id: str, seed: int, identity_hash: str | None = None) -> str:
+    def done_runs(self) -> dict[tuple[str, int], str | None]:
+        """(point, seed) -> identity hash of the stored run in force (None for rows stored
+        before run identities existed)."""
+        return {(r["point"], r["seed"]): r.get("identity_hash") for r in self.stored_runs()}
+
+    def image_path(self, point_id: str, seed: int, identity_hash: str | None = None,
+                   checkpoint_spp: int | None = None) -> str:
         """Where a run's image goes; runs of another identity get their own file, so the image
-        of a superseded run is never overwritten."""
+        of a superseded run is never overwritten. A progressive run's checkpoints add their spp."""
         tag = f"__{identity_hash[:8]}" if identity_hash else ""
-        return os.path.join(self.folder, "images", point_id.replace("/", "__") + f"__seed{seed}{tag}.exr")
+        at = f"__at{checkpoint_spp}" if checkpoint_spp is not None else ""
+        return os.path.join(self.folder, "images", point_id.replace("/", "__") + f"__seed{seed}{tag}{at}.exr")
+
+
+def checkpoint_rows(row: dict) -> list[dict]:
+    """A stored run as report rows: itself, or for a progressive run one row per checkpoint
+    that names a point (``point``: its spp's ladder point, or the budget point for a budget's
+    last pass), with the run's fields and the checkpoint's own (spp, elapsed wall_s, metrics,
+    image) and ``progressive_run``, the stored run's point."""
+    checkpoints = row.get("checkpoints")
+    if not checkpoints:
+        return [row]
+    base = {k: v for k, v in row.items() if k != "checkpoints"}
+    return [{**base, **cp, "progressive_run": row["point"]} for cp in checkpoints if cp.get("point")]

@@ -1,13 +1,17 @@
-"""The `sweep` and `reference` commands: wiring config, plan, runner, report and terminal."""
+"""The `sweep` and `reference` commands: wiring config, plan, runner, report and terminal.
+
+``prepare_sweep`` and ``run_sweep`` are the pipeline itself, shared by ``mitsuba-lab sweep``
+and ``mitsuba_lab.sweep`` (experiment.api)."""
 from __future__ import annotations
 
+import itertools
 import os
 import time
 
 from ..errors import LabError
 from ..progress import ProgressBar, duration
-from .config import PASS_PARAMETER, PluginSpec, load_config, with_depth
-from .plan import build_plan, estimated_seconds
+from .config import PASS_PARAMETER, Config, PluginSpec, load_config, with_depth
+from .plan import Plan, build_plan, estimated_seconds
 from .reference import get_reference, load_cached, reference_key
 from .store import ResultStore
 from .strategy_grid import check_grid, estimated_grid_seconds, grid_renders, render_strategy_grid
@@ -67,48 +71,58 @@ def print_plan(config, plan, out) -> None:
             unit = PASS_PARAMETER.get(strategies[point.strategy].type)
             count = f"{point.spp} {unit} of 1 spp" if unit else f"{point.spp} spp"
             level = count if point.spp else f"{point.budget_s:g} s budget ({unit or 'spp'} from a pilot)"
+            if point.progressive:
+                level = (f"progressive: passes {list(point.passes)} spp, curve at "
+                         f"{list(itertools.accumulate(point.passes))} spp" if point.passes
+                         else f"{point.budget_s:g} s budget, progressive (passes fitted by the first seed)")
             print(f"    {point.id:60s} {level}", file=out)
+    for item in plan.separate:
+        print(f"  separate renders on {item['scene']}: {item['strategy']} / {item['sampler']}: {item['reason']}",
+              file=out)
     for item in plan.left_out:
         print(f"  left out: {item['scene']} / {item['strategy']}: {item['reason']}", file=out)
     for item in plan.aliases:
         print(f"  alias: {item['scene']} / {item['strategy']} = {item['same_as']}: {item['reason']}", file=out)
 
 
-def sweep_command(config_path: str, output: str | None, dry_run: bool, out, cluster: str | None = None) -> int:
-    config = load_config(config_path)
+def prepare_sweep(source) -> tuple[Config, Plan]:
+    """(config, plan) from a TOML path or a dict (``load_config``): every problem with the config,
+    its plugins and its scenes is raised here, as a LabError, before anything renders."""
+    config = load_config(source)
     validate(config)                  # every plugin and scene x sampler, before anything renders
     plan = build_plan(config, assess_scene)
     check_grid(config, plan)
-    folder = output or config.output
-    if dry_run:
-        print_plan(config, plan, out)
-        rates, pixels = pilot_rates(config)
-        cached = set()
-        for scene in config.scenes:
-            spec = with_depth(config.reference.integrator, config.max_depth)
-            key = reference_key(scene.path, scene.resolution, scene.defaults, spec, config.reference.spp,
-                                config.reference.chunks)
-            if load_cached(config.reference.cache, key):
-                cached.add(scene.name)
-        seconds = estimated_seconds(plan, config, rates, pixels, cached)
-        for name, s in seconds.items():
-            ref = "cached" if name in cached else "to render"
-            print(f"  estimated {duration(s)} for {name} (reference {ref}; pilot "
-                  f"{rates[name] / 1e6:.2f} M samples/s with the reference integrator)", file=out)
-        grid = config.strategy_grid
-        if grid:
-            seconds["strategy grid"] = estimated_grid_seconds(config, rates[grid.scene], pixels[grid.scene])
-            print(f"  strategy grid: {grid_renders(config)} renders of {grid.strategy} on {grid.scene}, "
-                  f"{grid.spp} spp, path lengths 1..{grid.max_length}: estimated "
-                  f"{duration(seconds['strategy grid'])}", file=out)
-        print(f"estimated total: {duration(sum(seconds.values()))} (lab integrators run at 0.7-1.1x the "
-              f"speed of path; compile time not included)", file=out)
-        return 0
-    if os.path.exists(folder) and not os.path.isdir(folder):
-        raise LabError(f"output path is not a folder: {folder}")
-    store = ResultStore(folder)
-    bar = ProgressBar()
+    return config, plan
 
+
+def print_dry_run(config, plan, out) -> None:
+    """The plan and its estimated cost, from a short pilot render per scene (``--dry-run``)."""
+    print_plan(config, plan, out)
+    rates, pixels = pilot_rates(config)
+    cached = set()
+    for scene in config.scenes:
+        spec = with_depth(config.reference.integrator, config.max_depth)
+        key = reference_key(scene.path, scene.resolution, scene.defaults, spec, config.reference.spp,
+                            config.reference.chunks)
+        if load_cached(config.reference.cache, key):
+            cached.add(scene.name)
+    seconds = estimated_seconds(plan, config, rates, pixels, cached)
+    for name, s in seconds.items():
+        ref = "cached" if name in cached else "to render"
+        print(f"  estimated {duration(s)} for {name} (reference {ref}; pilot "
+              f"{rates[name] / 1e6:.2f} M samples/s with the reference integrator)", file=out)
+    grid = config.strategy_grid
+    if grid:
+        seconds["strategy grid"] = estimated_grid_seconds(config, rates[grid.scene], pixels[grid.scene])
+        print(f"  strategy grid: {grid_renders(config)} renders of {grid.strategy} on {grid.scene}, "
+              f"{grid.spp} spp, path lengths 1..{grid.max_length}: estimated "
+              f"{duration(seconds['strategy grid'])}", file=out)
+    print(f"estimated total: {duration(sum(seconds.values()))} (lab integrators run at 0.7-1.1x the "
+          f"speed of path; compile time not included)", file=out)
+
+
+def progress_printer(bar):
+    """The runner's ``progress(event, **info)`` callback, shown on ``bar`` (a ProgressBar)."""
     def progress(event, **info):
         if event == "reference":
             bar.message(f"reference for {info['scene']} ...")
@@ -122,15 +136,26 @@ def sweep_command(config_path: str, output: str | None, dry_run: bool, out, clus
             else:
                 bar.message(f"{runs} left out of the report: {info['changes']}")
         elif event == "start":
-            bar.begin(info["total"], f"{info['total']} points to run ({info['skipped']} already done)")
+            bar.begin(info["total"], f"{info['total']} points to run ({info['skipped']} already done)",
+                      unit="point")
         elif event == "point_done":
             bar.step(info["point"])
         elif event == "grid_cell":
             bar.message(f"strategy grid: ({info['cell']}), {info['done']}/{info['total']}")
 
+    return progress
+
+
+def run_sweep(config, plan, folder: str, bar, cluster: str | None = None) -> dict[str, str]:
+    """Run a prepared sweep into ``folder`` (resuming what it holds): references, points, the
+    strategy grid, then the report. Returns the report's paths (csv, html, md)."""
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise LabError(f"output path is not a folder: {folder}")
     from .report import build_report
     from .run import SweepRunner
 
+    store = ResultStore(folder)
+    progress = progress_printer(bar)
     executor = None
     address = cluster or config.cluster
     if address:
@@ -138,12 +163,27 @@ def sweep_command(config_path: str, output: str | None, dry_run: bool, out, clus
 
         executor = DaskExecutor(address)
         bar.message(f"running points on the Dask cluster at {address}")
+    try:
+        SweepRunner(config, plan, store, progress, executor).run()
+        render_strategy_grid(config, store, progress)      # here: its renders are few, and cheap
+    finally:
+        bar.close()                                        # an interrupted sweep leaves no live bar
+    return build_report(folder)
+
+
+def done_line(config, seconds: float, paths: dict[str, str]) -> str:
+    return (f"sweep '{config.name}' done in {duration(seconds)}; results in {paths['csv']}; "
+            f"report: {paths['html']} (and {paths['md']})")
+
+
+def sweep_command(config_path: str, output: str | None, dry_run: bool, out, cluster: str | None = None) -> int:
+    config, plan = prepare_sweep(config_path)
+    if dry_run:
+        print_dry_run(config, plan, out)
+        return 0
     start = time.perf_counter()
-    SweepRunner(config, plan, store, progress, executor).run()
-    render_strategy_grid(config, store, progress)      # here: its renders are few, and cheap
-    paths = build_report(folder)
-    print(f"sweep '{config.name}' done in {duration(time.perf_counter() - start)}; results in "
-          f"{paths['csv']}; report: {paths['html']} (and {paths['md']})", file=out)
+    paths = run_sweep(config, plan, output or config.output, ProgressBar(), cluster)
+    print(done_line(config, time.perf_counter() - start, paths), file=out)
     return 0
 
 
@@ -159,10 +199,10 @@ def reference_command(scene_path, integrator, params, spp, chunks, resolution, d
         images.check_writable(output)
     cache = os.path.abspath(os.path.expanduser(cache or os.environ.get("MITSUBA_LAB_CACHE") or DEFAULT_CACHE))
     bar = ProgressBar()
-    bar.begin(chunks)
+    bar.begin(chunks, unit="chunk")
     ref, cached = get_reference(os.path.abspath(scene_path), resolution, defaults,
                                 PluginSpec("reference", integrator, params), spp, chunks, cache,
-                                progress=lambda k, n: bar.step(f"chunk {k}/{n}"))
+                                progress=lambda k, n: bar.step())
     origin = "found in the cache" if cached else f"rendered in {ref.meta.get('seconds', 0):.1f} s"
     print(f"reference {ref.key} {origin}: {cache}/{ref.key}.exr; noise floor MSE {ref.mse_floor:.4g}, "
           f"relMSE {ref.rel_mse_floor():.4g}", file=out)

@@ -3,10 +3,12 @@
 A task carries everything its renders need (scene and plugin specs, the seeds
 still missing, the reference image, the regions, the variant), and returns rows
 and images instead of writing them: only the sweep's own process writes the
-store, so a task retried after a worker died can never duplicate a row.
+store, so a task retried after a worker died can never duplicate a row. A progressive
+point (``execute_progressive``) returns one row per seed with its checkpoints and their images.
 """
 from __future__ import annotations
 
+import functools
 import json
 import os
 import resource
@@ -18,7 +20,8 @@ import numpy as np
 
 from .. import metrics
 from .config import PluginSpec, SceneSpec, sample_count_plugin
-from .plan import Point
+from .plan import Point, point_id, warmup_sizes
+from .progressive import Checkpoint, run_passes
 
 #: Pilot sample counts for time budgets (spp, or passes: config.PASS_PARAMETER): timed renders
 #: fit time = fixed + per_sample x count. The first pilots are PILOT_SPP; while their times differ
@@ -30,6 +33,9 @@ PILOT_GROWTH = 4
 PILOT_BUDGET_FRACTION = 0.05
 #: At most this many growth steps (each compiles a kernel for a new spp).
 PILOT_MAX_GROWTH = 6
+#: A progressive run whose passes compiled a kernel after the warm-up is rendered again, at most
+#: this often (the run that compiled served as a warm-up).
+RECOMPILE_RETRIES = 2
 
 
 @dataclass(frozen=True)
@@ -46,6 +52,7 @@ class PointTask:
     variant: str
     identity: dict = field(default_factory=dict)    # what determines the runs (experiment.identity)
     identity_hash: str = ""
+    passes: tuple[int, ...] = ()    # progressive: pass sizes (the point's, or a budget's fitted ones)
 
 
 @dataclass
@@ -53,7 +60,39 @@ class PointResult:
     task: PointTask
     spp: int
     calibration: dict | None = None
-    runs: list = field(default_factory=list)     # (row without the image path, image)
+    runs: list = field(default_factory=list)     # (row without the image path, image), or for a
+                                                 # progressive run (row, [image of each checkpoint])
+
+
+@functools.lru_cache(maxsize=1)
+def _flip_openmp() -> tuple:
+    """The OpenMP runtimes FLIP may use (its wheel's own libgomp, the system's), as ctypes handles."""
+    import ctypes
+    import ctypes.util
+    import glob
+
+    import flip_evaluator
+
+    site = os.path.dirname(os.path.dirname(os.path.abspath(flip_evaluator.__file__)))
+    paths = glob.glob(os.path.join(site, "flip_evaluator.libs", "libgomp*.so*"))
+    paths += [p for p in [ctypes.util.find_library("gomp")] if p]
+    handles = []
+    for path in paths:
+        try:
+            handles.append(ctypes.CDLL(path))
+        except OSError:
+            pass
+    return tuple(h for h in handles if hasattr(h, "omp_set_num_threads"))
+
+
+def flip_one_thread(image: np.ndarray, ref_image: np.ndarray) -> float:
+    """HDR-FLIP (``metrics.flip_hdr``) on one OpenMP thread. Its OpenMP threads spin at barriers:
+    just after a render, while Dr.Jit's worker threads still spin before sleeping, a 64x64 FLIP
+    took 0.9 s instead of 0.05 s on 2 cores, and FLIP's idle threads then slowed the next timed
+    render by about 30%. One thread does neither."""
+    for runtime in _flip_openmp():
+        runtime.omp_set_num_threads(1)
+    return metrics.flip_hdr(image, ref_image)
 
 
 def measure(image: np.ndarray, ref_image: np.ndarray, regions: dict, optional: tuple[str, ...]) -> dict:
@@ -61,7 +100,7 @@ def measure(image: np.ndarray, ref_image: np.ndarray, regions: dict, optional: t
     row = {"mse": metrics.mse(image, ref_image), "rel_mse": metrics.rel_mse(image, ref_image),
            "finite": bool(np.isfinite(image).all()), "negative": int((image < 0).sum())}
     if "flip" in optional:
-        row["flip"] = metrics.flip_hdr(image, ref_image)
+        row["flip"] = flip_one_thread(image, ref_image)
     if "ciede2000" in optional:
         row["ciede2000"] = metrics.ciede2000_mean(image, ref_image)
     row["regions"] = {}
@@ -84,7 +123,7 @@ def _cached(slot: str, key: str, make):
 
 
 def execute(task: PointTask) -> PointResult:
-    from .. import activate
+    from ..runtime import activate
     from ..render import render
     from ..scene import make_integrator
     from ..scene_xml import load_scene_variant
@@ -102,26 +141,78 @@ def execute(task: PointTask) -> PointResult:
                              lambda: make_integrator(spec.type, spec.params))
         return render(scene, integrator, spp=spp, seed=seed)
 
+    if task.point.progressive:
+        return execute_progressive(task, render_at)
     result = PointResult(task, task.spp or 0)
     if not task.spp:
         result.spp, result.calibration = calibrate(task.point, render_at)
         result.calibration["identity_hash"] = task.identity_hash
-    params = sample_count_plugin(task.strategy, result.spp)[0].params
     render_at(result.spp, task.point.warmup_seed)                            # compile, untimed
     for seed in task.seeds:
         image, stats = render_at(result.spp, seed)
-        row = {"kind": "run", "point": task.point.id, "scene": task.point.scene,
-               "strategy": task.point.strategy, "sampler": task.point.sampler, "spp": result.spp,
-               "budget_s": task.point.budget_s, "seed": seed, "wall_s": stats.wall_s,
-               "kernel_s": stats.kernel_s, "compile_s": stats.compile_s, "rays": stats.rays,
-               "integrator": task.strategy.type, "params": params,
-               "identity": task.identity, "identity_hash": task.identity_hash,
-               "host": socket.gethostname(), "pid": os.getpid(),
-               # process-wide high-water mark so far (Linux reports KiB): cheap, not per render
-               "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-               "finished": time.time(), **measure(image, task.reference_image, task.regions, task.metrics)}
+        row = {**run_row(task, seed, result.spp), "wall_s": stats.wall_s, "kernel_s": stats.kernel_s,
+               "compile_s": stats.compile_s, "rays": stats.rays,
+               **measure(image, task.reference_image, task.regions, task.metrics)}
         result.runs.append((row, image))
     return result
+
+
+def run_row(task: PointTask, seed: int, spp: int) -> dict:
+    """The fields of a run row that are not timings or metrics."""
+    return {"kind": "run", "point": task.point.id, "scene": task.point.scene, "strategy": task.point.strategy,
+            "sampler": task.point.sampler, "spp": spp, "budget_s": task.point.budget_s, "seed": seed,
+            "integrator": task.strategy.type, "params": sample_count_plugin(task.strategy, spp)[0].params,
+            "identity": task.identity, "identity_hash": task.identity_hash,
+            "host": socket.gethostname(), "pid": os.getpid(),
+            # process-wide high-water mark so far (Linux reports KiB): cheap, not per render
+            "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            "finished": time.time()}
+
+
+def execute_progressive(task: PointTask, render_at) -> PointResult:
+    """A progressive point's runs, one per missing seed, as rows with their checkpoints."""
+    sizes = tuple(task.passes) or None                  # None: fitted to the budget by the first run
+    for size in warmup_sizes(sizes):                    # compile, untimed
+        render_at(size, task.point.warmup_seed)
+    result = PointResult(task, 0)
+    for seed in task.seeds:
+        for _ in range(1 + RECOMPILE_RETRIES):
+            checkpoints = run_passes(render_at, seed, sizes, task.point.budget_s)
+            if checkpoints[-1].cache_misses == 0:
+                break                                   # else the run was a warm-up: again
+        totals = [0] + [cp.spp for cp in checkpoints]
+        done = tuple(b - a for a, b in zip(totals, totals[1:]))          # the pass sizes rendered
+        if sizes is None:                               # the first run fits the budget: its passes are the point's
+            sizes = done
+            result.calibration = {"kind": "calibration", "point": task.point.id, "spp": checkpoints[-1].spp,
+                                  "passes": list(sizes), "budget_s": task.point.budget_s, "fitted_on_seed": seed,
+                                  "identity_hash": task.identity_hash}
+        result.spp = checkpoints[-1].spp
+        result.runs.append(progressive_row(task, seed, done, checkpoints))
+    return result
+
+
+def progressive_row(task: PointTask, seed: int, sizes, checkpoints: list[Checkpoint]) -> tuple[dict, list]:
+    """(row, checkpoint images): the run's row with its checkpoints (the last one's values also
+    at the top, as a one-render row has them). Over a ladder every checkpoint is the point of its
+    spp, and those at a ladder value and the last get the optional metrics (FLIP, CIEDE2000: the
+    slow ones); a budget run's last checkpoint is the budget point."""
+    point = task.point
+    rows = []
+    for cp in checkpoints:
+        is_last = cp is checkpoints[-1]
+        if point.budget_s is None:
+            name = point_id(point.scene, point.strategy, point.sampler, cp.spp)
+            budget, optional = None, task.metrics if (cp.spp in point.ladder or is_last) else ()
+        else:
+            name, budget, optional = (point.id, point.budget_s, task.metrics) if is_last else (None, None, ())
+        rows.append({"point": name, "budget_s": budget, "spp": cp.spp, "passes": cp.passes, "wall_s": cp.wall_s,
+                     "kernel_s": cp.kernel_s, "compile_s": cp.compile_s, "cache_misses": cp.cache_misses,
+                     "rays": cp.rays, **measure(cp.image, task.reference_image, task.regions, optional)})
+    final = {k: v for k, v in rows[-1].items() if k not in ("point", "budget_s")}
+    row = {**run_row(task, seed, checkpoints[-1].spp), **final, "progressive": True, "pass_spp": list(sizes),
+           "checkpoints": rows}
+    return row, [cp.image for cp in checkpoints]
 
 
 def calibrate(point: Point, render_at) -> tuple[int, dict]:

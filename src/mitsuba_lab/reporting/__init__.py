@@ -10,8 +10,8 @@ then renamed, with the mode the umask gives.
 """
 from .figures import pyplot, save_figure, save_loglog
 from .numbers import fmt
-from .page import embedded_image, html_page, html_table, md_to_html, write_markdown_page, write_text
+from .page import block_marker, embedded_image, html_page, html_table, md_to_html, write_markdown_page, write_text
 from .tables import dict_rows, markdown_table, write_csv
 
 __all__ = ["fmt", "markdown_table", "write_csv", "dict_rows", "md_to_html", "html_table", "html_page",
-           "embedded_image", "write_text", "write_markdown_page", "pyplot", "save_figure", "save_loglog"]
+           "embedded_image", "block_marker", "write_text", "write_markdown_page", "pyplot", "save_figure", "save_loglog"]

@@ -29,11 +29,18 @@ def _inline(text: str) -> str:
     return _BOLD.sub(r"<strong>\1</strong>", html.escape(text)).replace("`", "")
 
 
-def md_to_html(text: str, embed_from: str | None = None) -> str:
+def block_marker(name: str) -> str:
+    """A Markdown line that ``md_to_html`` replaces with the HTML block ``name`` (an HTML
+    comment, so a Markdown reader of summary.md shows nothing)."""
+    return f"<!-- block:{name} -->"
+
+
+def md_to_html(text: str, embed_from: str | None = None, blocks: dict[str, str] | None = None) -> str:
     """The Markdown subset of the reports as HTML: ``#`` headings, ``|`` tables (first row the
     header, ``|---|`` rules skipped), ``![alt](file.png)`` images and paragraphs of one line.
     Images are read from the folder ``embed_from`` and embedded as data URIs (without it an
-    image line stays text)."""
+    image line stays text). A ``block_marker(name)`` line becomes ``blocks[name]``, raw HTML
+    (an interactive viewer, say); a marker without a block is dropped."""
     out, table = [], []
 
     def flush_table():
@@ -47,7 +54,9 @@ def md_to_html(text: str, embed_from: str | None = None) -> str:
             table.append(line)
             continue
         flush_table()
-        if line.startswith("#"):
+        if line.startswith("<!-- block:") and line.endswith(" -->"):
+            out.append((blocks or {}).get(line[len("<!-- block:"):-len(" -->")], ""))
+        elif line.startswith("#"):
             level = len(line) - len(line.lstrip("#"))
             out.append(f"<h{level}>{html.escape(line.lstrip('#').strip())}</h{level}>")
         elif line.startswith("![") and embed_from:
@@ -76,12 +85,16 @@ def embedded_image(path: str, alt: str = "") -> str:
     return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
 
 
-def html_page(title: str, body: str, style: str = "") -> str:
+def html_page(title: str, body: str, style: str = "", script: str = "") -> str:
     """A complete HTML document: ``title`` (escaped here), the shared stylesheet plus
-    ``style``, and ``body`` (HTML, inserted as is)."""
+    ``style``, ``body`` (HTML, inserted as is) and ``script`` (JavaScript, run at the end of
+    the body; it must not contain "</script")."""
     css = STYLE + ("\n" + style if style else "")
+    if "</script" in script.lower():
+        raise ValueError("html_page: the script contains </script, which would end it early")
+    tail = f"<script>\n{script}\n</script>\n" if script else ""
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>\n'
-            f"<style>\n{css}\n</style></head><body>\n{body}\n</body></html>\n")
+            f"<style>\n{css}\n</style></head><body>\n{body}\n{tail}</body></html>\n")
 
 
 def write_text(path: str, text: str) -> str:
@@ -91,10 +104,12 @@ def write_text(path: str, text: str) -> str:
     return path
 
 
-def write_markdown_page(folder: str, title: str, md: str) -> dict[str, str]:
+def write_markdown_page(folder: str, title: str, md: str, blocks: dict[str, str] | None = None,
+                        style: str = "", script: str = "") -> dict[str, str]:
     """``folder/summary.md`` (``md``) and ``folder/index.html`` (the same Markdown as a
-    self-contained page, images embedded from ``folder``); returns {"md": ..., "html": ...}."""
+    self-contained page, images embedded from ``folder``, ``block_marker`` lines replaced by
+    ``blocks``, plus ``style`` and ``script``); returns {"md": ..., "html": ...}."""
     paths = {"md": os.path.join(folder, "summary.md"), "html": os.path.join(folder, "index.html")}
     write_text(paths["md"], md + "\n")
-    write_text(paths["html"], html_page(title, md_to_html(md, embed_from=folder)))
+    write_text(paths["html"], html_page(title, md_to_html(md, embed_from=folder, blocks=blocks), style, script))
     return paths

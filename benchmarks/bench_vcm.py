@@ -1,0 +1,120 @@
+"""lab_vcm: one iteration's cost split into light tracing, grid, camera subpaths with their
+connections, and merging; its light tracing per path against Mitsuba's `ptracer`.
+
+Per scene, one render of --spp iterations (one sample per pixel each) of lab_vcm, mode `vcm`,
+and the same render in mode `bpt` (the same light and camera subpaths: merging left out), each
+timed after a warm-up render of the same size, in --rounds alternating rounds (medians):
+
+* light: ``bdpt_stats()['light_s']``, the light passes (trace, light tracing's splats, storing
+  every vertex with a smooth lobe), per iteration and per light subpath;
+* grid: ``grid_s``, bucketing the stored vertices of each pass (a counting sort);
+* camera + connections: mode `bpt`'s ``camera_s`` (camera subpaths, emitter hits, NEE, the
+  connections to the lane's light subpath);
+* merging: mode `vcm`'s ``camera_s`` minus mode `bpt`'s (the gathers from the grid and the
+  third MIS quantity);
+* ptracer: Mitsuba's `ptracer` rendering W x H x spp light paths, per light path, against lab's
+  light pass per light subpath (same max_depth; the Russian roulettes differ).
+
+Every clock stops after dr.eval + dr.sync_thread (``render.timed_kernels``); compilation is
+left out by the warm-up and reported (kernels compiled during the timed renders, which
+should be 0). The machine is shared, so single timings are noisy.
+
+    .venv/bin/python benchmarks/bench_vcm.py [--rounds 3] [--res 64] [--spp 16] [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+
+import mitsuba as mi
+
+import mitsuba_lab  # noqa: F401  (selects the variant, registers the lab plugins)
+from mitsuba_lab.render import timed_kernels
+from mitsuba_lab.runtime import versions
+from mitsuba_lab.scene import load_scene, make_integrator
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCENES = ("cornell_box.xml", "caustic.xml", "sds.xml")
+med = statistics.median
+
+
+def timed_render(scene, integrator, spp, seed):
+    """(wall seconds, kernels compiled, the integrator's statistics) of one synchronised render."""
+    _, wall, history = timed_kernels(lambda: mi.render(scene, integrator=integrator, spp=spp, seed=seed))
+    compiled = sum(1 for k in history if "cache_hit" in k and not k["cache_hit"])
+    stats = integrator.bdpt_stats() if hasattr(integrator, "bdpt_stats") else {}
+    return wall, compiled, stats
+
+
+def measure(name, res, spp, depth, radius, rounds):
+    scene = load_scene(os.path.join(ROOT, "scenes", name), res=res)
+    methods = {
+        "vcm": make_integrator("lab_vcm", {"mode": "vcm", "max_depth": depth, "radius": radius}),
+        "bpt": make_integrator("lab_vcm", {"mode": "bpt", "max_depth": depth}),
+        "ptracer": make_integrator("ptracer", {"max_depth": depth}),
+        "path": make_integrator("path", {"max_depth": depth}),
+    }
+    for integrator in methods.values():                       # warm-up: compile every kernel
+        mi.render(scene, integrator=integrator, spp=spp, seed=1)
+    runs = {key: [] for key in methods}
+    for r in range(rounds):
+        for key, integrator in methods.items():
+            runs[key].append(timed_render(scene, integrator, spp, seed=100 + r))
+    pixels = res * res
+    vcm, bpt = runs["vcm"], runs["bpt"]
+    light = med(s["light_s"] for _, _, s in vcm)
+    return {
+        "scene": name,
+        "iterations": spp,
+        "light_ms": 1e3 * light / spp,
+        "grid_ms": 1e3 * med(s["grid_s"] for _, _, s in vcm) / spp,
+        "camera_ms": 1e3 * med(s["camera_s"] for _, _, s in bpt) / spp,
+        "merge_ms": 1e3 * (med(s["camera_s"] for _, _, s in vcm) - med(s["camera_s"] for _, _, s in bpt)) / spp,
+        "vcm_ms": 1e3 * med(w for w, _, _ in vcm) / spp,
+        "bpt_ms": 1e3 * med(w for w, _, _ in bpt) / spp,
+        "path_ms": 1e3 * med(w for w, _, _ in runs["path"]) / spp,
+        "light_ns_per_path": 1e9 * light / (pixels * spp),
+        "ptracer_ns_per_path": 1e9 * med(w for w, _, _ in runs["ptracer"]) / (pixels * spp),
+        "passes": vcm[0][2]["passes"],
+        "compiled": sum(c for key in runs for _, c, _ in runs[key]),
+    }
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--rounds", type=int, default=3, help="alternating timed rounds (default: 3)")
+    parser.add_argument("--res", type=int, default=64, help="film width and height (default: 64)")
+    parser.add_argument("--spp", type=int, default=16, help="iterations (samples per pixel) (default: 16)")
+    parser.add_argument("--max-depth", type=int, default=8, help="max_depth of every method (default: 8)")
+    parser.add_argument("--radius", type=float, default=0.03, help="lab_vcm's first radius (default: 0.03)")
+    parser.add_argument("--scenes", nargs="+", default=list(SCENES), help="scene files under scenes/")
+    parser.add_argument("--quick", action="store_true",
+                        help="smoke run: 32x32, 4 spp, 1 round, cornell box only (not a measurement)")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.res, args.spp, args.rounds, args.scenes = 32, 4, 1, ["cornell_box.xml"]
+    if min(args.rounds, args.res, args.spp) < 1 or not args.radius > 0:
+        parser.error("--rounds, --res and --spp must be >= 1 and --radius > 0")
+    missing = [n for n in args.scenes if not os.path.isfile(os.path.join(ROOT, "scenes", n))]
+    if missing:
+        parser.error(f"no such scene under scenes/: {', '.join(missing)}")
+    print(versions())
+    print(f"{args.res}x{args.res}, {args.spp} iterations, max_depth {args.max_depth}, medians of {args.rounds} "
+          f"rounds; milliseconds per iteration (one sample per pixel)")
+    header = ("scene", "light", "grid", "camera+conn", "merging", "vcm total", "bpt total", "path",
+              "light ns/path", "ptracer ns/path", "ratio", "passes", "compiled")
+    print(" | ".join(header))
+    for name in args.scenes:
+        m = measure(name, args.res, args.spp, args.max_depth, args.radius, args.rounds)
+        print(" | ".join([m["scene"], *(f"{m[k]:.2f}" for k in ("light_ms", "grid_ms", "camera_ms", "merge_ms",
+                                                                 "vcm_ms", "bpt_ms", "path_ms")),
+                          f"{m['light_ns_per_path']:.0f}", f"{m['ptracer_ns_per_path']:.0f}",
+                          f"{m['light_ns_per_path'] / m['ptracer_ns_per_path']:.2f}x", str(m["passes"]),
+                          str(m["compiled"])]), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,40 @@
+"""What ``lab_vcm`` knows about itself without a Mitsuba variant (``estimator.Estimator``)."""
+from __future__ import annotations
+
+from mitsuba_lab.plugins import params as declarations
+from mitsuba_lab.plugins.integrators.bdpt.estimator import Bidirectional
+
+
+class VertexMerging(Bidirectional):
+    """lab_vcm's estimator: the techniques of its ``mode`` (``params.VCM_MODES``) under one MIS."""
+    plugin_name = "lab_vcm"
+    PARAMETERS = declarations.LAB_VCM
+    OWN_PARAMETERS = ("mode", "radius", "alpha", "heuristic", "beta", "max_vertices")
+
+    def kinds(self) -> tuple[str, ...]:
+        return declarations.VCM_MODES[self.mode]
+
+    @classmethod
+    def separate_reason(cls, params: dict) -> str:
+        mode = params.get("mode", "vcm")
+        if "merge" in declarations.VCM_MODES.get(mode, ("merge",)):
+            return (f"lab_vcm mode={mode} merges with a radius that shrinks from sample to sample within a "
+                    f"render: averaged renders would each restart the schedule")
+        return ""
+
+    @classmethod
+    def applicability(cls, traits, params: dict) -> tuple[bool, str]:
+        """As lab_bdpt's (media, unknown emitters and sensors, light a mode cannot reach);
+        merging reaches any light that arrives at a smooth surface the camera sees."""
+        problem = cls.media_problem(traits) or cls.unsupported(traits)
+        if problem:
+            return False, problem
+        mode = params.get("mode", "vcm")
+        missing = cls._subset_problem(traits, declarations.VCM_MODES[mode])
+        if missing:
+            return False, f"lab_vcm with mode={mode} {missing}"
+        return True, ""
+
+    @classmethod
+    def unsupported(cls, traits) -> str:
+        return super().unsupported(traits).replace("lab_bdpt", "lab_vcm")
