@@ -176,7 +176,7 @@ def test_markdown_table_and_its_html(tmp_path):
         "<h1>Title</h1>",
         "<table><tr><th>a</th><th>b</th></tr><tr><td>1</td><td>x &lt;y&gt;</td></tr>"
         "<tr><td>2.5</td><td></td></tr></table>",
-        "<p><strong>Best:</strong> lab_mis.</p>"]
+        "<p><strong>Best:</strong> <code>lab_mis</code>.</p>"]
 
 
 def test_a_page_embeds_its_images_and_honours_the_umask(tmp_path):

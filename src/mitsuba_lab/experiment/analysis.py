@@ -29,6 +29,16 @@ from .. import images, metrics
 
 #: A measured MSE closer than this factor to the reference floor is flagged.
 FLOOR_WARNING_FACTOR = 10.0
+#: Renders whose median wall time is shorter than this (seconds) are not timed well enough
+#: to rank: launch overhead and scheduler jitter of a few milliseconds are then a sizeable
+#: part of the time (a user's 10 ms, 4 spp point once topped an efficiency ranking).
+MIN_TRUSTED_TIME_S = 0.05
+
+
+def timing_trusted(point) -> bool:
+    """Whether ``point``'s median render time is long enough to enter an efficiency ranking
+    or a fit against time (``MIN_TRUSTED_TIME_S``)."""
+    return point.time_s >= MIN_TRUSTED_TIME_S
 
 
 @dataclass

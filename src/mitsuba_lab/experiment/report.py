@@ -109,6 +109,7 @@ class Report(SectionTables):
             lines_md += ["", "## Left out and aliased strategies", "",
                          *markdown_table(["scene", "strategy", "reason"],
                                          [[x["scene"], x["strategy"], x["reason"]] for x in left])]
+        lines_md += self.settings_table()
         return "\n".join(lines_md)
 
     def scene_section(self, scene: str) -> str:

@@ -15,27 +15,41 @@ from collections import defaultdict
 from .. import metrics
 from ..plugins.params import resolve as resolve_params
 from ..reporting import fmt, markdown_table
-from .analysis import (PointStats, bias_by_passes, curve, equal_time_budgets, region_at_budgets, region_floor,
-                       region_stack_stats, slope, veach_bound)
+from .analysis import (MIN_TRUSTED_TIME_S, PointStats, bias_by_passes, curve, equal_time_budgets, region_at_budgets,
+                       region_floor, region_stack_stats, slope, timing_trusted, veach_bound)
 from .config import PASS_PARAMETER
 
 
 class SectionTables:
     def efficiency_table(self, groups, label) -> list[str]:
+        """Each group's longest point, ranked by efficiency; a group whose longest render is
+        shorter than MIN_TRUSTED_TIME_S is not ranked (listed last, marked) and the MSE-time
+        slope is fitted over the points at least that long."""
         rows = []
         for key, points in groups.items():
             top = max(points, key=lambda p: p.time_s)
-            times, errors = curve(points, "mse_corrected")
-            rows.append((top.efficiency if not math.isnan(top.efficiency) else -1, key, top, slope(times, errors)))
+            trusted = timing_trusted(top)
+            times, errors = curve([p for p in points if timing_trusted(p)], "mse_corrected")
+            score = top.efficiency if trusted and not math.isnan(top.efficiency) else -1.0
+            rows.append(((trusted, score), key, top, slope(times, errors)))
         rows.sort(key=lambda r: r[0], reverse=True)
+        short = f"{MIN_TRUSTED_TIME_S * 1000:g} ms"
         header = ["rank", "strategy", "spp", "time s", "MSE", "corrected MSE", "relMSE (+- seed std)", "efficiency",
                   "slope log MSE / log t", "FLIP", "CIEDE2000", "rays / sample (ext, shadow)"]
-        body = [[rank, label(key), p.spp, fmt(p.time_s), fmt(p.mse), fmt(p.mse_corrected),
+        body = [[rank if trusted else "not ranked", label(key), p.spp,
+                 fmt(p.time_s) + ("" if trusted else f" (< {short})"), fmt(p.mse), fmt(p.mse_corrected),
                  f"{fmt(p.rel_mse)} +- {fmt(p.rel_mse_std, 2)}", fmt(p.efficiency), fmt(s), fmt(p.flip),
                  fmt(p.ciede2000),
                  f"{fmt(p.rays_per_sample.get('extension'))}, {fmt(p.rays_per_sample.get('shadow'))}"]
-                for rank, (_, key, p, s) in enumerate(rows, 1)]
-        return ["", "### Efficiency (largest sample count), ranked", "", *markdown_table(header, body),
+                for rank, ((trusted, _), key, p, s) in enumerate(rows, 1)]
+        caption = (f"Each strategy's longest point (median wall time of one render). Renders shorter than "
+                   f"{short} are timing noise (launch overhead and scheduler jitter): such a point is not "
+                   f"ranked and is listed last, and the slope is fitted only over points of at least {short}.")
+        untimed = [label(key) for (trusted, _), key, _, _ in rows if not trusted]
+        if untimed:
+            caption += (f" **Not ranked:** {', '.join(untimed)} (no render of {short} or more: add spp or a "
+                        f"time budget).")
+        return ["", "### Efficiency (largest sample count), ranked", "", caption, "", *markdown_table(header, body),
                 *self.progressive_note(groups, label)]
 
     def progressive_note(self, groups, label) -> list[str]:
@@ -73,10 +87,13 @@ class SectionTables:
     def bias_table(self, stats) -> list[str]:
         header = ["point", "seeds", "variance", "bias^2 (+- se)", "relative variance", "relative bias^2 (+- se)",
                   "relMSE floor-corrected"]
-        body = [[s.point, s.seeds, fmt(s.variance), f"{fmt(s.bias2)} +- {fmt(s.bias2_se, 2)}", fmt(s.rel_variance),
-                 f"{fmt(s.rel_bias2)} +- {fmt(s.rel_bias2_se, 2)}", fmt(s.rel_mse_corrected)] for s in stats]
+        body = [[s.point, s.seeds, fmt(s.variance), _bias_cell(s.bias2, s.bias2_se), fmt(s.rel_variance),
+                 _bias_cell(s.rel_bias2, s.rel_bias2_se), fmt(s.rel_mse_corrected)] for s in stats]
         return ["", "### Bias and variance per point", "",
-                "Relative: the same in relMSE's units (pixels weighted by 1 / (ref^2 + 0.01)).", "",
+                "Relative: the same in relMSE's units (pixels weighted by 1 / (ref^2 + 0.01)). bias^2 is an "
+                "estimate (the seed mean's squared error minus its expected noise), so for an unbiased "
+                "estimator it scatters around zero and is negative about as often as positive; a value "
+                "within two standard errors of zero is marked \"within noise\": no bias is resolved there.", "",
                 *markdown_table(header, body)]
 
     def region_tables(self, scene, groups, label) -> list[str]:
@@ -240,6 +257,29 @@ class SectionTables:
                   "direct lighting (max_depth 2); with longer paths it is indicative only.")
         return md
 
+    def settings_table(self) -> list[str]:
+        """The strategies' and samplers' parameters as the runs used them: from each run's
+        identity (defaults filled in; a progressive pass count and ``count_rays``, which change
+        no image, left out), else the row's own params (older rows). One row per distinct
+        setting, with the scenes it was used on when it differs between scenes."""
+        settings = defaultdict(set)         # (kind, name, type, params as JSON) -> scenes
+        for row in self.store.current_runs():
+            ident = row.get("identity") or {}
+            integrator = ident.get("integrator") or {"type": row.get("integrator", ""), "params": row.get("params", {})}
+            settings[("strategy", row["strategy"], integrator["type"], _params_text(integrator["params"]))].add(
+                row["scene"])
+            sampler = ident.get("sampler") or {"type": "n/a", "params": None}      # rows before identities
+            settings[("sampler", row["sampler"], sampler["type"], _params_text(sampler["params"]))].add(row["scene"])
+        if not settings:
+            return []
+        scenes = {row["scene"] for row in self.store.current_runs()}
+        body = [[kind, name, plugin, params, "all" if found == scenes else ", ".join(sorted(found))]
+                for (kind, name, plugin, params), found in sorted(settings.items())]
+        return ["", "## Settings", "",
+                "Parameters as rendered, defaults filled in (the sample count is each point's own; a "
+                "progressive pass count and count_rays are left out).", "",
+                *markdown_table(["kind", "name", "plugin", "parameters", "scenes"], body)]
+
     def _run_row(self, stats: PointStats) -> dict:
         """A run row of the point (rows in force only; the store does not change while the
         report is built, so the point -> row map is made once)."""
@@ -257,3 +297,17 @@ class SectionTables:
 
     def _regions(self, scene, width, height) -> dict:
         return {n: tuple(r) for n, r in self.references[scene].meta.get("regions", {}).items()}
+
+
+def _params_text(params: dict | None) -> str:
+    """Parameters as one table cell: ``name = value`` pairs, sorted; "(defaults)" when none,
+    "(not stored)" when the rows do not say (None)."""
+    if params is None:
+        return "(not stored)"
+    return ", ".join(f"{k} = {v}" for k, v in sorted(params.items())) or "(defaults)"
+
+
+def _bias_cell(bias2: float, se: float) -> str:
+    """A bias^2 estimate with its standard error, marked when it is within two of them of zero."""
+    within = not math.isnan(bias2) and not math.isnan(se) and abs(bias2) <= 2 * se
+    return f"{fmt(bias2)} +- {fmt(se, 2)}" + (" (within noise)" if within else "")

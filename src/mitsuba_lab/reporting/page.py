@@ -19,14 +19,24 @@ STYLE = """body { font-family: sans-serif; margin: 2em; max-width: 1400px; }
 table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.85em; }
 th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: right; }
 th { background: #eee; } td:first-child, th:first-child { text-align: left; }
+code { font-family: monospace; background: #f3f3f3; padding: 0 0.2em; }
 img { max-width: 100%; }"""
 
 _BOLD = re.compile(r"\*\*(.+?)\*\*")
+_CODE = re.compile(r"`([^`]+)`")
 
 
 def _inline(text: str) -> str:
-    """One line of paragraph text: escaped, ``**bold**`` as <strong>, code backticks dropped."""
-    return _BOLD.sub(r"<strong>\1</strong>", html.escape(text)).replace("`", "")
+    """Inline Markdown of one line (paragraph, heading or table cell) as HTML: escaped,
+    ``**bold**`` as <strong>, backtick spans as <code> (their content literal: no bold inside).
+    A lone backtick stays as written."""
+    out, last = [], 0
+    for m in _CODE.finditer(text):
+        out.append(_BOLD.sub(r"<strong>\1</strong>", html.escape(text[last:m.start()])))
+        out.append(f"<code>{html.escape(m.group(1))}</code>")
+        last = m.end()
+    out.append(_BOLD.sub(r"<strong>\1</strong>", html.escape(text[last:])))
+    return "".join(out)
 
 
 def block_marker(name: str) -> str:
@@ -37,7 +47,8 @@ def block_marker(name: str) -> str:
 
 def md_to_html(text: str, embed_from: str | None = None, blocks: dict[str, str] | None = None) -> str:
     """The Markdown subset of the reports as HTML: ``#`` headings, ``|`` tables (first row the
-    header, ``|---|`` rules skipped), ``![alt](file.png)`` images and paragraphs of one line.
+    header, ``|---|`` rules skipped), ``![alt](file.png)`` images and paragraphs of one line;
+    inline ``**bold**`` and backtick code spans in all of them.
     Images are read from the folder ``embed_from`` and embedded as data URIs (without it an
     image line stays text). A ``block_marker(name)`` line becomes ``blocks[name]``, raw HTML
     (an interactive viewer, say); a marker without a block is dropped."""
@@ -46,7 +57,7 @@ def md_to_html(text: str, embed_from: str | None = None, blocks: dict[str, str] 
     def flush_table():
         if table:
             rows = [r.strip().strip("|").split("|") for r in table if not set(r.strip()) <= set("|-")]
-            out.append(html_table(rows[0], rows[1:]))
+            out.append(html_table(rows[0], rows[1:], markdown=True))
             table.clear()
 
     for line in text.splitlines():
@@ -58,7 +69,7 @@ def md_to_html(text: str, embed_from: str | None = None, blocks: dict[str, str] 
             out.append((blocks or {}).get(line[len("<!-- block:"):-len(" -->")], ""))
         elif line.startswith("#"):
             level = len(line) - len(line.lstrip("#"))
-            out.append(f"<h{level}>{html.escape(line.lstrip('#').strip())}</h{level}>")
+            out.append(f"<h{level}>{_inline(line.lstrip('#').strip())}</h{level}>")
         elif line.startswith("![") and embed_from:
             alt, src = line[2:].split("](", 1)
             out.append(f'<p>{embedded_image(os.path.join(embed_from, src.rstrip(")")), alt)}</p>')
@@ -68,9 +79,12 @@ def md_to_html(text: str, embed_from: str | None = None, blocks: dict[str, str] 
     return "\n".join(out)
 
 
-def html_table(header: Sequence, rows: Iterable[Sequence], row_classes: Sequence[str] | None = None) -> str:
-    """A <table> of escaped, stripped cells; ``row_classes`` gives each body row a CSS class."""
-    cell = lambda tag, c: f"<{tag}>{html.escape(str(c).strip())}</{tag}>"   # noqa: E731
+def html_table(header: Sequence, rows: Iterable[Sequence], row_classes: Sequence[str] | None = None,
+               markdown: bool = False) -> str:
+    """A <table> of escaped, stripped cells; ``row_classes`` gives each body row a CSS class;
+    ``markdown``: cells are Markdown text, their inline formatting rendered (``**``, backticks)."""
+    convert = _inline if markdown else html.escape
+    cell = lambda tag, c: f"<{tag}>{convert(str(c).strip())}</{tag}>"   # noqa: E731
     body = []
     for i, row in enumerate(rows):
         css = f" class='{html.escape(row_classes[i])}'" if row_classes and row_classes[i] else ""
