@@ -213,6 +213,10 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
 
     # -- What a pass uses (lab_vcm overrides these) -------------------------------------
 
+    #: The MIS weights' class, None: this module's ``BdptWeights`` (lab_vcm's ppm: weight 1 for
+    #: its one technique per path).
+    weights_class = None
+
     def pass_spp_limit(self, film_pixels: int) -> int:
         """Most samples per pixel in one pass besides ``max_vertices`` (lab_vcm: a bound)."""
         return 1 << 30
@@ -221,8 +225,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         """The MIS weights of a pass (lab_vcm adds merging)."""
         v = self.values
         ratio = plan.light_subpaths / plan.camera_lanes
-        weights = BdptWeights(v["heuristic"], v["beta"], self.kinds, light_paths=ratio,
-                              merge_area=self.merge_area(plan))
+        weights = (self.weights_class or BdptWeights)(v["heuristic"], v["beta"], self.kinds, light_paths=ratio,
+                                                      merge_area=self.merge_area(plan))
         # (opaque: a ratio that changes from pass to pass must not be compiled into the kernels)
         weights.light_paths = dr.opaque(mi.Float, ratio)
         return weights

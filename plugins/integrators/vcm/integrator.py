@@ -91,6 +91,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     def __init__(self, props: mi.Properties):
         super().__init__(props)
         self.merging = "merge" in self.kinds
+        if self.values["mode"] == "ppm":
+            self.weights_class = PpmWeights
         self._radius = 0.0
 
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
@@ -125,8 +127,6 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             iterations = mi.UInt32(plan.spp)
             dr.make_opaque(iterations)
             weights.lane_tables = (table(etas), table([1.0 / e for e in etas]), iterations)
-        if self.values["mode"] == "ppm":
-            weights.__class__ = PpmWeights           # the same state, weight 1 for each technique
         return weights
 
     def merge_area(self, plan) -> float:
