@@ -199,6 +199,9 @@ LAB_BDPT = (
           "joined by '+' from hit, nee, light, connect",
           check=lambda v: bdpt_strategy_kinds(v) is not None,
           expected="all, camera, light or kinds from hit, nee, light, connect joined by '+'"),
+    Param("light_paths", float, 1.0, "light subpaths traced per camera subpath (light tracing's "
+          "share: above 1 the extra ones only splat t = 1 connections; below 1 camera subpaths share them)",
+          check=lambda v: 1.0 / 64 <= v <= 64, expected="a number in [1/64, 64]"),
     Param("max_vertices", int, 1 << 21, "most light-subpath vertices held at once (a render is split "
           "into passes to fit)", **_int_at_least(1024)),
     Param("only_strategy", str, "", "render only strategy (s, t), written 's,t', with its MIS weight "

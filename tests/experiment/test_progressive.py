@@ -154,6 +154,9 @@ def test_progressive_mse_agrees_with_separate_renders(cornell, integrator):
         a, b = values[a], values[b]
         return (np.mean(a) - np.mean(b)) / np.sqrt(np.var(a, ddof=1) / len(a) + np.var(b, ddof=1) / len(b))
 
+    print(f"\n{integrator}: progressive against separate, z of " + ", ".join(
+        f"{name} at {n} spp {z((name, f'p{n}'), (name, f's{n}')):+.2f}" for name in errors for n in (4, 16)) +
+        f"; equal pass weights, relMSE at 16 spp {z(('rel_mse', 'equal'), ('rel_mse', 's16')):+.2f}")
     for name in errors:
         for n in (4, 16):
             assert abs(z((name, f"p{n}"), (name, f"s{n}"))) < Z_BOUND, (name, n)

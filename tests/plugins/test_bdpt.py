@@ -258,6 +258,37 @@ def test_memory_bound_splits_passes_and_shares_light_subpaths():
         assert_agrees(lab, ref, f"lab_bdpt max_vertices={max_vertices}")
 
 
+@pytest.mark.parametrize("name", ["cornell_box.xml", "stiff/light_in_glass.xml"])
+@pytest.mark.parametrize("light_paths", [0.25, 3.0])
+def test_light_paths_ratio_agrees_with_mitsuba_path(name, light_paths):
+    """``light_paths`` light subpaths per camera subpath: above 1 the extra ones only splat (and
+    store no vertex), below 1 camera subpaths share them; the weights count the samples."""
+    scene = load_scene(scene_path(name), res=RES)
+    integrator = bdpt(light_paths=light_paths)
+    lab = renders(scene, integrator, 16, SEEDS_LAB)
+    stats = integrator.bdpt_stats()
+    assert stats["light_subpaths"] == round(light_paths * 16 * RES * RES)
+    assert_agrees(lab, path_stack(scene, 64), f"lab_bdpt light_paths={light_paths} on {name}")
+
+
+def test_extra_light_paths_store_no_vertices():
+    """Above one light subpath per camera subpath, only the subpaths camera samples connect to
+    store vertices: light subpath i draws the same random numbers whatever their number, so the
+    stored vertices are exactly those of ``light_paths`` = 1 (one pass, same seed), while the
+    vertices reached grow with the subpaths traced. (Any ratio the weights count consistently is
+    unbiased; the count only sets the variance: the recursion against brute force with
+    light_paths != 1 is in test_bdpt_weights.py.)"""
+    scene = load_scene(scene_path("cornell_box.xml"), res=RES)
+    stats = {}
+    for light_paths in (1.0, 3.0):
+        integrator = bdpt(light_paths=light_paths)
+        mi.render(scene, integrator=integrator, spp=4, seed=5)
+        stats[light_paths] = integrator.bdpt_stats()
+    assert stats[3.0]["passes"] == stats[1.0]["passes"] == 1
+    assert stats[3.0]["light_vertices_stored"] == stats[1.0]["light_vertices_stored"]
+    assert stats[3.0]["light_vertices_reached"] > 2.5 * stats[1.0]["light_vertices_reached"]
+
+
 STIFF = sorted(f for f in os.listdir(os.path.join(ROOT, "scenes", "stiff")) if f.endswith(".xml"))
 
 

@@ -97,6 +97,15 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                          joined by '+'. The weights are renormalised over the
                          enabled ones, so a subset is unbiased for the light it
                          can reach. (Default: ``all``)
+    light_paths   float  Light subpaths traced per camera subpath, in [1/64, 64]:
+                         light tracing's share of the work. Above 1, camera
+                         sample i connects to light subpath i and the others
+                         add t = 1 splats only (and store no vertices); below
+                         1, camera samples share light subpaths (sample i uses
+                         subpath i mod N). The weights count each strategy's
+                         samples, so any value is unbiased; raise it where
+                         light tracing carries the image (light seen through
+                         glass). (Default: 1)
     max_vertices  int    Most light-subpath vertices held at once (>= 1024; 88
                          bytes each in RGB, 124 where a BSDF is anisotropic or
                          has a normal or bump map). A render whose light subpaths need
@@ -178,15 +187,16 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         inv_area, axis = sensor_constants(sensor)
         self.stats = stats = BdptStats()
         total, done, index = None, 0, 0
+        light_paths = v.get("light_paths", 1.0)         # (lab_vcm: 1)
         while done < spp:
             # light subpaths that fit in max_vertices: film pixels x spp_pass, or fewer, shared
             fit = max(1, int(v["max_vertices"] / (1.25 * self.vertices_per_path)))
-            spp_pass = max(1, min(spp - done, fit // film_px, self.pass_spp_limit(film_px)))
-            count = min(film_px * spp_pass, fit)
+            spp_pass = max(1, min(spp - done, int(fit // (film_px * light_paths)), self.pass_spp_limit(film_px)))
+            count = max(1, min(round(film_px * spp_pass * light_paths), fit))
             plan = PassPlan(index, done, spp_pass, count, crop_px * spp_pass)
             tracer.weights = self.pass_weights(plan)
             light = self._light_pass(tracer, film, count, crop_px / count, pass_seed(seed, index), stats,
-                                     traits.tangent_bsdf)
+                                     traits.tangent_bsdf, plan.camera_lanes)
             if light is None:                          # did not fit: fewer light subpaths
                 continue
             block, vertices, last, stored = light
@@ -239,10 +249,12 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         """What the camera subpaths merge with (lab_vcm); None: no merging."""
         return None
 
-    def _light_pass(self, tracer, film, count: int, sample_scale: float, seed: int, stats, tangents: bool):
+    def _light_pass(self, tracer, film, count: int, sample_scale: float, seed: int, stats, tangents: bool,
+                    camera_lanes: int):
         """Trace ``count`` light subpaths: (splat block, vertices, last slots, stored vertices), or
         None when they needed more than ``max_vertices`` (``vertices_per_path`` is updated; the
-        caller retries with fewer)."""
+        caller retries with fewer). Without merging only the first ``camera_lanes`` subpaths, the
+        ones camera subpaths connect to, store vertices."""
         if not tracer.weights.enabled & {"light", "connect", "merge"}:   # (s <= 1 only: no light subpath)
             return splats.new_block(film), LightVertices(1), dr.full(mi.UInt32, NONE, count), 0
         max_vertices = self.values["max_vertices"]
@@ -252,7 +264,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             start = time.perf_counter()
             block = splats.new_block(film)
             vertices = LightVertices(capacity, tangents, tracer.weights.merging)
-            reached, stores, last = tracer.trace(count, light_seed, block, sample_scale, vertices)
+            reached, stores, last = tracer.trace(count, light_seed, block, sample_scale, vertices,
+                                                 None if tracer.weights.merging else camera_lanes)
             dr.eval(block.tensor(), *vertices.arrays(), last, reached, stores)
             dr.sync_thread()
             stats.light_s += time.perf_counter() - start

@@ -148,9 +148,10 @@ class LightTracer:
 
     @dr.syntax
     def trace(self, count: int, seed: int, block: mi.ImageBlock, sample_scale: float,
-              vertices: LightVertices | None = None):
+              vertices: LightVertices | None = None, store_lanes: int | None = None):
         """Trace ``count`` light subpaths (PCG32 stream per lane from ``seed``), splat every t = 1
-        connection into ``block`` and, with ``vertices``, store the connectable vertices.
+        connection into ``block`` and, with ``vertices``, store the connectable vertices (of the
+        first ``store_lanes`` subpaths only, when given: the ones camera subpaths read).
 
         Returns (surface vertices reached (UInt32[1]), stores attempted (UInt32[1]), each lane's
         last stored slot (``vertices.NONE`` when none))."""
@@ -251,6 +252,8 @@ class LightTracer:
             # ---------- store x_depth for connections with camera vertices ----------
             if dr.hint(storing, mode="scalar"):
                 store = smooth & (depth + camera_segments <= max_depth)
+                if dr.hint(store_lanes is not None and store_lanes < count, mode="scalar"):
+                    store &= index < dr.opaque(mi.UInt32, store_lanes)
                 slot = dr.scatter_inc(stores, mi.UInt32(0), store)
                 kept = store & (slot < capacity)
                 vertices.store(slot, si, -ray.d, beta, mis, depth, last, kept,

@@ -17,6 +17,7 @@ from .. import images
 from ..errors import LabError
 from ..images import atomic_path
 from ..reporting import fmt, pyplot
+from ..reporting.figures import legend_outside, series_styles
 from .comparisons import comparison_sets, default_set, group_points, region_rel_mse, relative_error, shown_image
 from .viewer import crop_exposure
 
@@ -64,7 +65,8 @@ def build_figure(report, scene: str, budget: float | None = None):
     ref = report.references[scene]
     height, width = ref.image.shape[:2]
     regions = report._regions(scene, width, height)
-    colours = {label(k): f"C{i}" for i, k in enumerate(groups)}
+    styles, how = series_styles(groups, ("strategy", "sampler"))     # as in the report's plots
+    colours = {label(k): style.colour for k, style in styles.items()}
     columns = [("reference", None)] + chosen.entries
     n, rows = len(columns), 1 + len(regions)
     crop_ratio = [max(0.25, min(1.0, (r[3] - r[1]) / (r[2] - r[0]))) for r in regions.values()]
@@ -99,7 +101,7 @@ def build_figure(report, scene: str, budget: float | None = None):
                 if col == 0:       # horizontal, left of the row: thin regions leave no room above
                     cax.text(-0.06, 0.5, f"{rname}\n{offset:+g} EV" if offset else rname, ha="right",
                              va="center", transform=cax.transAxes)
-        plot_errors(fig.add_subplot(outer[1]), groups, label, colours, chosen)
+        plot_errors(fig.add_subplot(outer[1]), groups, label, styles, how, chosen)
         fig.suptitle(f"{scene}: {chosen.name} (relMSE under each image and crop: that render alone)",
                      fontsize=7, y=0.995)
     return fig
@@ -130,25 +132,24 @@ def report_floor(ref, rect) -> float:
     return float(np.mean(var / (ref.image[y0:y1, x0:x1].astype(np.float64) ** 2 + 1e-2)))
 
 
-def plot_errors(ax, groups, label, colours, chosen) -> None:
+def plot_errors(ax, groups, label, styles, how, chosen) -> None:
     shown = {p.point for _, p in chosen.entries}
     for key, points in groups.items():
         points = sorted(points, key=lambda p: p.time_s)
         t = [p.time_s for p in points]
         e = [max(p.rel_mse_corrected, 1e-12) for p in points]
         err = [0 if math.isnan(p.rel_mse_std) else min(p.rel_mse_std, 0.999 * v) for p, v in zip(points, e)]
-        ax.errorbar(t, e, yerr=err, marker="o", ms=2.5, lw=0.9, capsize=1.5, color=colours[label(key)],
-                    label=label(key))
+        ax.errorbar(t, e, yerr=err, ms=2.5, lw=0.9, capsize=1.5, **styles[key].kwargs(), label=label(key))
         picked = [(p.time_s, v) for p, v in zip(points, e) if p.point in shown]
         if picked:
-            ax.plot(*zip(*picked), "o", ms=6, mfc="none", mec=colours[label(key)], mew=0.8)
+            ax.plot(*zip(*picked), "o", ms=6, mfc="none", mec=styles[key].colour, mew=0.8)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("wall time of one render (s)")
     ax.set_ylabel("relMSE, reference floor subtracted")
     ax.set_title("error against time (bars: std over seeds; circled: shown)", pad=2)
     ax.grid(True, which="both", alpha=0.25, lw=0.4)
-    ax.legend(frameon=False)
+    legend_outside(ax, STYLE["legend.fontsize"], how)
 
 
 def write_figures(report, out_dir: str, budget: float | None = None) -> list[str]:

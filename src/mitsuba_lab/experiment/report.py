@@ -17,8 +17,8 @@ from collections import defaultdict
 import numpy as np
 
 from .. import images
-from ..reporting import block_marker, dict_rows, fmt, markdown_table, pyplot, save_figure, save_loglog, write_csv, \
-    write_markdown_page
+from ..reporting import block_marker, dict_rows, fmt, markdown_table, write_csv, write_markdown_page
+from ..reporting.figures import loglog_axes, pyplot, save_figure, series_styles
 from . import viewer
 from .analysis import FLOOR_WARNING_FACTOR, PointStats, curve, equal_time_budgets, point_stats, run_image
 from .reference import Reference
@@ -160,37 +160,36 @@ class Report(SectionTables):
 
     # -- figures -------------------------------------------------------------------------
     def plot_curves(self, scene, groups, label) -> str:
-        plt = pyplot()
-        fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
-        for key, points in groups.items():
-            points = sorted(points, key=lambda p: p.time_s)
-            t = [p.time_s for p in points]
-            e = [max(p.rel_mse_corrected, 1e-12) for p in points]
-            err = [p.rel_mse_std if not math.isnan(p.rel_mse_std) else 0 for p in points]
-            ax.errorbar(t, e, yerr=err, marker="o", capsize=3, label=label(key))
-        return save_loglog(fig, ax, os.path.join(self.out, f"{scene}_curves.png"),
-                           "wall time of one render (s)", "relMSE, reference floor subtracted",
-                           f"{scene}: error against time (bars: std over seeds)", legend_size=8)
+        fig, _ = curves_figure(groups, label)
+        return save_figure(fig, os.path.join(self.out, f"{scene}_curves.png"))
 
-    def plot_passes(self, scene, curves: dict) -> str:
+    def plot_passes(self, scene, curves: dict, styles: dict | None = None) -> str:
+        """bias^2 (solid, filled) and variance (dashed, open) against passes per curve;
+        ``styles`` {curve name: Style} gives each the colour and marker of its curve elsewhere."""
         plt = pyplot()
         fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
-        for i, (name, result) in enumerate(curves.items()):
-            rows, colour = result["rows"], f"C{i}"
-            ax.plot([r["passes"] for r in rows], [r["variance"] for r in rows], "s--", color=colour,
-                    label=f"{name}: variance")
+        styles = styles or series_styles(curves)[0]
+        for name, result in curves.items():
+            rows, style = result["rows"], styles[name]
+            ax.plot([r["passes"] for r in rows], [r["variance"] for r in rows], color=style.colour,
+                    marker=style.marker, linestyle="--", mfc="none", label=f"{name}: variance")
             shown = [r for r in rows if r["bias2"] > 0]        # a log axis has no room for <= 0
             ax.errorbar([r["passes"] for r in shown], [r["bias2"] for r in shown],
-                        yerr=[min(r["bias2_se"], 0.999 * r["bias2"]) for r in shown], fmt="o-", color=colour,
-                        capsize=3, label=f"{name}: bias^2 (+- se)")
-        return save_loglog(fig, ax, os.path.join(self.out, f"{scene}_passes.png"),
-                           "passes or iterations (one light-vertex map and one camera sample per pixel each)",
-                           "part of relMSE", f"{scene}: bias^2 and variance against passes", legend_size=7)
+                        yerr=[min(r["bias2_se"], 0.999 * r["bias2"]) for r in shown], color=style.colour,
+                        marker=style.marker, linestyle="-", capsize=3, label=f"{name}: bias^2 (+- se)")
+        loglog_axes(ax, "passes or iterations (one light-vertex map and one camera sample per pixel each)",
+                    "part of relMSE", f"{scene}: bias^2 (solid) and variance (dashed) against passes", legend_size=7)
+        from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+        # plain numbers at powers of two (log minor labels such as 3x10^1 collide)
+        passes = [r["passes"] for result in curves.values() for r in result["rows"]] or [1]
+        ax.set_xticks([2 ** k for k in range(int(math.log2(max(passes))) + 1) if min(passes) <= 2 ** k]
+                      or sorted(set(passes)))
+        ax.xaxis.set_major_formatter(ScalarFormatter())
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        return save_figure(fig, os.path.join(self.out, f"{scene}_passes.png"))
 
     def image_strip(self, scene, groups, label) -> str | None:
-        plt = pyplot()
-        from matplotlib.patches import Rectangle
-
         ref = self.references[scene]
         curves = {key: curve(points) for key, points in groups.items()}
         budgets = equal_time_budgets(curves)
@@ -198,28 +197,102 @@ class Report(SectionTables):
         chosen = []
         for key, points in groups.items():
             pick = min(points, key=lambda p: abs(math.log(p.time_s / target)) if target else -p.time_s)
-            chosen.append((key, pick))
+            chosen.append((strip_title(label(key), pick.spp, pick.time_s), run_image(self.folder, pick.images[0])))
         height, width = ref.image.shape[:2]
-        regions = self._regions(scene, width, height)
-        cols = 1 + len(chosen)
-        fig, axes = plt.subplots(2, cols, figsize=(2.2 * cols, 4.6), dpi=100, squeeze=False)
-        axes[0][0].imshow(images.srgb_preview(ref.image))
-        axes[0][0].set_title("reference", fontsize=8)
-        for name, (x0, y0, x1, y1) in regions.items():
-            axes[0][0].add_patch(Rectangle((x0 - 0.5, y0 - 0.5), x1 - x0, y1 - y0, fill=False, color="cyan", lw=0.8))
-        axes[1][0].imshow(np.log10(np.maximum(ref.variance.mean(-1), 1e-12)), cmap="viridis")
-        axes[1][0].set_title("log10 reference variance", fontsize=7)
-        for col, (key, p) in enumerate(chosen, 1):
-            image = run_image(self.folder, p.images[0])
-            axes[0][col].imshow(images.srgb_preview(image))
-            axes[0][col].set_title(f"{label(key)}\n{p.spp} spp, {p.time_s:.2g} s", fontsize=7)
-            rel_err = np.abs(image - ref.image).mean(-1) / (np.abs(ref.image).mean(-1) + 1e-2)
-            axes[1][col].imshow(np.log10(np.maximum(rel_err, 1e-4)), cmap="magma", vmin=-3, vmax=0.5)
-            axes[1][col].set_title("log10 relative error", fontsize=7)
-        for ax in axes.flat:
-            ax.set_xticks([])
-            ax.set_yticks([])
+        fig = strip_figure(ref.image, ref.variance, chosen, self._regions(scene, width, height))
         return save_figure(fig, os.path.join(self.out, f"{scene}_images.png"))
+
+
+#: The thumbnail grid's columns at most: six 2.2-inch cells fill a 1400 px page at 100 dpi.
+STRIP_COLUMNS = 6
+#: log10 relative error range of every error map (one colour bar for all).
+ERROR_RANGE = (-3.0, 0.5)
+
+
+def curves_figure(groups, label, styles=None):
+    """(figure, axes): corrected relMSE against time per group, bars the std over seeds;
+    one colour per strategy and one marker and line style per sampler (``styles``: what
+    ``series_styles`` returns, by default for these groups), the legend outside the axes."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
+    styles, how = styles or series_styles(groups, ("strategy", "sampler"))
+    for key, points in groups.items():
+        points = sorted(points, key=lambda p: p.time_s)
+        t = [p.time_s for p in points]
+        e = [max(p.rel_mse_corrected, 1e-12) for p in points]
+        err = [0 if math.isnan(p.rel_mse_std) else min(p.rel_mse_std, 0.999 * v) for p, v in zip(points, e)]
+        ax.errorbar(t, e, yerr=err, capsize=2, ms=4, lw=1.0, label=label(key), **styles[key].kwargs())
+    scene = next((getattr(p, "scene", "") for points in groups.values() for p in points), "")
+    loglog_axes(ax, "wall time of one render (s)", "relMSE, reference floor subtracted",
+                f"{scene}: error against time (bars: std over seeds)", legend_size=7, legend_title=how)
+    return fig, ax
+
+
+def strip_title(name: str, spp: int, time_s: float, width: int = 24) -> str:
+    """A thumbnail's title: the label (broken after "/" when long), then spp and time."""
+    if len(name) > width and " / " in name:
+        name = name.replace(" / ", " /\n", 1)
+    return f"{name}\n{spp} spp, {time_s:.2g} s"
+
+
+def strip_figure(reference, variance, chosen, regions=None, columns: int = STRIP_COLUMNS):
+    """The reference and each (title, image) of ``chosen`` as thumbnails in a grid of at most
+    ``columns`` cells a row, each image above its map: log10 reference variance under the
+    reference, log10 relative error |x - ref| / (|ref| + 0.01) under the renders; below the
+    grid one colour bar for the variance and one shared by all error maps."""
+    from matplotlib.patches import Rectangle
+
+    plt = pyplot()
+    cells = 1 + len(chosen)
+    cols = min(columns, cells)
+    rows = math.ceil(cells / cols)
+    height, width = reference.shape[:2]
+    aspect = height / width
+    cell_w = 2.2
+    fig = plt.figure(figsize=(cell_w * cols, rows * (2 * cell_w * aspect + 0.5) + 0.5), dpi=100)
+    # outer rows: one per row of cells (room for the titles between them), then the colour bars
+    outer = fig.add_gridspec(rows + 1, cols, height_ratios=[2 * aspect] * rows + [0.06], hspace=0.22,
+                             wspace=0.06)
+
+    def cell(i):
+        inner = outer[divmod(i, cols)].subgridspec(2, 1, hspace=0.03)
+        return fig.add_subplot(inner[0]), fig.add_subplot(inner[1])
+
+    top, bottom = cell(0)
+    top.imshow(images.srgb_preview(reference))
+    top.set_title("reference", fontsize=8)
+    for name, (x0, y0, x1, y1) in (regions or {}).items():
+        top.add_patch(Rectangle((x0 - 0.5, y0 - 0.5), x1 - x0, y1 - y0, fill=False, color="cyan", lw=0.8))
+    var_map = bottom.imshow(np.log10(np.maximum(variance.mean(-1), 1e-12)), cmap="viridis")
+    axes, err_map = [top, bottom], None
+    for i, (title, image) in enumerate(chosen, 1):
+        top, bottom = cell(i)
+        top.imshow(images.srgb_preview(image))
+        top.set_title(title, fontsize=8)
+        rel_err = np.abs(image - reference).mean(-1) / (np.abs(reference).mean(-1) + 1e-2)
+        err_map = bottom.imshow(np.log10(np.maximum(rel_err, 1e-4)), cmap="magma", vmin=ERROR_RANGE[0],
+                                vmax=ERROR_RANGE[1])
+        axes += [top, bottom]
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    _colour_bar(fig, var_map, outer[-1, 0], "log10 reference variance (map under the reference)")
+    if err_map is not None:
+        _colour_bar(fig, err_map, outer[-1, 1:], "log10 relative error |x - ref| / (|ref| + 0.01), every render's map")
+    return fig
+
+
+def _colour_bar(fig, mappable, spec, label: str) -> None:
+    """A horizontal colour bar in ``spec``, inset from its ends so that the end labels of two
+    bars side by side do not touch."""
+    from matplotlib.ticker import MaxNLocator
+
+    bar = fig.colorbar(mappable, cax=fig.add_subplot(spec.subgridspec(1, 12, wspace=0)[0, 1:11]),
+                       orientation="horizontal")
+    bar.locator = MaxNLocator(6, steps=[1, 2, 5, 10])       # whole and half decades
+    bar.update_ticks()
+    bar.set_label(label, fontsize=7)
+    bar.ax.tick_params(labelsize=7)
 
 
 def check_sweep_folder(folder: str) -> None:

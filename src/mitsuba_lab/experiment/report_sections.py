@@ -15,30 +15,35 @@ from collections import defaultdict
 from .. import metrics
 from ..plugins.params import resolve as resolve_params
 from ..reporting import fmt, markdown_table
+from ..reporting.figures import series_styles
 from .analysis import (MIN_TRUSTED_TIME_S, PointStats, bias_by_passes, curve, equal_time_budgets, region_at_budgets,
-                       region_floor, region_stack_stats, slope, timing_trusted, veach_bound)
+                       region_floor, region_stack_stats, timing_trusted, veach_bound)
 from .config import PASS_PARAMETER
+from .spectrum import fit_slope, slope_cell, slope_note
 
 
 class SectionTables:
     def efficiency_table(self, groups, label) -> list[str]:
         """Each group's longest point, ranked by efficiency; a group whose longest render is
         shorter than MIN_TRUSTED_TIME_S is not ranked (listed last, marked) and the MSE-time
-        slope is fitted over the points at least that long."""
+        slope is fitted over the points at least that long, +- its standard error, marked
+        when it cannot be trusted (``spectrum.fit_slope``)."""
         rows = []
         for key, points in groups.items():
             top = max(points, key=lambda p: p.time_s)
             trusted = timing_trusted(top)
-            times, errors = curve([p for p in points if timing_trusted(p)], "mse_corrected")
+            timed = [p for p in points if timing_trusted(p)]
+            fit = fit_slope([p.time_s for p in timed], [p.mse_corrected for p in timed],
+                            [p.mse_std / math.sqrt(p.seeds) for p in timed])
             score = top.efficiency if trusted and not math.isnan(top.efficiency) else -1.0
-            rows.append(((trusted, score), key, top, slope(times, errors)))
+            rows.append(((trusted, score), key, top, fit))
         rows.sort(key=lambda r: r[0], reverse=True)
         short = f"{MIN_TRUSTED_TIME_S * 1000:g} ms"
         header = ["rank", "strategy", "spp", "time s", "MSE", "corrected MSE", "relMSE (+- seed std)", "efficiency",
                   "slope log MSE / log t", "FLIP", "CIEDE2000", "rays / sample (ext, shadow)"]
         body = [[rank if trusted else "not ranked", label(key), p.spp,
                  fmt(p.time_s) + ("" if trusted else f" (< {short})"), fmt(p.mse), fmt(p.mse_corrected),
-                 f"{fmt(p.rel_mse)} +- {fmt(p.rel_mse_std, 2)}", fmt(p.efficiency), fmt(s), fmt(p.flip),
+                 f"{fmt(p.rel_mse)} +- {fmt(p.rel_mse_std, 2)}", fmt(p.efficiency), slope_cell(s), fmt(p.flip),
                  fmt(p.ciede2000),
                  f"{fmt(p.rays_per_sample.get('extension'))}, {fmt(p.rays_per_sample.get('shadow'))}"]
                 for rank, ((trusted, _), key, p, s) in enumerate(rows, 1)]
@@ -50,6 +55,7 @@ class SectionTables:
             caption += (f" **Not ranked:** {', '.join(untimed)} (no render of {short} or more: add spp or a "
                         f"time budget).")
         return ["", "### Efficiency (largest sample count), ranked", "", caption, "", *markdown_table(header, body),
+                *slope_note([(label(key), fit) for _, key, _, fit in rows], "slope column"),
                 *self.progressive_note(groups, label)]
 
     def progressive_note(self, groups, label) -> list[str]:
@@ -166,6 +172,9 @@ class SectionTables:
             if unit is None or len(points) < 2:
                 continue
             result = bias_by_passes(points, lambda p: int(self._param(p, unit, p.spp)))
+            resolved = [r for r in result["rows"] if r["resolved"]]
+            fit = fit_slope([r["passes"] for r in resolved], [r["bias2"] for r in resolved],
+                            [r["bias2_se"] for r in resolved])
             curves[label(key)] = result
             header = [unit, "seeds", "time s", "relMSE", "variance", "bias^2 (+- se)", "resolved", "bias^2 / relMSE"]
             body = [[r["passes"], r["seeds"], fmt(r["time_s"]), fmt(r["rel_mse"]), fmt(r["variance"]),
@@ -175,10 +184,15 @@ class SectionTables:
                    f"In relMSE's units (pixels weighted by 1 / (ref^2 + 0.01), so the light's edge pixels do "
                    f"not swamp the rest): relMSE = bias^2 + variance + reference floor ({fmt(rel_floor)}); "
                    f"bias^2 +- one standard error, resolved when more than two above zero. Log-log slope "
-                   f"of the resolved bias^2 against {unit}: {fmt(result['slope'])}.", "",
-                   *markdown_table(header, body)]
+                   f"of the resolved bias^2 against {unit}: {slope_cell(fit)}.", "",
+                   *markdown_table(header, body),
+                   *slope_note([(label(key), fit)], "above", "theory for progressive photon mapping (alpha 2/3): "
+                               "bias^2 falls as passes^(-2/3) where the radiance is smooth, as passes^(-1/3) "
+                               "at edges and corners")]
         if curves:
-            md += ["", f"![bias^2 and variance against passes]({os.path.basename(self.plot_passes(scene, curves))})"]
+            styles = series_styles(groups, ("strategy", "sampler"))[0]       # the colours of the other plots
+            plot = self.plot_passes(scene, curves, {label(key): styles[key] for key in groups if label(key) in curves})
+            md += ["", f"![bias^2 and variance against passes]({os.path.basename(plot)})"]
         return md
 
     def _mis_setting(self, stats: PointStats) -> tuple[str, int, tuple]:

@@ -15,6 +15,8 @@ Small pure functions (the first three) and two report helpers built on them:
   spectrum, so the benchmarks report MSE and spectra without them as well;
 * ``mse_slope``: least-squares slope of log MSE against log spp (-1 for plain
   Monte Carlo, steeper for stratified / QMC samplers on smooth integrands);
+* ``fit_slope``: the same fit with its standard error and a word on whether it can be
+  trusted (``slope_cell``, ``slope_note`` print it in the report's tables);
 * ``slope_table``, ``plot_error_spectra``: Markdown table and PNG for the report,
   given the report's groups {(strategy, sampler): [PointStats]}.
 """
@@ -22,10 +24,12 @@ from __future__ import annotations
 
 import math
 import os
+from typing import NamedTuple
 
 import numpy as np
 
-from ..reporting import markdown_table, pyplot, save_figure
+from ..reporting import markdown_table
+from ..reporting.figures import legend_outside, pyplot, save_figure, series_styles
 
 
 def _luminance_error(err: np.ndarray) -> np.ndarray:
@@ -129,6 +133,84 @@ def mse_slope(spp, mse) -> float:
     return float(np.polyfit(np.log(spp), np.log(mse), 1)[0])
 
 
+#: A fitted slope is not trusted with a standard error above this ...
+SLOPE_SE_LIMIT = 0.5
+#: ... nor when it lies more than two standard errors outside this range: MSE against effort
+#: falls as -1 for unbiased Monte Carlo, about as -2/3 for progressive photon mapping, and
+#: steeper than -1 only where stratification or QMC helps (-2 to -3 on smooth integrands).
+SLOPE_RANGE = (-3.0, 0.0)
+
+
+class SlopeFit(NamedTuple):
+    slope: float
+    se: float                       # NaN when neither the scatter nor the points' errors give one
+    points: int
+    problem: str                    # why it cannot be trusted; "" when it can
+
+
+def fit_slope(x, y, y_se=None) -> SlopeFit:
+    """Least-squares slope of log y against log x, with a standard error and a verdict.
+
+    The standard error is the larger of two: from the scatter about the line (3 points or
+    more) and from the points' own standard errors ``y_se`` (propagated through the fit,
+    sigma(log y) = se / y, the points taken as independent). Not trusted (``problem``): fewer
+    than 3 points (a line through 2 always fits: "too few to check the line"), a standard
+    error above SLOPE_SE_LIMIT, or a slope more than two standard errors outside SLOPE_RANGE. Pairs with x or y <= 0 are
+    left out (log axes); under 2 distinct x the slope is NaN."""
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    s = np.full(x.shape, np.nan) if y_se is None else np.asarray(y_se, np.float64)
+    keep = (x > 0) & (y > 0) & np.isfinite(y)
+    lx, ly, sigma = np.log(x[keep]), np.log(y[keep]), s[keep] / y[keep]
+    n = int(lx.size)
+    if n < 2 or np.ptp(lx) == 0:
+        return SlopeFit(math.nan, math.nan, n, "fewer than 2 points")
+    dx = lx - lx.mean()
+    sxx = float(dx @ dx)
+    slope = float(dx @ (ly - ly.mean()) / sxx)
+    candidates = []
+    if n >= 3:
+        residual = ly - ly.mean() - slope * dx
+        candidates.append(math.sqrt(float(residual @ residual) / (n - 2) / sxx))
+    if np.all(np.isfinite(sigma)):
+        candidates.append(math.sqrt(float(((dx / sxx) ** 2) @ sigma ** 2)))
+    se = max(candidates) if candidates else math.nan
+    reach = 2 * se if not math.isnan(se) else 0.0
+    problems = []
+    if n < 3:
+        problems.append("too few to check the line")
+    if se > SLOPE_SE_LIMIT:
+        problems.append(f"standard error {se:.2g} > {SLOPE_SE_LIMIT:g}")
+    if slope - reach > SLOPE_RANGE[1] or slope + reach < SLOPE_RANGE[0]:
+        problems.append(f"outside [{SLOPE_RANGE[0]:g}, {SLOPE_RANGE[1]:g}]")
+    return SlopeFit(slope, se, n, ", ".join(problems))
+
+
+def slope_cell(fit: SlopeFit) -> str:
+    """A table cell: slope +- standard error, "*" when it cannot be trusted, "n/a" without one."""
+    if math.isnan(fit.slope):
+        return "n/a"
+    text = f"{fit.slope:.2f}" + ("" if math.isnan(fit.se) else f" +- {fit.se:.2f}")
+    return text + (" *" if fit.problem else "")
+
+
+#: What a slope of MSE against spp or time should be (the sentence under a slope table).
+MSE_THEORY = ("theory: -1 for unbiased Monte Carlo, about -2/3 for progressive photon mapping, steeper than -1 "
+              "only where stratification or QMC helps")
+
+
+def slope_note(fits: list[tuple[str, SlopeFit]], where: str, theory: str = MSE_THEORY) -> list[str]:
+    """Markdown lines under a slope table: which slopes are marked and why, and what
+    ``theory`` expects (nothing when every slope is trusted)."""
+    flagged = [(name, fit) for name, fit in fits if fit.problem and not math.isnan(fit.slope)]
+    if not flagged:
+        return []
+    return ["", f"Slopes marked * ({where}) cannot be trusted: " +
+            "; ".join(f"{name} ({fit.points} points: {fit.problem})" for name, fit in flagged) +
+            f". A slope comes from a few noisy points (+- one standard error: from the scatter about the "
+            f"line or the seeds' spread, whichever is larger); {theory}. A positive slope means the error "
+            f"did not fall: noise, or a floor."]
+
+
 # ----------------------------------------------------------------------------
 # Report helpers: groups = {(strategy, sampler): [PointStats, ...]}
 # ----------------------------------------------------------------------------
@@ -139,21 +221,26 @@ def _ladder(points):
 
 
 def slope_table(groups, label) -> list[str]:
-    """Markdown lines: slope of log MSE (reference floor subtracted) against log spp per group."""
+    """Markdown lines: slope of log MSE (reference floor subtracted) against log spp per group,
+    with its standard error and, for one that cannot be trusted (``fit_slope``), a mark."""
     rows = []
     for key, points in groups.items():
         pts = [p for p in _ladder(points) if p.mse_corrected > 0]
         if len({p.spp for p in pts}) < 2:
             continue
-        slope = mse_slope([p.spp for p in pts], [p.mse_corrected for p in pts])
-        rows.append((slope, label(key), f"{pts[0].spp}-{pts[-1].spp}", len(pts)))
+        fit = fit_slope([p.spp for p in pts], [p.mse_corrected for p in pts],
+                        [getattr(p, "mse_std", math.nan) / math.sqrt(getattr(p, "seeds", 1)) for p in pts])
+        rows.append((fit.slope, label(key), f"{pts[0].spp}-{pts[-1].spp}", len(pts), fit))
     if not rows:
         return []
+    rows.sort(key=lambda r: r[:4])
+    body = [[name, f"{slope:.2f}", rng, n, "n/a" if math.isnan(fit.se) else f"{fit.se:.2f}",
+             f"* {fit.problem}" if fit.problem else ""] for slope, name, rng, n, fit in rows]
     return ["", "### MSE against spp", "",
             "Slope of log MSE (reference floor subtracted) against log spp: -1 for independent "
             "samples; steeper where stratification or QMC helps.", "",
-            *markdown_table(["strategy / sampler", "slope", "spp range", "points"],
-                            [[name, f"{slope:.2f}", rng, n] for slope, name, rng, n in sorted(rows)])]
+            *markdown_table(["strategy / sampler", "slope", "spp range", "points", "standard error", "trust"], body),
+            *slope_note([(name, fit) for _, name, _, _, fit in rows], "in the trust column")]
 
 
 def plot_error_spectra(groups, label, reference: np.ndarray, folder: str, path: str,
@@ -181,17 +268,19 @@ def plot_error_spectra(groups, label, reference: np.ndarray, folder: str, path: 
         freq = spectra[0][0]
         power = np.nanmean([s[1] for s in spectra], axis=0)
         low = float(np.mean([low_frequency_fraction(e) for e in errors]))
-        curves.append((label(key), p.spp, freq, power, low))
+        curves.append((key, label(key), p.spp, freq, power, low))
     if not curves:
         return None
     fig, ax = pyplot().subplots(figsize=(6.4, 4.2), dpi=100)
-    for name, spp, freq, power, low in curves:
-        ax.plot(freq, power, label=f"{name} ({spp} spp, low-freq. share {low:.3f})")
+    styles, how = series_styles(groups, ("strategy", "sampler"))          # as in the report's other plots
+    for key, name, spp, freq, power, low in curves:
+        ax.plot(freq, power, ms=3, lw=1.0, markevery=max(1, len(freq) // 8), **styles[key].kwargs(),
+                label=f"{name} ({spp} spp, low-freq. share {low:.3f})")
     ax.set_yscale("log")
     ax.set_xlabel("radial frequency (cycles / pixel)")
     ax.set_ylabel("error power")
     where = f"rows {row0}.. (below the emitter)" if row0 else "whole image"
     ax.set_title(f"radially averaged power spectrum of the error (mean over seeds; {where})", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    legend_outside(ax, 7, how)
     return save_figure(fig, path)
