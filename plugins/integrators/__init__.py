@@ -6,5 +6,6 @@ Plugins: ``path`` (``lab_naive``, ``lab_nee``, ``lab_mis``: one path loop), ``ph
 ``Densities``), ``naive``, ``nee``, ``mis`` (the path tracers' weights), ``photon.estimator``,
 ``bdpt.estimator``. Shared pieces: ``mis_weight`` (the MIS heuristics, on Dr.Jit or numpy
 arrays), ``direct`` (emitter sampling and emitter hits with the densities of both techniques),
-``roulette`` (Russian roulette), ``counters`` (ray counts), ``spawn`` (ray offsets).
+``roulette`` (Russian roulette), ``counters`` (ray counts), ``spawn`` (ray offsets), ``spectral``
+(spectral variants: one set of wavelengths per pass for light and camera paths).
 """

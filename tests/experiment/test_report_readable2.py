@@ -205,3 +205,24 @@ def test_the_report_marks_the_rising_slope_and_not_the_clean_ones(report):
     assert "rising / independent (3 points: outside [-3, 0])" in note and "good /" not in note
     for name in ("s_curves.png", "s_images.png", "s_spectra.png"):
         assert os.path.getsize(os.path.join(folder, "report", name)) > 10_000
+
+
+def test_a_point_at_the_reference_floor_is_not_ranked():
+    """A strategy whose MSE minus the reference's floor is not above zero has no efficiency:
+    it is listed as not ranked and named, not given a rank below the others."""
+    from mitsuba_lab.experiment.report_sections import SectionTables
+
+    def point(mse_corrected):
+        efficiency = 1.0 / (mse_corrected * 0.2) if mse_corrected > 0 else math.nan
+        return SimpleNamespace(scene="s", time_s=0.2, spp=64, mse=1e-3, mse_std=1e-4, seeds=4, mse_corrected=mse_corrected,
+                               rel_mse=1e-2, rel_mse_std=1e-3, efficiency=efficiency, flip=math.nan,
+                               ciede2000=math.nan, rays_per_sample={})
+
+    tables = SectionTables()
+    tables.progressive_note = lambda groups, label: []
+    groups = {("fine", "independent"): [point(1e-3)], ("floored", "independent"): [point(-1e-5)]}
+    md = "\n".join(tables.efficiency_table(groups, lambda key: key[0]))
+    rows = {cells[1]: cells for cells in ([c.strip() for c in line.strip("|").split("|")]
+                                          for line in md.splitlines() if line.startswith("| ") and not line.startswith("| rank"))}
+    assert rows["fine"][0] == "1" and rows["floored"][0] == "not ranked"
+    assert "**Not ranked, at the reference's noise floor:** floored" in md

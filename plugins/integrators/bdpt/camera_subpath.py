@@ -135,6 +135,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
     eta = mi.Float(1)
     depth = mi.UInt32(0)
     prev_it = dr.zeros(mi.Interaction3f)
+    prev_it.p = ray.o                          # the sensor: where a textured light seen directly is seen from
     # Mitsuba's meaning: with an environment every pixel is valid, unless hide_emitters
     valid_ray = active & ((scene.environment() is not None) and not hide)
     prev_p = mi.Point3f(ray.o)                 # where the segment to the next vertex starts
@@ -163,7 +164,9 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
                 hit &= depth > 1               # the environment seen directly is hidden too
             infinite = table.at_infinity(emitter, hit)
             ds = mi.DirectionSample3f(scene, si=si, ref=prev_it)
-            pdf_nee = nee_density(scene, prev_it, ds, infinite, hit & (depth > 1))
+            # at depth 1 a textured area light still needs its position density (light tracing's
+            # emission density of x_0, the competitor of a direct hit; ``table.emission``)
+            pdf_nee = nee_density(scene, prev_it, ds, infinite, hit & ((depth > 1) | ~infinite))
             cos_light = dr.select(infinite, 1.0, dr.abs(dr.dot(si.n, ray.d)))
             pdf_pos, pdf_dir, _ = table.emission(emitter, cos_light, pdf_nee, hit)
             # (light tracing never splats an emitter at infinity: no competitor for x_0 there)

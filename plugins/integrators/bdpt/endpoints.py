@@ -40,8 +40,10 @@ _KINDS = {"AreaLight": _AREA, "PointLight": _POINT, "SpotLight": _SPOT, "Directi
 
 
 def _textured(emitter) -> bool:
-    """The area light's radiance varies over its surface (Mitsuba then samples positions by it)."""
-    return any(key.startswith("radiance.") and key != "radiance.value" for key in mi.traverse(emitter).keys())
+    """The area light's radiance varies over its surface (Mitsuba then samples positions by it):
+    a 2D texture has a ``to_uv`` transform; a spectrum (``radiance.value``, a blackbody's
+    ``temperature``, the D65 table of an RGB spectrum in spectral variants) does not vary."""
+    return any(key.startswith("radiance.") and key.endswith("to_uv") for key in mi.traverse(emitter).keys())
 
 
 class EmitterTable:

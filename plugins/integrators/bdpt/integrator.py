@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators import spawn
+from mitsuba_lab.plugins.integrators import spawn, spectral
 from mitsuba_lab.plugins.integrators.support import warn_if_unsupported
 from mitsuba_lab.plugins.params import UNBOUNDED, bdpt_only_strategy
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
@@ -121,12 +121,13 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                          (Default: empty)
     ============= ====== ========================================================
 
-    Handles: area lights (any shape, textured or not), point and spot lights; smooth,
-    delta and mixed BSDFs (``plastic``: connections use the smooth lobes, the delta lobes
-    are followed); shading normals (the adjoint correction on the light side); the
-    pinhole ``perspective`` sensor with any film size and crop window. Refused in one line:
-    spectral and polarized variants, emitters at infinity (``constant``, ``envmap``,
-    ``directional``), other sensors, ``render(develop=False)``, ``samples_per_pass``.
+    Handles: area lights (any shape, textured or not), point, spot and directional lights,
+    ``constant`` and ``envmap``; smooth, delta and mixed BSDFs (``plastic``: connections use
+    the smooth lobes, the delta lobes are followed); shading normals (the adjoint correction
+    on the light side); the pinhole ``perspective`` sensor with any film size and crop window;
+    RGB, mono and spectral variants (spectral: one set of wavelengths per pass, drawn from the
+    sensor, so a pass is one sample per pixel; ``spectral.py``). Refused in one line:
+    polarized variants, other sensors, ``render(develop=False)``, ``samples_per_pass``.
     Participating media are ignored (one warning). Light-subpath seeds come from the
     render's seed; each pass has its own.
 
@@ -191,10 +192,14 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         while done < spp:
             # light subpaths that fit in max_vertices: film pixels x spp_pass, or fewer, shared
             fit = max(1, int(v["max_vertices"] / (1.25 * self.vertices_per_path)))
-            spp_pass = max(1, min(spp - done, int(fit // (film_px * light_paths)), self.pass_spp_limit(film_px)))
+            spp_pass = max(1, min(spp - done, int(fit // (film_px * light_paths)), self.pass_spp_limit(film_px),
+                                  1 if mi.is_spectral else spp))        # spectral: one set of wavelengths per pass
             count = max(1, min(round(film_px * spp_pass * light_paths), fit))
             plan = PassPlan(index, done, spp_pass, count, crop_px * spp_pass)
             tracer.weights = self.pass_weights(plan)
+            u = spectral.pass_samples(seed, index + 1)[index] if mi.is_spectral else None
+            if u is not None:
+                tracer.pass_spectrum = spectral.sensor_spectrum(sensor, u)
             light = self._light_pass(tracer, film, count, crop_px / count, pass_seed(seed, index), stats,
                                      traits.tangent_bsdf, plan.camera_lanes)
             if light is None:                          # did not fit: fewer light subpaths
@@ -206,8 +211,12 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                                     self.pass_grid(vertices, stored, plan, stats))
             start = time.perf_counter()
             try:
-                image = mi.SamplingIntegrator.render(self, scene, sensor, pass_seed(seed, index), spp_pass,
-                                                     True, True)
+                if u is None:
+                    image = mi.SamplingIntegrator.render(self, scene, sensor, pass_seed(seed, index), spp_pass,
+                                                         True, True)
+                else:                              # every camera ray at the pass's wavelengths
+                    image = spectral.render_pass(self, scene, sensor, dr.opaque(mi.UInt32, pass_seed(seed, index)),
+                                                 spp_pass, u)
             finally:
                 self._pass = None
             dr.eval(image)

@@ -24,13 +24,18 @@ the reference point). All cosines in the weights are geometric (area measure), o
 subpaths, so every strategy's density of a vertex is computed the same way. With ``vertices``
 given, the vertices a connection can end at (smooth BSDF, short enough for a camera vertex to
 join) are stored for the camera subpaths (``vertices.LightVertices``).
+
+Spectral variants: a pass has one set of wavelengths, the sensor's for the pass's sample
+(``pass_spectrum``, set by the driver), and every light subpath is emitted at exactly those
+(``spectral.emit``), so its vertices can be joined to camera vertices; a splat carries the
+sensor's spectral weight that a camera ray's weight carries.
 """
 from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators import spawn
+from mitsuba_lab.plugins.integrators import spawn, spectral
 from mitsuba_lab.plugins.integrators.photon.tracer import adjoint_correction
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 
@@ -47,10 +52,11 @@ def finite_or_zero(x):
 
 def check_variant() -> None:
     """Refuse variants lab_bdpt cannot render yet (one line)."""
-    if mi.is_spectral or mi.is_polarized:
-        # Light and camera subpaths would need the same wavelengths (and Stokes vectors).
-        raise ValueError(f"lab_bdpt: variant '{mi.variant()}' is not supported yet: bidirectional paths "
-                         f"are traced in RGB and mono variants only (use llvm_ad_rgb or llvm_ad_mono)")
+    if mi.is_polarized:
+        # Light and camera subpaths would need the same Stokes frames at every connection.
+        variant = mi.variant()
+        raise ValueError(f"lab_bdpt: variant '{variant}' is not supported: bidirectional paths carry "
+                         f"unpolarized light; use {variant.replace('_polarized', '')}")
 
 
 def transported(bsdf, si: mi.SurfaceInteraction3f, wo, active):
@@ -128,6 +134,9 @@ class LightTracer:
         self.table = EmitterTable(scene)
         self.only = only                     # () or the one strategy (s, t) to splat
         self.hide_emitters = hide_emitters   # camera rays pass through area emitters
+        self.spectra = spectral.EmitterSpectra(scene, "lab_bdpt") if mi.is_spectral else None
+        #: spectral variants: (wavelengths, the sensor's spectral weight) of the pass
+        self.pass_spectrum = None
 
     @dr.syntax
     def _visible(self, it, ds, active):
@@ -171,7 +180,21 @@ class LightTracer:
         u_wav = rng.next_float32()
         sample_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
         sample_dir = mi.Point2f(rng.next_float32(), rng.next_float32())
-        ray, ray_weight = emitter.sample_ray(time, u_wav, sample_pos, sample_dir)
+        if dr.hint(self.spectra is not None, mode="scalar"):
+            if self.pass_spectrum is None:
+                raise ValueError("lab_bdpt: a spectral variant's light subpaths need the pass's wavelengths")
+            wavelengths, sensor_weight = self.pass_spectrum
+            u_tables, p_tables = self.spectra.tables(wavelengths)
+            # opaque: with one emitter the tables are single values, which would otherwise be
+            # compiled into the kernels, and every pass would compile them again
+            dr.make_opaque(*u_tables, *p_tables)
+            ray, ray_weight = spectral.emit(emitter, time, [dr.opaque(mi.Float, v) for v in wavelengths],
+                                            [dr.gather(mi.Float, t, emitter_index) for t in u_tables],
+                                            [dr.gather(mi.Float, t, emitter_index) for t in p_tables],
+                                            sample_pos, sample_dir, True)
+            scale = scale * sensor_weight         # what a camera ray's weight carries
+        else:
+            ray, ray_weight = emitter.sample_ray(time, u_wav, sample_pos, sample_dir)
         # The same position sample gives x_0 again, with its area density and normal (an
         # emitter at infinity has no position: its x_0 is the direction, see endpoints.py).
         ps, pos_weight = emitter.sample_position(time, sample_pos)

@@ -55,9 +55,10 @@ def coverage(film: mi.Film):
         x, y = index % (w * n), index // (w * n)
         uv = mi.Point2f((mi.Float(x) + 0.5) / n, (mi.Float(y) + 0.5) / n)
         block = new_block(film)
-        one = mi.Spectrum(1.0 / (n * n))
-        wavelengths = dr.zeros(mi.Color0f, dr.width(index))     # (RGB and mono: no wavelengths)
-        splat(block, uv, wavelengths, one, mi.Bool(True))
+        # raw channels (colour 1 / n^2, alpha 1, weight 0 as a splat's): no spectrum to convert
+        one = mi.Float(1.0 / (n * n))
+        values = [one] * 3 + ([mi.Float(1.0)] if block.channel_count() == 5 else []) + [mi.Float(0.0)]
+        block.put(uv + mi.Vector2f(block.offset()), values)
         film.put_block(block)
         _coverage_cache[key] = film.develop()
         dr.eval(_coverage_cache[key])

@@ -16,7 +16,7 @@ from mitsuba_lab.plugins.variant import plugin_settings
 from mitsuba_lab.scene import SceneTraits
 from mitsuba_lab.plugins.params import DIRECT_MODES, UNBOUNDED  # noqa: F401 (re-exported)
 
-from . import spectral
+from mitsuba_lab.plugins.integrators import spectral
 from .estimator import PhotonMapping
 from .gather import CameraPass
 from .grid import PhotonGrid

@@ -40,7 +40,7 @@ import mitsuba as mi
 from mitsuba_lab.plugins.integrators import spawn
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 
-from . import spectral
+from mitsuba_lab.plugins.integrators import spectral
 from .records import PhotonRecords
 
 #: Emission samples per emitter for the power estimate that drives emitter selection.

@@ -78,7 +78,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
 
     A light vertex merges with a camera vertex when within r_i, facing the same way (normals
     within ~37 degrees, as lab_photon) and when the merged path is no longer than
-    ``max_depth``. Supports what lab_bdpt supports (RGB and mono variants). Statistics of the
+    ``max_depth``. Supports what lab_bdpt supports (RGB, mono and spectral variants; spectral:
+    one iteration per pass). Statistics of the
     last render (``bdpt_stats()``): light, grid and camera time, the radii.
 
     .. code-block:: python

@@ -35,25 +35,31 @@ class SectionTables:
             timed = [p for p in points if timing_trusted(p)]
             fit = fit_slope([p.time_s for p in timed], [p.mse_corrected for p in timed],
                             [p.mse_std / math.sqrt(p.seeds) for p in timed])
-            score = top.efficiency if trusted and not math.isnan(top.efficiency) else -1.0
-            rows.append(((trusted, score), key, top, fit))
+            floor = math.isnan(top.efficiency)       # corrected MSE <= 0: at the reference's floor
+            score = top.efficiency if trusted and not floor else -1.0
+            rows.append(((trusted and not floor, score), key, top, fit))
         rows.sort(key=lambda r: r[0], reverse=True)
         short = f"{MIN_TRUSTED_TIME_S * 1000:g} ms"
         header = ["rank", "strategy", "spp", "time s", "MSE", "corrected MSE", "relMSE (+- seed std)", "efficiency",
                   "slope log MSE / log t", "FLIP", "CIEDE2000", "rays / sample (ext, shadow)"]
-        body = [[rank if trusted else "not ranked", label(key), p.spp,
-                 fmt(p.time_s) + ("" if trusted else f" (< {short})"), fmt(p.mse), fmt(p.mse_corrected),
+        body = [[rank if ranked else "not ranked", label(key), p.spp,
+                 fmt(p.time_s) + ("" if timing_trusted(p) else f" (< {short})"), fmt(p.mse), fmt(p.mse_corrected),
                  f"{fmt(p.rel_mse)} +- {fmt(p.rel_mse_std, 2)}", fmt(p.efficiency), slope_cell(s), fmt(p.flip),
                  fmt(p.ciede2000),
                  f"{fmt(p.rays_per_sample.get('extension'))}, {fmt(p.rays_per_sample.get('shadow'))}"]
-                for rank, ((trusted, _), key, p, s) in enumerate(rows, 1)]
+                for rank, ((ranked, _), key, p, s) in enumerate(rows, 1)]
         caption = (f"Each strategy's longest point (median wall time of one render). Renders shorter than "
                    f"{short} are timing noise (launch overhead and scheduler jitter): such a point is not "
                    f"ranked and is listed last, and the slope is fitted only over points of at least {short}.")
-        untimed = [label(key) for (trusted, _), key, _, _ in rows if not trusted]
+        untimed = [label(key) for _, key, p, _ in rows if not timing_trusted(p)]
         if untimed:
             caption += (f" **Not ranked:** {', '.join(untimed)} (no render of {short} or more: add spp or a "
                         f"time budget).")
+        floored = [label(key) for _, key, p, _ in rows if timing_trusted(p) and math.isnan(p.efficiency)]
+        if floored:
+            caption += (f" **Not ranked, at the reference's noise floor:** {', '.join(floored)} (the MSE minus the "
+                        f"reference's floor is not above zero, so no efficiency can be told: render the "
+                        f"reference with more spp).")
         return ["", "### Efficiency (largest sample count), ranked", "", caption, "", *markdown_table(header, body),
                 *slope_note([(label(key), fit) for _, key, _, fit in rows], "slope column"),
                 *self.progressive_note(groups, label)]

@@ -52,6 +52,17 @@ def sensor_wavelengths(sensor: mi.Sensor, u: float) -> list[float]:
     return [float(wavelengths[k][0]) for k in range(dr.size_v(mi.UnpolarizedSpectrum))]
 
 
+def sensor_spectrum(sensor: mi.Sensor, u: float):
+    """(wavelengths (nm), spectral weight) the sensor gives every camera ray of a pass with
+    sample ``u``: the weight (response over density, an ``mi.Spectrum``) that a camera ray's
+    weight carries, and that a light path splatted into the film at those wavelengths needs."""
+    wavelengths, weight = sensor.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f, 1), mi.Float(u))
+    n = dr.size_v(mi.UnpolarizedSpectrum)
+    # opaque: a pass's values must not be compiled into the kernels
+    return ([float(wavelengths[k][0]) for k in range(n)],
+            mi.Spectrum(*[dr.opaque(mi.Float, float(weight[k][0])) for k in range(n)]))
+
+
 def emitter_name(emitter, index: int) -> str:
     shape = emitter.get_shape()                          # an area light is known by its shape
     return (shape.id() if shape is not None else emitter.id()) or f"#{index}"
@@ -65,7 +76,7 @@ class EmitterSpectra:
     #: Half-width, in table steps, of the central difference that gives dF^-1/dlambda.
     HALF_WINDOW = 4
 
-    def __init__(self, scene: mi.Scene):
+    def __init__(self, scene: mi.Scene, plugin: str = "lab_photon"):
         emitters = scene.emitters()
         n = self.TABLE + 1
         self.grid = np.linspace(0.0, 1.0, n)
@@ -77,7 +88,7 @@ class EmitterSpectra:
         self.maps = np.array([np.array(e.sample_wavelengths(si, u)[0][0], dtype=np.float64) for e in emitters])
         for e, lam in enumerate(self.maps):
             if np.any(np.diff(lam) < 0) or not np.all(np.isfinite(lam)):
-                raise ValueError(f"lab_photon: emitter '{emitter_name(emitters[e], e)}' "
+                raise ValueError(f"{plugin}: emitter '{emitter_name(emitters[e], e)}' "
                                  f"({emitters[e].class_name()}) samples its wavelengths by a map that "
                                  f"is not monotone, so its photons cannot be emitted at the camera's "
                                  f"wavelengths in spectral variants; use an RGB variant")
