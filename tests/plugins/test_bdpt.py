@@ -105,7 +105,8 @@ def test_agrees_with_mitsuba_path(name):
     assert_agrees(lab, path_stack(scene, 64), f"lab_bdpt on {name}")
 
 
-USER_SCENES = ["textured_mesh_room", "principled_and_blend", "spot_and_directional", "normal_bump_maps"]
+USER_SCENES = ["textured_mesh_room", "principled_and_blend", "spot_and_directional", "normal_bump_maps",
+               "thinlens_envmap", "mixed_lights_crop"]
 
 
 @pytest.fixture(scope="module")
@@ -117,10 +118,11 @@ def user_assets(tmp_path_factory):
 
 @pytest.mark.parametrize("name", USER_SCENES)
 def test_users_scenes_agree_with_mitsuba_path(user_assets, name):
-    """tests/user_scenes.py's scenes with a pinhole camera: OBJ/PLY meshes, textures, a textured
-    area light, principled and blended BSDFs, spot and directional lights, normal and bump maps
-    (where the light side's shading-normal correction must use the map's normal:
-    ``light_subpath.transported``), non-square films and a crop window."""
+    """tests/user_scenes.py's scenes: OBJ/PLY meshes, textures, a textured area light,
+    principled and blended BSDFs, spot and directional lights, an EXR environment map and a
+    constant one, normal and bump maps (where the light side's shading-normal correction must use
+    the map's normal: ``light_subpath.transported``), non-square films, a crop window, and two
+    with a thin lens."""
     import user_scenes
 
     scene = user_scenes.load(user_assets, name)
@@ -258,6 +260,39 @@ def test_memory_bound_splits_passes_and_shares_light_subpaths():
         assert_agrees(lab, ref, f"lab_bdpt max_vertices={max_vertices}")
 
 
+def thin_lens_scene(name: str, aperture: float, focus: float, res: int = RES):
+    """A lab scene with its pinhole replaced by a thin lens (Mitsuba's ``thinlens``)."""
+    with open(scene_path(name)) as f:
+        text = re.sub(r'<float name="focus_distance" value="[^"]*"\s*/>', "", f.read())
+    lens = (f'<sensor type="thinlens"><float name="aperture_radius" value="{aperture}"/>'
+            f'<float name="focus_distance" value="{focus}"/>')
+    assert text.count('<sensor type="perspective">') == 1
+    return mi.load_string(text.replace('<sensor type="perspective">', lens), res=res)
+
+
+@pytest.mark.parametrize("name, aperture, focus", [("cornell_box.xml", 0.2, 3.9), ("caustic.xml", 0.1, 2.0)])
+def test_thin_lens_agrees_with_mitsuba_path(name, aperture, focus):
+    """A thin lens: every strategy samples the lens point the same way (uniform on the aperture),
+    so its density cancels from the weights, and the direction density from a lens point is the
+    pinhole's 1 / (A' cos^3) (the focal plane maps to the film as the pinhole's image plane)."""
+    scene = thin_lens_scene(name, aperture, focus)
+    assert_agrees(renders(scene, bdpt(), 16, SEEDS_LAB), path_stack(scene, 64), f"lab_bdpt, thin lens, {name}")
+
+
+def test_a_wrong_lens_density_is_caught(monkeypatch):
+    """Power: a camera direction density 1.25x too large on the camera side only (as if the lens
+    were not the pinhole's image plane) breaks the weights' sum and fails the test."""
+    from mitsuba_lab.plugins.integrators.bdpt import integrator
+
+    right = integrator.sensor_constants
+    monkeypatch.setattr(integrator, "sensor_constants", lambda sensor: (1.25 * right(sensor)[0], right(sensor)[1]))
+    scene = thin_lens_scene("cornell_box.xml", 0.2, 3.9)
+    wrong = renders(scene, bdpt(), 16, SEEDS_LAB)
+    result = z_scores(wrong, path_stack(scene, 64))
+    print(f"thin lens, direction density x 1.25 on the camera side: max |z| {result.max_abs_z:.2f}")
+    assert result.max_abs_z > 2 * Z_BOUND
+
+
 def textured_light_scene(folder: str, res: int = RES) -> str:
     """The Cornell box with its ceiling light's radiance a bitmap (a checkerboard, 8 x 8 texels,
     written to ``folder``): a textured area light, seen directly by the camera."""
@@ -360,11 +395,10 @@ def test_refusals_are_one_line():
             make_integrator("lab_bdpt", params)
     with pytest.raises(ValueError, match="develop=False"):
         bdpt().render(scene, develop=False)
-    thin = mi.load_dict({"type": "scene", "sensor": {"type": "thinlens", "aperture_radius": 0.1,
-                                                      "focus_distance": 3.0},
-                         "light": {"type": "point", "position": [0, 0, 1]}, "floor": {"type": "rectangle"}})
-    with pytest.raises(ValueError, match="perspective"):
-        bdpt().render(thin, spp=1)
+    ortho = mi.load_dict({"type": "scene", "sensor": {"type": "orthographic"},
+                          "light": {"type": "point", "position": [0, 0, 1]}, "floor": {"type": "rectangle"}})
+    with pytest.raises(ValueError, match="perspective and thinlens sensors only so far, not OrthographicCamera"):
+        bdpt().render(ortho, spp=1)
     aov = mi.load_dict({"type": "aov", "aovs": "d:depth", "inner": {"type": "lab_bdpt"}})
     with pytest.raises(Exception, match="cannot be nested"):
         aov.render(scene, spp=1)

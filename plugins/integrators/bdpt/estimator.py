@@ -9,6 +9,11 @@ from mitsuba_lab.plugins.params import bdpt_strategy_kinds
 SUPPORTED_DELTA_EMITTERS = ("point", "spot", "directional")
 
 
+#: Sensors whose direction density (and a lens position density, the same for every strategy)
+#: the weights know: the pinhole and the thin lens, 1 / (A' cos^3) from the point on the lens.
+SUPPORTED_SENSORS = ("PerspectiveCamera", "ThinLensCamera")
+
+
 class Bidirectional(Estimator):
     """lab_bdpt's estimator: bidirectional path tracing with MIS over the enabled strategies."""
     plugin_name = "lab_bdpt"
@@ -26,7 +31,7 @@ class Bidirectional(Estimator):
         * participating media (neither subpath sees them);
         * emitters whose emission densities ``endpoints.py`` does not know (``projector``, and
           any plugin of unknown kind);
-        * sensors other than the pinhole ``perspective`` (thin lens, orthographic, ...);
+        * sensors other than ``perspective`` and ``thinlens`` (orthographic, ...);
         * a ``strategies`` subset without the strategies some light of the scene needs: an
           emitter seen directly needs ``hit`` or ``light`` (an environment: ``hit``), light
           from delta emitters ``nee`` or ``light`` for its direct part, a scene whose BSDFs
@@ -54,8 +59,9 @@ class Bidirectional(Estimator):
         if unsupported:
             return f"lab_bdpt does not support {', '.join(unsupported)} emitters yet"
         sensors = traits.sensor_kinds
-        if sensors and sensors[0] != "PerspectiveCamera":
-            return f"lab_bdpt supports pinhole (perspective) sensors only so far, not {sensors[0]}"
+        if sensors and sensors[0] not in SUPPORTED_SENSORS:
+            return (f"lab_bdpt supports perspective and thinlens sensors only so far, not {sensors[0]} "
+                    f"(light tracing must be able to reach it)")
         return ""
 
     @staticmethod

@@ -124,7 +124,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     Handles: area lights (any shape, textured or not), point, spot and directional lights,
     ``constant`` and ``envmap``; smooth, delta and mixed BSDFs (``plastic``: connections use
     the smooth lobes, the delta lobes are followed); shading normals (the adjoint correction
-    on the light side); the pinhole ``perspective`` sensor with any film size and crop window;
+    on the light side); the ``perspective`` (pinhole) and ``thinlens`` sensors with any film
+    size and crop window;
     RGB, mono and spectral variants (spectral: one set of wavelengths per pass, drawn from the
     sensor, so a pass is one sample per pixel; ``spectral.py``). Refused in one line:
     polarized variants, other sensors, ``render(develop=False)``, ``samples_per_pass``.
