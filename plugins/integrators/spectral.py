@@ -85,6 +85,9 @@ class EmitterSpectra:
         si.wi = mi.Vector3f(0, 0, 1)
         # One direct call per emitter (some spectra, e.g. blackbody, cannot be sampled inside a
         # symbolic call over all emitters). Wavelength 0 has no shift: it is F itself.
+        # Mitsuba's blackbody samples its wavelengths with a host-side Newton loop, which runs
+        # only on values known when the kernel is traced: its samples must stay literals
+        self.literal_samples = any(key.endswith("temperature") for e in emitters for key in mi.traverse(e).keys())
         self.maps = np.array([np.array(e.sample_wavelengths(si, u)[0][0], dtype=np.float64) for e in emitters])
         for e, lam in enumerate(self.maps):
             if np.any(np.diff(lam) < 0) or not np.all(np.isfinite(lam)):

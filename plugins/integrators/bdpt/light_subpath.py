@@ -185,9 +185,10 @@ class LightTracer:
                 raise ValueError("lab_bdpt: a spectral variant's light subpaths need the pass's wavelengths")
             wavelengths, sensor_weight = self.pass_spectrum
             u_tables, p_tables = self.spectra.tables(wavelengths)
-            # opaque: with one emitter the tables are single values, which would otherwise be
-            # compiled into the kernels, and every pass would compile them again
-            dr.make_opaque(*u_tables, *p_tables)
+            if not self.spectra.literal_samples:
+                # with one emitter a table is a single value, which would be compiled into the
+                # kernels, and every pass would compile them again: keep it in memory
+                dr.make_opaque(*u_tables, *p_tables)
             ray, ray_weight = spectral.emit(emitter, time, [dr.opaque(mi.Float, v) for v in wavelengths],
                                             [dr.gather(mi.Float, t, emitter_index) for t in u_tables],
                                             [dr.gather(mi.Float, t, emitter_index) for t in p_tables],
