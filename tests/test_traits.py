@@ -219,3 +219,20 @@ def test_russian_roulette_for_camera_paths_and_photons():
     out, survives = russian_roulette(beta, mi.Float([0.1, 0.9, 0.9]), rr_active, eta=mi.Float(1.0))
     assert list(np.array(survives)) == [True, False, True]                 # u < q, or no roulette
     np.testing.assert_allclose(np.array(out)[0], [1.0, 0.5 / 0.5, 2.0], rtol=1e-6)
+
+
+def test_a_grey_rgb_emitter_is_not_dark_in_a_spectral_variant():
+    """In spectral variants an RGB emission becomes sigmoid-polynomial coefficients times D65,
+    and a grey of 0.5 has all-zero coefficients: that is light, not a zero factor."""
+    import mitsuba_lab
+
+    try:
+        mitsuba_lab.use_variant("llvm_ad_spectral")
+        scene = mi.load_dict({"type": "scene", "floor": {"type": "rectangle"},
+                              "light": {"type": "point", "position": [0, 0, 1],
+                                        "intensity": {"type": "rgb", "value": [0.5, 0.5, 0.5]}}})
+        t = SceneTraits.from_scene(scene)
+        assert not t.dark_emitters and not any("emits nothing" in w for w in t.warnings())
+    finally:
+        mitsuba_lab.use_variant("llvm_ad_rgb")
+

@@ -88,6 +88,12 @@ class EmitterSpectra:
         # Mitsuba's blackbody samples its wavelengths with a host-side Newton loop, which runs
         # only on values known when the kernel is traced: its samples must stay literals
         self.literal_samples = any(key.endswith("temperature") for e in emitters for key in mi.traverse(e).keys())
+        if self.literal_samples and len(emitters) > 1:
+            # (with several emitters a lane's sample is gathered from a table: not a literal)
+            raise ValueError(f"{plugin}: a blackbody emitter among {len(emitters)} emitters cannot be emitted at "
+                             f"the camera's wavelengths in spectral variants (Mitsuba samples a blackbody's "
+                             f"wavelengths only from values fixed when its kernel is traced); give it an "
+                             f"RGB or tabulated spectrum, make it the only emitter, or use an RGB variant")
         self.maps = np.array([np.array(e.sample_wavelengths(si, u)[0][0], dtype=np.float64) for e in emitters])
         for e, lam in enumerate(self.maps):
             if np.any(np.diff(lam) < 0) or not np.all(np.isfinite(lam)):

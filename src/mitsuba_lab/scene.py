@@ -192,9 +192,13 @@ def _emits_nothing(emitter) -> bool:
         if not area > 0:
             return True
     params = mi.traverse(emitter)
-    for key in params.keys():
+    keys = list(params.keys())
+    for key in keys:
         head, _, tail = key.partition(".")
         factor = (head in _EMISSION_FACTORS and tail in ("value", "data")) or key in ("scale", "data")
+        # in spectral variants an RGB emission is a sigmoid-polynomial spectrum times D65: its
+        # "value" holds coefficients, and all-zero coefficients mean a grey of 0.5, not zero
+        factor &= not any(k.startswith(f"{head}.d65.") for k in keys)
         if factor and _all_zero(params[key]):
             return True
     return False

@@ -336,6 +336,14 @@ def test_spectral_variant_agrees_with_mitsuba_path(tmp_path):
             assert pixel_problem(lab, True) == ""
             result = z_scores(lab, path_stack(scene, 64))
             assert result.max_abs_z <= Z_BOUND, f"{name}: max |z| {result.max_abs_z:.2f}, {result.rel_diff}"
+        # a blackbody among several emitters: refused in one line (Mitsuba samples its wavelengths
+        # only from values fixed when the kernel is traced; alone, it renders)
+        several = mi.load_dict({"type": "scene", "floor": {"type": "rectangle"}, "camera": {"type": "perspective"},
+                                "sun": {"type": "point", "position": [0, 0, 1]},
+                                "lamp": {"type": "rectangle", "emitter": {"type": "area", "radiance": {
+                                    "type": "blackbody", "temperature": 3000}}}})
+        with pytest.raises(Exception, match="lab_bdpt: a blackbody emitter among 2 emitters cannot be emitted"):
+            bdpt().render(several, spp=1)
     finally:
         mitsuba_lab.use_variant("llvm_ad_rgb")
 
