@@ -176,6 +176,10 @@ class PhotonTracer:
         if dr.hint(wavelengths is not None, mode="scalar"):
             lam = [dr.opaque(mi.Float, v) for v in wavelengths]
             u_tables, p_tables = self.spectra.tables(wavelengths)
+            if not self.spectra.literal_samples:
+                # with one emitter a table is a single value, which would be compiled into the
+                # kernels, and every pass would compile them again: keep it in memory
+                dr.make_opaque(*u_tables, *p_tables)
             samples = [dr.gather(mi.Float, table, emitter_index) for table in u_tables]
             densities = [dr.gather(mi.Float, table, emitter_index) for table in p_tables]
             ray, weight = spectral.emit(emitter, time, lam, samples, densities, sample2, sample3, True)
