@@ -114,6 +114,12 @@ def test_thumbnail_strip_wraps_and_has_colour_bars():
         assert len([ax for ax in small.axes if ax.images]) == 6
     finally:
         pyplot().close(small)
+    balanced = strip_figure(reference, variance, chosen[:7])    # 8 cells: two rows of 4, not 6 + 2
+    try:
+        thumbs = [ax for ax in balanced.axes if ax.images and ax.get_title()]
+        assert len({round(ax.get_position().x0, 3) for ax in thumbs}) == 4
+    finally:
+        pyplot().close(balanced)
 
 
 def test_fit_slope_gives_its_standard_error_and_flags_what_cannot_be_trusted():

@@ -244,8 +244,8 @@ def strip_figure(reference, variance, chosen, regions=None, columns: int = STRIP
 
     plt = pyplot()
     cells = 1 + len(chosen)
-    cols = min(columns, cells)
-    rows = math.ceil(cells / cols)
+    rows = math.ceil(cells / columns)
+    cols = math.ceil(cells / rows)             # rows as full as each other: 8 cells are 4 + 4, not 6 + 2
     height, width = reference.shape[:2]
     aspect = height / width
     cell_w = 2.2
