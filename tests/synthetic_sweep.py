@@ -72,3 +72,17 @@ def write_sweep(folder, seeds=SEEDS, strategies=STRATEGIES, budgets=BUDGETS, spp
                               "rel_mse": float(np.mean((image - reference) ** 2 / (reference ** 2 + 0.01))),
                               "image": os.path.relpath(path, folder), "regions": _region_errors(image, reference),
                               "finite": True, "negative": 0})
+
+
+def edit_runs(folder, edit) -> None:
+    """Rewrite the stored sweep's run rows: ``edit(row)`` changes a row in place, or returns
+    the rows that replace it (a list); the other rows are kept as they are."""
+    import json
+
+    path = os.path.join(folder, "results.jsonl")
+    rows = []
+    for row in map(json.loads, open(path)):
+        replaced = edit(row) if row["kind"] == "run" else None
+        rows.extend(replaced if replaced is not None else [row])
+    with open(path, "w") as f:
+        f.writelines(json.dumps(r) + "\n" for r in rows)

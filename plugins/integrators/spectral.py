@@ -46,12 +46,6 @@ def pass_samples(seed: int, passes: int) -> list[float]:
     return [(start + i * INV_PHI) % 1.0 for i in range(passes)]
 
 
-def sensor_wavelengths(sensor: mi.Sensor, u: float) -> list[float]:
-    """The wavelengths (nm) the sensor gives every camera ray of a pass with sample ``u``."""
-    wavelengths, _ = sensor.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f, 1), mi.Float(u))
-    return [float(wavelengths[k][0]) for k in range(dr.size_v(mi.UnpolarizedSpectrum))]
-
-
 def sensor_spectrum(sensor: mi.Sensor, u: float):
     """(wavelengths (nm), spectral weight) the sensor gives every camera ray of a pass with
     sample ``u``: the weight (response over density, an ``mi.Spectrum``) that a camera ray's
@@ -122,7 +116,19 @@ class EmitterSpectra:
                 p_k.append(density)
             us.append(mi.Float(u_k))
             ps.append(mi.Float(p_k))
+        if not self.literal_samples:
+            # with one emitter a table is a single value, which would be compiled into the
+            # kernels, and every pass would compile them again: keep it in memory
+            dr.make_opaque(*us, *ps)
         return us, ps
+
+    def emit(self, emitter, emitter_index, time, wavelengths: list[float], sample2, sample3):
+        """(ray, flux weight) of each lane's ``emitter`` (``emitter_index``: its index in the
+        scene's emitters) at the pass's ``wavelengths`` (``emit`` with this pass's tables)."""
+        u_tables, p_tables = self.tables(wavelengths)
+        return emit(emitter, time, [dr.opaque(mi.Float, v) for v in wavelengths],
+                    [dr.gather(mi.Float, t, emitter_index) for t in u_tables],
+                    [dr.gather(mi.Float, t, emitter_index) for t in p_tables], sample2, sample3, True)
 
 
 def emit(emitter, time, wavelengths, samples, densities, sample2, sample3, active):

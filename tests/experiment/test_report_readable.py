@@ -1,8 +1,6 @@
 """The sweep report reads as it stands (issue #18): inline Markdown rendered in the HTML, the
 strategies' and samplers' settings echoed, and timings too short to trust kept out of the
 efficiency ranking. Built on the numpy-made sweep of ``synthetic_sweep`` (nothing rendered)."""
-import json
-import os
 import re
 
 import pytest
@@ -39,19 +37,16 @@ def _sweep_with_identities_and_fast_runs(folder) -> None:
     """The synthetic sweep, its run rows given identities (as the runner stores them) and the
     "noisy" strategy's times scaled by FAST."""
     synth.write_sweep(folder)
-    path = os.path.join(folder, "results.jsonl")
-    rows = [json.loads(line) for line in open(path)]
-    for row in rows:
-        if row["kind"] != "run":
-            continue
+
+    def edit(row):
         depth = 5 if row["strategy"] == "good" else 3
         row["identity"] = {"integrator": {"type": "lab_nee", "params": {"max_depth": depth, "rr_depth": 5}},
                            "sampler": {"type": "independent", "params": {}}}
         if row["strategy"] == "noisy":
             row["wall_s"] *= FAST
             row["kernel_s"] *= FAST
-    with open(path, "w") as f:
-        f.writelines(json.dumps(r) + "\n" for r in rows)
+
+    synth.edit_runs(folder, edit)
 
 
 @pytest.fixture(scope="module")

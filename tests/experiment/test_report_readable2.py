@@ -3,7 +3,6 @@ grouped styles with the legend outside the data, a wrapped thumbnail grid with c
 and slopes marked when they cannot be trusted. The figures are checked on their matplotlib
 objects; the tables on a report built from the numpy-made sweep of ``synthetic_sweep``,
 cloned to 5 strategies x 3 samplers (nothing rendered)."""
-import json
 import math
 import os
 from types import SimpleNamespace
@@ -162,19 +161,15 @@ def _fifteen_series_sweep(folder) -> None:
     timed at 4 ms per spp (at least 50 ms from 16 spp on), and "rising"'s MSE made to grow
     with spp (a slope near +0.5, which no estimator converging has)."""
     synth.write_sweep(folder, strategies={name: 0.3 + 0.2 * i for i, name in enumerate(STRATEGIES)})
-    path = os.path.join(folder, "results.jsonl")
-    rows = []
-    for row in map(json.loads, open(path)):
-        if row["kind"] != "run":
-            rows.append(row)
-            continue
+
+    def edit(row):
         row["wall_s"] = row["kernel_s"] = 0.004 * row["spp"] * (1 + 0.01 * row["seed"])
         if row["strategy"] == "rising":
             row["mse"] *= (row["spp"] / 4) ** 1.5
-        for sampler in SAMPLERS:
-            rows.append({**row, "sampler": sampler, "point": row["point"].replace("/independent/", f"/{sampler}/")})
-    with open(path, "w") as f:
-        f.writelines(json.dumps(r) + "\n" for r in rows)
+        return [{**row, "sampler": sampler, "point": row["point"].replace("/independent/", f"/{sampler}/")}
+                for sampler in SAMPLERS]
+
+    synth.edit_runs(folder, edit)
 
 
 @pytest.fixture(scope="module")

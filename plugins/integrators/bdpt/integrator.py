@@ -190,6 +190,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         self.stats = stats = BdptStats()
         total, done, index = None, 0, 0
         light_paths = v.get("light_paths", 1.0)         # (lab_vcm: 1)
+        u_passes = spectral.pass_samples(seed, spp) if mi.is_spectral else None   # a pass is one spp there
         while done < spp:
             # light subpaths that fit in max_vertices: film pixels x spp_pass, or fewer, shared
             fit = max(1, int(v["max_vertices"] / (1.25 * self.vertices_per_path)))
@@ -198,7 +199,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             count = max(1, min(round(film_px * spp_pass * light_paths), fit))
             plan = PassPlan(index, done, spp_pass, count, crop_px * spp_pass)
             tracer.weights = self.pass_weights(plan)
-            u = spectral.pass_samples(seed, index + 1)[index] if mi.is_spectral else None
+            u = u_passes[index] if u_passes else None
             if u is not None:
                 tracer.pass_spectrum = spectral.sensor_spectrum(sensor, u)
             light = self._light_pass(tracer, film, count, crop_px / count, pass_seed(seed, index), stats,

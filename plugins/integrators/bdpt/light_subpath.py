@@ -184,15 +184,7 @@ class LightTracer:
             if self.pass_spectrum is None:
                 raise ValueError("lab_bdpt: a spectral variant's light subpaths need the pass's wavelengths")
             wavelengths, sensor_weight = self.pass_spectrum
-            u_tables, p_tables = self.spectra.tables(wavelengths)
-            if not self.spectra.literal_samples:
-                # with one emitter a table is a single value, which would be compiled into the
-                # kernels, and every pass would compile them again: keep it in memory
-                dr.make_opaque(*u_tables, *p_tables)
-            ray, ray_weight = spectral.emit(emitter, time, [dr.opaque(mi.Float, v) for v in wavelengths],
-                                            [dr.gather(mi.Float, t, emitter_index) for t in u_tables],
-                                            [dr.gather(mi.Float, t, emitter_index) for t in p_tables],
-                                            sample_pos, sample_dir, True)
+            ray, ray_weight = self.spectra.emit(emitter, emitter_index, time, wavelengths, sample_pos, sample_dir)
             scale = scale * sensor_weight         # what a camera ray's weight carries
         else:
             ray, ray_weight = emitter.sample_ray(time, u_wav, sample_pos, sample_dir)

@@ -256,7 +256,7 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
             pass_seed = int(mi.sample_tea_32(seed & 0xFFFFFFFF, i)[0])
             camera_seed = int(mi.sample_tea_32(i, seed & 0xFFFFFFFF)[0])
             u = u_passes[i]
-            wavelengths = None if u is None else spectral.sensor_wavelengths(sensor, u)
+            wavelengths = None if u is None else spectral.sensor_spectrum(sensor, u)[0]
             first, remaining, batch_index = 0, cfg.photons_per_pass, 0
             while remaining > 0:
                 count = min(remaining, max(1, int(cfg.max_records / (1.25 * stores_per_photon))))

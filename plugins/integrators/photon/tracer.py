@@ -174,15 +174,7 @@ class PhotonTracer:
         sample2 = mi.Point2f(rng.next_float32(), rng.next_float32())
         sample3 = mi.Point2f(rng.next_float32(), rng.next_float32())
         if dr.hint(wavelengths is not None, mode="scalar"):
-            lam = [dr.opaque(mi.Float, v) for v in wavelengths]
-            u_tables, p_tables = self.spectra.tables(wavelengths)
-            if not self.spectra.literal_samples:
-                # with one emitter a table is a single value, which would be compiled into the
-                # kernels, and every pass would compile them again: keep it in memory
-                dr.make_opaque(*u_tables, *p_tables)
-            samples = [dr.gather(mi.Float, table, emitter_index) for table in u_tables]
-            densities = [dr.gather(mi.Float, table, emitter_index) for table in p_tables]
-            ray, weight = spectral.emit(emitter, time, lam, samples, densities, sample2, sample3, True)
+            ray, weight = self.spectra.emit(emitter, emitter_index, time, wavelengths, sample2, sample3)
         else:
             ray, weight = emitter.sample_ray(time, u_wavelength, sample2, sample3)
         if dr.hint(self.origin_fixes is not None, mode="scalar"):
