@@ -20,6 +20,7 @@ left out by the warm-up and reported (kernels compiled during the timed renders,
 should be 0). The machine is shared, so single timings are noisy.
 
     .venv/bin/python benchmarks/bench_vcm.py [--rounds 3] [--res 64] [--spp 16] [--quick]
+    .venv/bin/python benchmarks/bench_vcm.py --pass-sizes --spp 64   # lab_vcm's pass sizes against fixed ones
 """
 from __future__ import annotations
 
@@ -82,6 +83,31 @@ def measure(name, res, spp, depth, radius, rounds):
     }
 
 
+def pass_sizes(name, res, spp, depth, radius, rounds):
+    """ms per iteration of lab_vcm (mode vcm) with lab_vcm's own pass sizes (``adaptive``: about
+    PASS_LIGHT_VERTICES stored vertices per pass) and with every pass fixed at 2^14, 2^16 and 2^18
+    light subpaths, in alternating rounds (medians), and the passes each took."""
+    scene = load_scene(os.path.join(ROOT, "scenes", name), res=res)
+    integrator = make_integrator("lab_vcm", {"mode": "vcm", "max_depth": depth, "radius": radius})
+    module = sys.modules[type(integrator).__module__]
+    own = {k: getattr(module, k) for k in ("FIRST_PASS_LIGHT_SUBPATHS", "MIN_PASS_LIGHT_SUBPATHS",
+                                           "MAX_PASS_LIGHT_SUBPATHS")}
+    settings = {"adaptive": own, **{f"2^{e}": dict.fromkeys(own, 1 << e) for e in (14, 16, 18)}}
+    runs = {key: [] for key in settings}
+    try:
+        for r in range(rounds + 1):                     # round 0: the warm-up
+            for key, values in settings.items():
+                for k, v in values.items():
+                    setattr(module, k, v)
+                wall, _, stats = timed_render(scene, integrator, spp, seed=100 + r)
+                if r:
+                    runs[key].append((wall, stats["passes"]))
+    finally:
+        for k, v in own.items():
+            setattr(module, k, v)
+    return {key: (1e3 * med(w for w, _ in v) / spp, v[0][1]) for key, v in runs.items()}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rounds", type=int, default=3, help="alternating timed rounds (default: 3)")
@@ -90,6 +116,8 @@ def main(argv=None) -> int:
     parser.add_argument("--max-depth", type=int, default=8, help="max_depth of every method (default: 8)")
     parser.add_argument("--radius", type=float, default=0.03, help="lab_vcm's first radius (default: 0.03)")
     parser.add_argument("--scenes", nargs="+", default=list(SCENES), help="scene files under scenes/")
+    parser.add_argument("--pass-sizes", action="store_true",
+                        help="instead: lab_vcm's ms per iteration with its own pass sizes and with fixed ones")
     parser.add_argument("--quick", action="store_true",
                         help="smoke run: 32x32, 4 spp, 1 round, cornell box only (not a measurement)")
     args = parser.parse_args(argv)
@@ -101,6 +129,14 @@ def main(argv=None) -> int:
     if missing:
         parser.error(f"no such scene under scenes/: {', '.join(missing)}")
     print(versions())
+    if args.pass_sizes:
+        print(f"{args.res}x{args.res}, {args.spp} iterations, max_depth {args.max_depth}, medians of {args.rounds} "
+              f"rounds; lab_vcm ms per iteration (passes) with light subpaths per pass:")
+        print("scene | adaptive | 2^14 | 2^16 | 2^18")
+        for name in args.scenes:
+            m = pass_sizes(name, args.res, args.spp, args.max_depth, args.radius, args.rounds)
+            print(" | ".join([name, *(f"{ms:.2f} ({passes})" for ms, passes in m.values())]), flush=True)
+        return 0
     print(f"{args.res}x{args.res}, {args.spp} iterations, max_depth {args.max_depth}, medians of {args.rounds} "
           f"rounds; milliseconds per iteration (one sample per pixel)")
     header = ("scene", "light", "grid", "camera+conn", "merging", "vcm total", "bpt total", "path",

@@ -230,6 +230,9 @@ LAB_VCM = (
           check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
     Param("alpha", float, 0.75, "radius schedule r_i = r_1 i^((alpha - 1) / 2), iteration i = sample i",
           check=lambda v: 0.0 < v < 1.0, expected="a number in (0, 1)"),
+    Param("light_paths", float, 1.0, "light subpaths traced per camera subpath in each iteration: all of "
+          "them merge and splat, camera subpath i connects to light subpath i",
+          check=lambda v: 1.0 <= v <= 64, expected="a number in [1, 64]"),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
                                             "max_vertices"))
 

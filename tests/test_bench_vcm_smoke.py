@@ -16,3 +16,23 @@ def test_bench_vcm_quick(capsys):
     row = lines[-1].split(" | ")
     assert row[0] == "cornell_box.xml" and len(row) == 13
     assert row[-1] == "0"                                     # no kernel compiled while timed
+
+
+def test_bench_vcm_pass_sizes_quick(capsys):
+    """--pass-sizes prints lab_vcm's ms per iteration with its own pass sizes and fixed ones, and
+    puts the integrator's constants back."""
+    spec = importlib.util.spec_from_file_location("bench_vcm", os.path.join(ROOT, "benchmarks", "bench_vcm.py"))
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    import sys
+
+    from mitsuba_lab.scene import make_integrator
+
+    module = sys.modules[type(make_integrator("lab_vcm", {})).__module__]
+    before = module.FIRST_PASS_LIGHT_SUBPATHS
+    assert bench.main(["--quick", "--pass-sizes"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[-2] == "scene | adaptive | 2^14 | 2^16 | 2^18"
+    row = lines[-1].split(" | ")
+    assert row[0] == "cornell_box.xml" and len(row) == 5 and all(cell.endswith("(1)") for cell in row[1:])
+    assert module.FIRST_PASS_LIGHT_SUBPATHS == before

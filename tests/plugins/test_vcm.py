@@ -74,6 +74,17 @@ def test_merging_agrees_with_mitsuba_path(name, mode):
     assert_agrees(lab, path_stack(scene), f"lab_vcm mode={mode} on {name}")
 
 
+@pytest.mark.parametrize("name", ["cornell_box.xml", "caustic.xml"])
+def test_more_light_paths_agree_with_mitsuba_path(name):
+    """light_paths = 4: four light subpaths per camera subpath in each iteration, all merged with
+    (merging density pi r^2 N with N four times larger) and all splatting."""
+    scene = load_scene(scene_path(name), res=RES)
+    integrator = vcm(radius=SMALL_RADIUS, light_paths=4)
+    lab = renders(scene, integrator, 16, SEEDS_LAB)
+    assert integrator.bdpt_stats()["light_subpaths"] == 4 * RES * RES * 16
+    assert_agrees(lab, path_stack(scene), f"lab_vcm light_paths=4 on {name}")
+
+
 def test_a_wrong_merging_normalisation_is_caught(monkeypatch):
     """Power: merges 10% too bright (bpm, where merging carries most of the image; 32
     iterations x 16 seeds) fail. (3% at 16 iterations gave |z| 1.9: bpm's noise at r_1 = 0.02
@@ -148,16 +159,36 @@ def test_refusals_are_one_line():
     for params, match in (({"mode": "ppm2"}, "parameter 'mode' must be one of vcm, bpt, bpm, ppm, lt, pt"),
                           ({"alpha": 1.0}, "parameter 'alpha' must be a number in \\(0, 1\\)"),
                           ({"radius": -1.0}, "parameter 'radius' must be"),
+                          ({"light_paths": 0.5}, "parameter 'light_paths' must be a number in \\[1, 64\\]"),
                           ({"strategies": "all"}, "strategies")):
         with pytest.raises(Exception, match=match):
             make_integrator("lab_vcm", params)
 
 
 def test_statistics_name_the_radii_and_the_grid_time():
-    """Iterations share a pass (each with its own radius) up to 2^14 light subpaths."""
+    """Iterations share a pass (each with its own radius): 2^18 light subpaths in the first."""
     scene = load_scene(scene_path("cornell_box.xml"), res=16)
     integrator = vcm(radius=0.1, alpha=0.5)
     render(scene, integrator, spp=4)
     stats = integrator.bdpt_stats()
     assert stats["passes"] == 1 and stats["grid_s"] > 0         # 4 iterations of 256 light subpaths
     assert stats["radius_first"] == pytest.approx(0.1) and stats["radius_last"] == pytest.approx(0.1 * 4 ** -0.25)
+
+
+def test_passes_hold_about_a_fixed_number_of_stored_vertices():
+    """The first pass holds 2^18 light subpaths (64 iterations at 64x64); later ones as many as
+    keep about 2^20 stored vertices by the first's count, at most 2^18 subpaths: the caustic
+    scene (about 0.5 stored vertices per subpath) and the Cornell box (3.1) take 64 iterations a
+    pass, the closed box of albedo 0.99 (6.8) 37, so 110 iterations are 64 + 37 + 9."""
+    from mitsuba_lab.plugins.integrators.vcm.integrator import PASS_LIGHT_VERTICES
+
+    for name, spp, passes in (("caustic.xml", 80, 2), ("cornell_box.xml", 80, 2),
+                              ("stiff/closed_box_albedo_099.xml", 110, 3)):
+        scene = load_scene(scene_path(name), res=64)
+        integrator = vcm(radius=0.03)
+        render(scene, integrator, spp=spp)
+        stats = integrator.bdpt_stats()
+        per_path = stats["light_vertices_stored"] / stats["light_subpaths"]
+        print(f"{name}: {per_path:.2f} stored vertices per subpath, {stats['passes']} passes")
+        assert stats["passes"] == passes, (name, per_path, stats["passes"])
+    assert 6 < per_path and int(PASS_LIGHT_VERTICES / per_path) // (64 * 64) == 37

@@ -9,7 +9,7 @@ class VertexMerging(Bidirectional):
     """lab_vcm's estimator: the techniques of its ``mode`` (``params.VCM_MODES``) under one MIS."""
     plugin_name = "lab_vcm"
     PARAMETERS = declarations.LAB_VCM
-    OWN_PARAMETERS = ("mode", "radius", "alpha", "heuristic", "beta", "max_vertices")
+    OWN_PARAMETERS = ("mode", "radius", "alpha", "light_paths", "heuristic", "beta", "max_vertices")
 
     def kinds(self) -> tuple[str, ...]:
         return declarations.VCM_MODES[self.mode]

@@ -22,10 +22,15 @@ def vcm_radius(r1: float, iteration: int, alpha: float) -> float:
     return r1 * iteration ** ((alpha - 1.0) / 2.0)
 
 
-#: Light subpaths per pass (several iterations in one pass save their per-pass overhead, but
-#: more light vertices than the caches hold make merging slower: at 64x64 on 2 cores, 16
-#: iterations of bpm cost 0.37 s in 16 passes, 0.25 s in 4, 0.31 s in 1).
-PASS_LIGHT_SUBPATHS = 1 << 14
+#: Pass sizes when merging. Each pass traces its light subpaths, stores and buckets their
+#: vertices, then merges; several iterations in one pass share its per-pass overhead (Python,
+#: kernel launches, about 10 ms), but a grid larger than the caches makes merging slower. So
+#: a pass holds about PASS_LIGHT_VERTICES stored vertices, measured by the render's first pass
+#: (of FIRST_PASS_LIGHT_SUBPATHS subpaths), within [MIN, MAX]_PASS_LIGHT_SUBPATHS subpaths
+#: (``benchmarks/bench_vcm.py`` compares the pass sizes).
+PASS_LIGHT_VERTICES = 1 << 20
+FIRST_PASS_LIGHT_SUBPATHS = 1 << 18
+MIN_PASS_LIGHT_SUBPATHS, MAX_PASS_LIGHT_SUBPATHS = 1 << 14, 1 << 18
 
 
 class PpmWeights(BdptWeights):
@@ -43,8 +48,8 @@ class PpmWeights(BdptWeights):
 class LabVCMIntegrator(LabBDPTIntegrator):
     r"""Vertex connection and merging (:monosp:`lab_vcm`)
 
-    Each iteration (one sample per pixel) traces one light subpath per pixel and stores its
-    vertices, builds a hashed grid over them, then traces one camera subpath per pixel sample.
+    Each iteration (one sample per pixel) traces one light subpath per pixel (``light_paths``)
+    and stores its vertices, builds a hashed grid over them, then traces one camera subpath per pixel sample.
     At each camera vertex every technique of ``lab_bdpt`` runs (emitter hit, next-event
     estimation, connections to the lane's light subpath, light tracing from the light side),
     plus *merging*: a density estimate from the light vertices of all light subpaths within
@@ -73,6 +78,11 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                          film's larger side, as lab_photon (Default: 0)
     alpha         float  Radius schedule r_i = r_1 i^((alpha - 1) / 2), in (0, 1)
                          (Default: 0.75)
+    light_paths   float  Light subpaths per camera subpath in each iteration, in
+                         [1, 64]: every one is stored, merged with and splats
+                         its light tracing; camera subpath i connects to light
+                         subpath i. More of them make merging's estimate less
+                         noisy for the same camera work (Default: 1)
     max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices: as lab_bdpt.
     ============= ====== ========================================================
 
@@ -95,9 +105,12 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         if self.values["mode"] == "ppm":
             self.weights_class = PpmWeights
         self._radius = 0.0
+        self._stored_per_subpath = None    # light vertices stored per subpath, this render
 
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
+        if self._pass is None:
+            self._stored_per_subpath = None
         if self._pass is None and self.merging:
             r1 = self.values["radius"]
             if not r1 > 0:
@@ -111,7 +124,18 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         return [vcm_radius(self._radius, plan.done + k + 1, self.values["alpha"]) for k in range(plan.spp)]
 
     def pass_spp_limit(self, film_pixels: int) -> int:
-        return max(1, PASS_LIGHT_SUBPATHS // film_pixels) if self.merging else super().pass_spp_limit(film_pixels)
+        if not self.merging:
+            return super().pass_spp_limit(film_pixels)
+        per_path = self._stored_per_subpath
+        subpaths = FIRST_PASS_LIGHT_SUBPATHS if per_path is None else min(
+            MAX_PASS_LIGHT_SUBPATHS, max(MIN_PASS_LIGHT_SUBPATHS, int(PASS_LIGHT_VERTICES / max(per_path, 1e-3))))
+        return max(1, int(subpaths / (film_pixels * self.values["light_paths"])))
+
+    def _light_pass(self, tracer, film, count: int, *args):
+        light = super()._light_pass(tracer, film, count, *args)
+        if light is not None:              # (this render's own measure: the same seed, the same passes)
+            self._stored_per_subpath = light[3] / count
+        return light
 
     @staticmethod
     def _light_subpaths(plan) -> list[int]:
@@ -140,7 +164,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         start = time.perf_counter()
         grid = VertexGrid(vertices, stored, radii, self._light_subpaths(plan))
         grid.first_only = self.values["mode"] == "ppm"
-        dr.eval(grid.start, grid.size, grid.order)
+        dr.eval(grid.buckets, grid.order, grid.points, grid.records)
         dr.sync_thread()
         stats.grid_s += time.perf_counter() - start
         if plan.index == 0:
