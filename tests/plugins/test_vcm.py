@@ -127,8 +127,8 @@ def test_bias_shrinks_with_the_radius():
 STIFF = sorted(f for f in os.listdir(os.path.join(ROOT, "scenes", "stiff")) if f.endswith(".xml"))
 
 
-@pytest.mark.parametrize("mode", ["vcm", "ppm"])
-def test_spectral_variant_agrees_with_mitsuba_path(mode):
+@pytest.mark.parametrize("mode, light_paths", [("vcm", 1), ("ppm", 1), ("vcm", 4)])
+def test_spectral_variant_agrees_with_mitsuba_path(mode, light_paths):
     """llvm_ad_spectral, as lab_photon: one set of wavelengths per pass (here one iteration), at
     which light subpaths are emitted, merged and connected (sRGB of a spectrum may be out of
     gamut: negative channels are allowed, negative luminance is not)."""
@@ -137,10 +137,10 @@ def test_spectral_variant_agrees_with_mitsuba_path(mode):
     try:
         mitsuba_lab.use_variant("llvm_ad_spectral")
         scene = load_scene(scene_path("cornell_box.xml"), res=RES)
-        lab = renders(scene, vcm(mode=mode, radius=SMALL_RADIUS), 16, SEEDS_LAB)
+        lab = renders(scene, vcm(mode=mode, radius=SMALL_RADIUS, light_paths=light_paths), 16, SEEDS_LAB)
         assert pixel_problem(lab, True) == ""
         result = z_scores(lab, path_stack(scene))
-        print(f"lab_vcm mode={mode} in llvm_ad_spectral: max |z| {result.max_abs_z:.2f}, "
+        print(f"lab_vcm mode={mode}, light_paths={light_paths} in llvm_ad_spectral: max |z| {result.max_abs_z:.2f}, "
               f"relative difference {result.rel_diff.round(4)}")
         assert result.max_abs_z <= Z_BOUND
     finally:
