@@ -282,7 +282,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             stats.light_s += time.perf_counter() - start
             n = int(stores[0])
             stats.peak_vertex_bytes = max(stats.peak_vertex_bytes,
-                                          capacity * vertex_bytes(tangents, tracer.weights.merging))
+                                          capacity * vertex_bytes(tangents))
             if n <= capacity:
                 break
             stats.retraces += 1

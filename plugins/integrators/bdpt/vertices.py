@@ -20,13 +20,14 @@ lane's iteration: lab_vcm merges within an iteration) and its depth.
 The fields are packed into fixed-width records of floats (integers by their bits), one flat
 array per record kind (``POINT``, ``RECORD``, ``TANGENTS``): Dr.Jit reads a power-of-two run of
 floats in one packet load, so a connection or a merge reads a vertex in two or three loads
-instead of some twenty gathers (lab_vcm's merging: 3.8 against 5.5 ms per iteration on the
-Cornell box at 64x64, ``benchmarks/bench_vcm.py``).
+instead of some twenty gathers (``benchmarks/bench_vcm.py``; README).
 """
 from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
+
+from mitsuba_lab.plugins.integrators.photon.records import spectrum_channels
 
 from .weights import SubpathMis
 
@@ -46,9 +47,9 @@ TANGENTS = {"sh_s": 0, "dp_du": 3, "dp_dv": 6}
 TANGENT_WIDTH = 16
 
 
-def vertex_bytes(tangents: bool = False, merging: bool = False) -> int:
-    """Bytes per stored vertex (``tangents``: with the tangent record; ``merging`` changes
-    nothing: the iteration and dvm have their places in every record)."""
+def vertex_bytes(tangents: bool = False) -> int:
+    """Bytes per stored vertex (``tangents``: with the tangent record; merging's iteration and
+    dvm have their places in every record)."""
     return 4 * (POINT_WIDTH + RECORD_WIDTH + 1 + TANGENT_WIDTH * tangents)
 
 
@@ -76,13 +77,13 @@ def vector(record, offset: int, kind=mi.Vector3f):
     return kind(record[offset], record[offset + 1], record[offset + 2])
 
 
-def spectrum_channels(value) -> list:
+def channels_of(value) -> list:
     """A Spectrum's channels as Floats (1, 3 or 4)."""
-    return [value[i] for i in range(dr.size_v(mi.Spectrum))]
+    return [value[i] for i in range(spectrum_channels())]
 
 
 def spectrum_at(record, offset: int) -> mi.Spectrum:
-    return mi.Spectrum(*[record[offset + i] for i in range(dr.size_v(mi.Spectrum))])
+    return mi.Spectrum(*[record[offset + i] for i in range(spectrum_channels())])
 
 
 class LightVertices:
@@ -110,7 +111,7 @@ class LightVertices:
         write(self.points, [*si.p, *si.n, bits(depth), bits(iteration)], POINT_WIDTH, slot, active)
         dvm = mis.dvm if self.merging else 0.0
         write(self.records, [*si.sh_frame.n, *si.uv, *wi_world, mi.Float(mis.dvcm), mi.Float(mis.dvc),
-                             mi.Float(dvm), bits(prev), *spectrum_channels(beta)], RECORD_WIDTH, slot, active)
+                             mi.Float(dvm), bits(prev), *channels_of(beta)], RECORD_WIDTH, slot, active)
         dr.scatter(self.bsdf, si.bsdf(), slot, active)
         if self.tangents:
             write(self.frames, [*si.sh_frame.s, *si.dp_du, *si.dp_dv], TANGENT_WIDTH, slot, active)

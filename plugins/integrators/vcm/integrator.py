@@ -105,12 +105,9 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         if self.values["mode"] == "ppm":
             self.weights_class = PpmWeights
         self._radius = 0.0
-        self._stored_per_subpath = None    # light vertices stored per subpath, this render
 
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
-        if self._pass is None:
-            self._stored_per_subpath = None
         if self._pass is None and self.merging:
             r1 = self.values["radius"]
             if not r1 > 0:
@@ -126,16 +123,12 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     def pass_spp_limit(self, film_pixels: int) -> int:
         if not self.merging:
             return super().pass_spp_limit(film_pixels)
-        per_path = self._stored_per_subpath
+        # stored vertices per subpath from this render's own passes (the same seed, the same passes)
+        traced = self.stats.light_subpaths
+        per_path = self.stats.light_vertices_stored / traced if traced else None
         subpaths = FIRST_PASS_LIGHT_SUBPATHS if per_path is None else min(
             MAX_PASS_LIGHT_SUBPATHS, max(MIN_PASS_LIGHT_SUBPATHS, int(PASS_LIGHT_VERTICES / max(per_path, 1e-3))))
         return max(1, int(subpaths / (film_pixels * self.values["light_paths"])))
-
-    def _light_pass(self, tracer, film, count: int, *args):
-        light = super()._light_pass(tracer, film, count, *args)
-        if light is not None:              # (this render's own measure: the same seed, the same passes)
-            self._stored_per_subpath = light[3] / count
-        return light
 
     @staticmethod
     def _light_subpaths(plan) -> list[int]:
