@@ -19,7 +19,7 @@ Every clock stops after dr.eval + dr.sync_thread (``render.timed_kernels``); com
 left out by the warm-up and reported (kernels compiled during the timed renders, which
 should be 0). The machine is shared, so single timings are noisy.
 
-    .venv/bin/python benchmarks/bench_vcm.py [--rounds 3] [--res 64] [--spp 16] [--quick]
+    .venv/bin/python benchmarks/bench_vcm.py [--rounds 3] [--res 64] [--spp 16] [--quick] [--merge-first]
     .venv/bin/python benchmarks/bench_vcm.py --pass-sizes --spp 64   # lab_vcm's pass sizes against fixed ones
 """
 from __future__ import annotations
@@ -49,10 +49,11 @@ def timed_render(scene, integrator, spp, seed):
     return wall, compiled, stats
 
 
-def measure(name, res, spp, depth, radius, rounds):
+def measure(name, res, spp, depth, radius, rounds, merge_first=False):
     scene = load_scene(os.path.join(ROOT, "scenes", name), res=res)
     methods = {
-        "vcm": make_integrator("lab_vcm", {"mode": "vcm", "max_depth": depth, "radius": radius}),
+        "vcm": make_integrator("lab_vcm", {"mode": "vcm", "max_depth": depth, "radius": radius,
+                                           "merge_first": merge_first}),
         "bpt": make_integrator("lab_vcm", {"mode": "bpt", "max_depth": depth}),
         "ptracer": make_integrator("ptracer", {"max_depth": depth}),
         "path": make_integrator("path", {"max_depth": depth}),
@@ -118,6 +119,8 @@ def main(argv=None) -> int:
     parser.add_argument("--scenes", nargs="+", default=list(SCENES), help="scene files under scenes/")
     parser.add_argument("--pass-sizes", action="store_true",
                         help="instead: lab_vcm's ms per iteration with its own pass sizes and with fixed ones")
+    parser.add_argument("--merge-first", action="store_true",
+                        help="lab_vcm with merge_first = true (merging at the camera's first vertex too)")
     parser.add_argument("--quick", action="store_true",
                         help="smoke run: 32x32, 4 spp, 1 round, cornell box only (not a measurement)")
     args = parser.parse_args(argv)
@@ -138,12 +141,13 @@ def main(argv=None) -> int:
             print(" | ".join([name, *(f"{ms:.2f} ({passes})" for ms, passes in m.values())]), flush=True)
         return 0
     print(f"{args.res}x{args.res}, {args.spp} iterations, max_depth {args.max_depth}, medians of {args.rounds} "
-          f"rounds; milliseconds per iteration (one sample per pixel)")
+          f"rounds, merge_first {str(args.merge_first).lower()}; milliseconds per iteration (one sample "
+          f"per pixel)")
     header = ("scene", "light", "grid", "camera+conn", "merging", "vcm total", "bpt total", "path",
               "light ns/path", "ptracer ns/path", "ratio", "passes", "compiled")
     print(" | ".join(header))
     for name in args.scenes:
-        m = measure(name, args.res, args.spp, args.max_depth, args.radius, args.rounds)
+        m = measure(name, args.res, args.spp, args.max_depth, args.radius, args.rounds, args.merge_first)
         print(" | ".join([m["scene"], *(f"{m[k]:.2f}" for k in ("light_ms", "grid_ms", "camera_ms", "merge_ms",
                                                                  "vcm_ms", "bpt_ms", "path_ms")),
                           f"{m['light_ns_per_path']:.0f}", f"{m['ptracer_ns_per_path']:.0f}",

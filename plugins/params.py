@@ -233,6 +233,9 @@ LAB_VCM = (
     Param("light_paths", float, 1.0, "light subpaths traced per camera subpath in each iteration: all of "
           "them merge and splat, camera subpath i connects to light subpath i",
           check=lambda v: 1.0 <= v <= 64, expected="a number in [1, 64]"),
+    Param("merge_first", bool, False, "merge at the camera's first vertex too (modes vcm and bpm; Georgiev's "
+          "VCM); false leaves the light arriving there to light tracing, NEE and connections, and that merge "
+          "out of every MIS sum (ppm always merges there)"),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
                                             "max_vertices"))
 

@@ -3,15 +3,19 @@ column (timings are not checked: the machine is shared), and nothing compiles wh
 import importlib.util
 import os
 
+import pytest
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def test_bench_vcm_quick(capsys):
+@pytest.mark.parametrize("extra", [[], ["--merge-first"]])
+def test_bench_vcm_quick(capsys, extra):
     spec = importlib.util.spec_from_file_location("bench_vcm", os.path.join(ROOT, "benchmarks", "bench_vcm.py"))
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    assert bench.main(["--quick"]) == 0
+    assert bench.main(["--quick", *extra]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
+    assert f"merge_first {'true' if extra else 'false'}" in lines[-3]
     assert lines[-2].startswith("scene | light | grid | camera+conn | merging")
     row = lines[-1].split(" | ")
     assert row[0] == "cornell_box.xml" and len(row) == 13

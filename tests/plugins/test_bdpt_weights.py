@@ -9,7 +9,9 @@ the two agree to a relative 1e-9 (RTOL); weights of the strategies that can buil
 swapped reverse density) is caught; Dr.Jit arrays give numpy's numbers to float32 precision.
 With merging (lab_vcm's extra technique at every interior vertex, density
 p_light(x_0..x_i) p_camera(x_i..x_k) pi r^2 N_light) the same holds over connections and merges
-together, and a connection that leaves out merging at its own vertex is caught.
+together, and a connection that leaves out merging at its own vertex is caught; so it does
+without merging at the camera's first vertex (``merge_from`` = 2), where any camera-side sum
+that still counts that merge is caught.
 """
 import numpy as np
 import pytest
@@ -86,8 +88,8 @@ def recursive_weights(g, mis, wrong=None):
     for i in range(k - 1, -1, -1):
         state = mis.after_hit(state, d2[i], cc[i])
         camera[i] = state
-        if i > 0:
-            state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i])
+        if i > 0:                          # (x_i lies k - i segments from the sensor)
+            state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i], depth=k - i)
     w = np.zeros((k + 1, N))
     for s in range(k + 1):
         t = k + 1 - s
@@ -96,12 +98,13 @@ def recursive_weights(g, mis, wrong=None):
         elif t == 1 and s == 1:
             w[s] = mis.emitter_to_camera(rv[1], cc[0], d2[0], g["pos"], delta[0])
         elif s == 1:
-            w[s] = mis.nee(camera[1], g["nee"], pdf_emit, cc[0], cl[1], d2[0], rv[1], fw[1], delta[0])
+            w[s] = mis.nee(camera[1], g["nee"], pdf_emit, cc[0], cl[1], d2[0], rv[1], fw[1], delta[0],
+                           depth=k - 1)
         elif t == 1:
             w[s] = mis.light_to_camera(light[k - 1], rv[k], cc[k - 1], d2[k - 1], rv[k - 1])
         else:
             w[s] = mis.connect(light[s - 1], camera[s], fw[s - 1], rv[s - 1], rv[s], fw[s],
-                               cc[s - 1], cl[s], d2[s - 1])
+                               cc[s - 1], cl[s], d2[s - 1], depth=k - s)
     return np.where(feasible(delta), w, 0.0)    # the integrator never runs an infeasible one
 
 
@@ -252,33 +255,64 @@ def recursive_weights_with_merging(g, mis):
     for i in range(k - 1, 0, -1):
         state = mis.after_hit(state, d2[i], cc[i])
         camera[i] = state
-        state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i])
-    merges = [np.where(delta[i], 0.0, mis.merge(light[i], camera[i], rv[i], fw[i])) for i in range(1, k)]
+        state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i], depth=k - i)
+    # (the integrator does not merge at a camera vertex nearer the sensor than merge_from)
+    merges = [np.where(delta[i] | (k - i < mis.merge_from), 0.0, mis.merge(light[i], camera[i], rv[i], fw[i]))
+              for i in range(1, k)]
     return np.concatenate([recursive_weights(g, mis), np.array(merges).reshape(-1, N)])
 
 
+@pytest.mark.parametrize("merge_from", [1, 2])
 @pytest.mark.parametrize("subset", MERGE_SUBSETS)
 @pytest.mark.parametrize("beta", [1.0, 2.0])
-def test_merging_weights_equal_brute_force_and_sum_to_one(subset, beta):
+def test_merging_weights_equal_brute_force_and_sum_to_one(subset, beta, merge_from):
     """Vertex connection and merging (Georgiev et al. 2012): merging at x_i has density
     p_light(x_0..x_i) p_camera(x_i..x_k) pi r^2 N_light, and the recursion (a third running
-    quantity, dVM) weights it, and every connection, against all the others."""
+    quantity, dVM) weights it, and every connection, against all the others; with
+    ``merge_from`` = 2 the camera's first vertex is no merging technique, in any sum."""
     worst = 0.0
     for k in range(1, 8):
         g = random_paths(k, seed=900 * k + int(beta))
         area = float(np.exp(np.random.default_rng(k).uniform(np.log(1e-4), np.log(1e4))))
-        mis = BdptWeights("power", beta, strategies=subset, light_paths=g["light_paths"], merge_area=area)
+        mis = BdptWeights("power", beta, strategies=subset, light_paths=g["light_paths"], merge_area=area,
+                          merge_from=merge_from)
         p_light, p_camera = area_densities(g)
         with np.errstate(all="ignore"):
             got = recursive_weights_with_merging(g, mis)
             ref = brute_force_weights(p_light, p_camera, g["delta"], beta, subset, g["nee"], g["light_paths"],
-                                      area)
+                                      area, merge_from)
         worst = max(worst, _max_rel(got, ref))
         reach = ref.sum(axis=0) > 0
         np.testing.assert_allclose(got.sum(axis=0)[reach], 1.0, rtol=RTOL)
         assert np.all(got.sum(axis=0)[~reach] == 0.0)
-    print(f"{'+'.join(subset)}, beta {beta}: max relative error {worst:.2e}")
+    print(f"{'+'.join(subset)}, beta {beta}, merge_from {merge_from}: max relative error {worst:.2e}")
     assert worst < RTOL
+
+
+@pytest.mark.parametrize("mistake", ["scatter_camera", "nee", "connect", "light_to_camera"])
+def test_a_first_vertex_merge_left_in_a_sum_is_caught(monkeypatch, mistake):
+    """Power of the merge_from = 2 check: a camera-side call that still counts merging at the
+    camera's first vertex (in dVC and dVM, in next-event estimation's sum, a connection's, or
+    light tracing's) misweights paths."""
+    area, kinds = 3.0, MERGE_SUBSETS[0]
+    err = 0.0
+    for k in range(2, 6):
+        g = random_paths(k, seed=13 + k)
+        mis = BdptWeights("power", 2.0, strategies=kinds, light_paths=g["light_paths"], merge_area=area,
+                          merge_from=2)
+        every = BdptWeights("power", 2.0, strategies=kinds, light_paths=g["light_paths"], merge_area=area)
+        if mistake == "light_to_camera":
+            monkeypatch.setattr(mis, mistake, every.light_to_camera)
+        else:
+            right = getattr(mis, mistake)
+            monkeypatch.setattr(mis, mistake, lambda *a, depth=None, right=right: right(*a, depth=None))
+        p_light, p_camera = area_densities(g)
+        with np.errstate(all="ignore"):
+            ref = brute_force_weights(p_light, p_camera, g["delta"], 2.0, kinds, g["nee"], g["light_paths"],
+                                      area, 2)
+            err = max(err, _max_rel(recursive_weights_with_merging(g, mis), ref))
+    print(f"{mistake}: max relative error {err:.2e}")
+    assert err > 1e3 * RTOL
 
 
 def test_merging_off_changes_nothing():
@@ -290,6 +324,8 @@ def test_merging_off_changes_nothing():
         np.testing.assert_array_equal(recursive_weights(g, plain), recursive_weights(g, with_area))
     with pytest.raises(ValueError, match="merge_area"):
         BdptWeights(strategies=("merge",))
+    with pytest.raises(ValueError, match="merge_from"):
+        BdptWeights(strategies=("merge",), merge_area=1.0, merge_from=3)
 
 
 def test_a_missing_merge_term_is_caught():

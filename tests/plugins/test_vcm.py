@@ -6,7 +6,8 @@
   blur's bias is far below the noise of 16 seeds x 16 iterations) ``vcm`` and ``bpm`` agree
   with Mitsuba's ``path`` by the z-test of the other agreement tests (|z| <= Z_BOUND = 5 on 3x3
   blocks of 8x8 pixels and on the image means); the merging estimate's normalisation times 1.03
-  fails it (power).
+  fails it (power). The same with and without ``merge_first`` (merging at the camera's first
+  vertex, Georgiev et al.'s VCM, or not: lab_vcm's default).
 * Consistency: with a large first radius the bias is plain (blur at the box's edges and
   corners) and shrinks as the radius shrinks with the iterations.
 * No NaN, Inf or negative pixel on the stiff scenes; bad parameters are one line.
@@ -67,11 +68,14 @@ def path_stack(scene, spp=64):
 
 
 @pytest.mark.parametrize("name", ["cornell_box.xml", "caustic.xml"])
-@pytest.mark.parametrize("mode", ["vcm", "bpm", "ppm"])
-def test_merging_agrees_with_mitsuba_path(name, mode):
+@pytest.mark.parametrize("mode, merge_first", [("vcm", True), ("bpm", True), ("ppm", True), ("vcm", False),
+                                               ("bpm", False)])
+def test_merging_agrees_with_mitsuba_path(name, mode, merge_first):
+    """merge_first = false: no merging at the camera's first vertex, in the techniques or in the
+    weights (a sum that still counted it would darken what the camera sees directly)."""
     scene = load_scene(scene_path(name), res=RES)
-    lab = renders(scene, vcm(mode=mode, radius=SMALL_RADIUS), 16, SEEDS_LAB)
-    assert_agrees(lab, path_stack(scene), f"lab_vcm mode={mode} on {name}")
+    lab = renders(scene, vcm(mode=mode, radius=SMALL_RADIUS, merge_first=merge_first), 16, SEEDS_LAB)
+    assert_agrees(lab, path_stack(scene), f"lab_vcm mode={mode}, merge_first={merge_first} on {name}")
 
 
 @pytest.mark.parametrize("name", ["cornell_box.xml", "caustic.xml"])
@@ -86,7 +90,8 @@ def test_more_light_paths_agree_with_mitsuba_path(name):
 
 
 def test_a_wrong_merging_normalisation_is_caught(monkeypatch):
-    """Power: merges 10% too bright (bpm, where merging carries most of the image; 32
+    """Power: merges 10% too bright (bpm merging at every camera vertex, where merging carries most
+    of the image; 32
     iterations x 16 seeds) fail. (3% at 16 iterations gave |z| 1.9: bpm's noise at r_1 = 0.02
     hides it; lab_bdpt's test catches 3% in the connection weights.)"""
     from mitsuba_lab.plugins.integrators.vcm import merging
@@ -100,14 +105,14 @@ def test_a_wrong_merging_normalisation_is_caught(monkeypatch):
         self.normalisation = self.normalisation * 1.10
 
     monkeypatch.setattr(merging.VertexGrid, "__init__", brighter)
-    wrong = renders(scene, vcm(mode="bpm", radius=SMALL_RADIUS), 32, SEEDS_LAB)
+    wrong = renders(scene, vcm(mode="bpm", radius=SMALL_RADIUS, merge_first=True), 32, SEEDS_LAB)
     z = z_scores(wrong, ref).max_abs_z
     print(f"merges x 1.10: max |z| {z:.2f}")
     assert z > Z_BOUND
 
 
 def test_bias_shrinks_with_the_radius():
-    """bpm with r_1 = 0.8 (two fifths of the Cornell box's wall) and alpha = 0.25: the blur darkens
+    """bpm (merging at every camera vertex) with r_1 = 0.8 (two fifths of the Cornell box's wall) and alpha = 0.25: the blur darkens
     the image near edges and corners; after 16x the iterations the radius is 2.8x smaller
     (r_i = r_1 i^((alpha - 1) / 2)) and so is the darkening, beyond 3 standard errors."""
     scene = load_scene(scene_path("cornell_box.xml"), res=16)
@@ -115,7 +120,7 @@ def test_bias_shrinks_with_the_radius():
     ref_mean = ref[..., :3].mean()
     bias = {}
     for n, seeds in ((16, 48), (256, 12)):
-        lab = renders(scene, vcm(mode="bpm", radius=0.8, alpha=0.25), n, range(seeds))[..., :3]
+        lab = renders(scene, vcm(mode="bpm", radius=0.8, alpha=0.25, merge_first=True), n, range(seeds))[..., :3]
         means = lab.mean(axis=(1, 2, 3)) / ref_mean - 1.0
         bias[n] = (means.mean(), means.std(ddof=1) / np.sqrt(len(means)))
         print(f"{n} iterations: relative bias {bias[n][0]:+.4f} +- {bias[n][1]:.4f}")
@@ -147,11 +152,12 @@ def test_spectral_variant_agrees_with_mitsuba_path(mode, light_paths):
         mitsuba_lab.use_variant("llvm_ad_rgb")
 
 
+@pytest.mark.parametrize("merge_first", [True, False])
 @pytest.mark.parametrize("name", STIFF)
-def test_no_nan_inf_or_negative_on_stiff_scenes(name):
+def test_no_nan_inf_or_negative_on_stiff_scenes(name, merge_first):
     scene = load_scene(scene_path(f"stiff/{name}"), res=16)
     depth = -1 if name == "closed_box_albedo_099.xml" else MAX_DEPTH
-    image = render(scene, vcm(max_depth=depth), spp=8, seed=7)[None]
+    image = render(scene, vcm(max_depth=depth, merge_first=merge_first), spp=8, seed=7)[None]
     assert pixel_problem(image, False) == "", f"{name}: {pixel_problem(image, False)}"
 
 
@@ -160,6 +166,8 @@ def test_refusals_are_one_line():
                           ({"alpha": 1.0}, "parameter 'alpha' must be a number in \\(0, 1\\)"),
                           ({"radius": -1.0}, "parameter 'radius' must be"),
                           ({"light_paths": 0.5}, "parameter 'light_paths' must be a number in \\[1, 64\\]"),
+                          ({"merge_first": 0}, "parameter 'merge_first' expects a boolean"),
+                          ({"mode": "ppm", "merge_first": False}, "ppm.*merge_first = false does not apply"),
                           ({"strategies": "all"}, "strategies")):
         with pytest.raises(Exception, match=match):
             make_integrator("lab_vcm", params)
@@ -192,3 +200,16 @@ def test_passes_hold_about_a_fixed_number_of_stored_vertices():
         print(f"{name}: {per_path:.2f} stored vertices per subpath, {stats['passes']} passes")
         assert stats["passes"] == passes, (name, per_path, stats["passes"])
     assert 6 < per_path and int(PASS_LIGHT_VERTICES / per_path) // (64 * 64) == 37
+
+
+def test_bpm_without_the_first_merge_is_left_out_where_delta_lights_shine():
+    """bpm's direct light from a point light reaches what the camera sees only by merging there:
+    with merge_first = false the planner leaves it out (and a render warns), with the reason;
+    vcm keeps next-event estimation and light tracing for it."""
+    from mitsuba_lab.scene import SceneTraits, strategy_applicability
+
+    traits = SceneTraits.from_scene(load_scene(scene_path("stiff/delta_lights_only.xml"), res=8))
+    ok, reason = strategy_applicability(traits, "lab_vcm", {"mode": "bpm", "merge_first": False})
+    assert not ok and "merge_first=false cannot render direct light from delta emitters" in reason, reason
+    for params in ({"mode": "bpm", "merge_first": True}, {"mode": "ppm"}, {"mode": "vcm"}):
+        assert strategy_applicability(traits, "lab_vcm", params) == (True, ""), params

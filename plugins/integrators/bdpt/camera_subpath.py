@@ -98,7 +98,7 @@ def connect_to_light_subpath(scene, cp: CameraPass, si, bsdf, beta, mis: Subpath
         f_y, pdf_y_rev = transported(bsdf_y, y, wo_y, use)
         pdf_y_fwd = bsdf_y.pdf(ctx_imp, y, wo_y, use)
         weight = w.connect(mis_y, mis, pdf_y_fwd, pdf_y_rev, pdf_x_fwd, pdf_x_rev,
-                           dr.abs(dr.dot(y.n, d)), dr.abs(dr.dot(si.n, d)), dist2)
+                           dr.abs(dr.dot(y.n, d)), dr.abs(dr.dot(si.n, d)), dist2, depth)
         value = spectrum_or_zero(beta * f_x * f_y * beta_y * (finite_or_zero(weight) / dist2))
         use &= dr.max(mi.unpolarized_spectrum(value)) > 0
         use &= ~scene.ray_test(spawn.spawn_ray_to(si, y.p, floor), use)
@@ -192,7 +192,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         pdf_nee = dr.select(ds.delta, ds.pdf, ds.pdf * cos_light / dist2)   # area (at infinity: solid angle)
         pdf_pos, pdf_dir, delta = table.emission(ds.emitter, cos_light, pdf_nee, nee_on)
         w_nee = w.nee(mis, pdf_nee, pdf_pos * pdf_dir, cos_light, dr.abs(dr.dot(si.n, ds.d)), dist2,
-                      pdf_fwd, pdf_rev, delta)
+                      pdf_fwd, pdf_rev, delta, depth)
         L += dr.select(nee_on, spectrum_or_zero(beta * f * em_weight * finite_or_zero(w_nee)), 0.0)
 
         # ---------------- s >= 2: connections to the light subpath ----------------
@@ -202,13 +202,14 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
 
         # ---------------- merging with the light vertices around (lab_vcm) ----------------
         if dr.hint(merging, mode="scalar"):
-            L += cp.grid.merge(cp, si, bsdf, beta, mis, depth, iteration, smooth & (depth < max_depth))
+            L += cp.grid.merge(cp, si, bsdf, beta, mis, depth, iteration,
+                               smooth & (depth < max_depth) & (depth >= w.merge_from))
 
         # ---------------- BSDF sampling (sampled above) ----------------
         wo_world = si.to_world(bs.wo)
         pdf_rev = reverse_pdf(bsdf, ctx_imp, si, bs.wo, active_next)
         mis = w.scatter_camera(mis, bs.pdf, pdf_rev, dr.abs(dr.dot(si.n, wo_world)),
-                               mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta))
+                               mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta), depth)
         dvcm, dvc, first = finite_or_zero(mis.dvcm), finite_or_zero(mis.dvc), mi.Float(mis.first)
         dvm = carried(merging, mis.dvm, dvm)
         valid_ray |= active & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)

@@ -237,6 +237,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     #: The MIS weights' class, None: this module's ``BdptWeights`` (lab_vcm's ppm: weight 1 for
     #: its one technique per path).
     weights_class = None
+    #: The first camera depth that merges (lab_vcm's merge_first; ``BdptWeights.merge_from``).
+    merge_from = 1
 
     def pass_spp_limit(self, film_pixels: int) -> int:
         """Most samples per pixel in one pass besides ``max_vertices`` (lab_vcm: a bound)."""
@@ -247,7 +249,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         v = self.values
         ratio = plan.light_subpaths / plan.camera_lanes
         weights = (self.weights_class or BdptWeights)(v["heuristic"], v["beta"], self.kinds, light_paths=ratio,
-                                                      merge_area=self.merge_area(plan))
+                                                      merge_area=self.merge_area(plan), merge_from=self.merge_from)
         # (opaque: a ratio that changes from pass to pass must not be compiled into the kernels)
         weights.light_paths = dr.opaque(mi.Float, ratio)
         return weights

@@ -48,6 +48,10 @@ p_light(x_0 .. x_i) p_camera(x_i .. x_k) eta. Each subpath then carries a third 
 ``dvm`` (SmallVCM's ``dVM``: the techniques with fewer vertices on its side, relative to
 merging at its current vertex), every connection's sums gain eta (merging at the vertices it
 joins), and ``merge`` gives the merging weight. Without ``merge`` nothing changes.
+``merge_from`` = 2 leaves merging out at the camera's first vertex (one segment from the
+sensor), as a technique and from every other technique's sums: the camera-side calls
+(``scatter_camera``, ``nee``, ``connect``) take the camera vertex's ``depth``, and
+``light_to_camera``'s light vertex is the camera's first.
 
 Every function works on numpy arrays (or floats) and on Dr.Jit arrays, element-wise; it uses
 arithmetic operators, ``select`` and ``power``, and imports no Mitsuba, Dr.Jit or numpy at load.
@@ -126,7 +130,7 @@ class BdptWeights:
     """
 
     def __init__(self, heuristic: str = "power", beta: float = 2.0, strategies="all",
-                 light_paths: float = 1.0, merge_area: float = 0.0):
+                 light_paths: float = 1.0, merge_area: float = 0.0, merge_from: int = 1):
         if heuristic not in ("balance", "power"):
             raise ValueError(f"lab_bdpt: heuristic must be 'balance' or 'power', got '{heuristic}'")
         if heuristic == "power" and not beta > 0:
@@ -139,6 +143,11 @@ class BdptWeights:
                              f"subset of {', '.join(ALL_KINDS)}, got {strategies!r}")
         if "merge" in kinds and not merge_area > 0:
             raise ValueError(f"lab_vcm: merging needs merge_area = pi r^2 N_light > 0, got {merge_area}")
+        # (a light subpath's sums hold merges at its vertices before it knows how far from the
+        # sensor they will lie; only the camera's first vertex is always known to be one)
+        if merge_from not in (1, 2):
+            raise ValueError(f"lab_vcm: merge_from must be 1 (every camera vertex merges) or 2 (all but the "
+                             f"first), got {merge_from!r}")
         self.beta = 1.0 if heuristic == "balance" else float(beta)
         self.enabled = frozenset(kinds)
         self.light_paths = float(light_paths)
@@ -148,6 +157,7 @@ class BdptWeights:
         self.merging = "merge" in self.enabled
         self.eta = self._m(float(merge_area)) if self.merging else 0.0
         self.inv_eta = self._m(1.0 / float(merge_area)) if self.merging else 0.0
+        self.merge_from = merge_from
 
     #: lab_vcm: (eta table, 1 / eta table, iterations), one entry per iteration of a pass, each
     #: to the power beta (Dr.Jit arrays; see ``at_lanes``); None: ``eta`` holds for every lane.
@@ -198,6 +208,15 @@ class BdptWeights:
         """``state.dvcm`` times its enable factor (0 for a disabled kind, whatever dvcm is)."""
         return _gate(self._flag(state, start_kind), state.dvcm)
 
+    def _merges(self, depth):
+        """1.0 where a camera vertex ``depth`` segments from the sensor merges, else 0.0
+        (``merge_from``); ``depth`` None: every camera vertex does."""
+        if depth is None or self.merge_from <= 1 or not self.merging:
+            return 1.0
+        if isinstance(depth, (int, float)):
+            return 1.0 if depth >= self.merge_from else 0.0
+        return _select(depth >= self.merge_from, 1.0, 0.0)
+
     # -- starting and extending subpaths ---------------------------------------------------
 
     def start_light(self, pdf_emit, pdf_nee, cos_light, delta=False) -> SubpathMis:
@@ -226,15 +245,16 @@ class BdptWeights:
         return SubpathMis(state.dvcm * self._m(dist2) * inv_cos, state.dvc * inv_cos, state.first,
                           state.dvm * inv_cos)
 
-    def _scatter(self, state, pdf_fwd, pdf_rev, cos_out, delta, start_kind):
-        """Shared by both sides; only the kind of the subpath's first ratio differs."""
+    def _scatter(self, state, pdf_fwd, pdf_rev, cos_out, delta, start_kind, merges=1.0):
+        """Shared by both sides; only the kind of the subpath's first ratio differs (``merges``:
+        0.0 where this vertex does not merge)."""
         ratio, rev, inner = self._m(cos_out / pdf_fwd), self._m(pdf_rev), self._gated(state, start_kind)
-        folded = ratio * (state.dvc * rev + inner + self.eta)       # eta: merging at this vertex
+        folded = ratio * (state.dvc * rev + inner + self.eta * merges)   # eta: merging at this vertex
         dvc = _select(delta, state.dvc * self._m(cos_out), folded)
         dvcm = _select(delta, 0.0 * folded, self._m(1.0 / pdf_fwd))
         dvm = state.dvm
         if self.merging:
-            folded_vm = ratio * (state.dvm * rev + inner * self.inv_eta + 1.0)
+            folded_vm = ratio * (state.dvm * rev + inner * self.inv_eta + merges)
             dvm = _select(delta, state.dvm * self._m(cos_out), folded_vm)
         return SubpathMis(dvcm, dvc, 0.0 * state.first, dvm)
 
@@ -245,9 +265,9 @@ class BdptWeights:
         ``cos_out`` |cos| of the new direction at this vertex, ``delta`` a delta lobe sampled."""
         return self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, "nee")
 
-    def scatter_camera(self, state, pdf_fwd, pdf_rev, cos_out, delta=False) -> SubpathMis:
-        """``scatter_light`` for a camera-subpath vertex."""
-        return self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, "light")
+    def scatter_camera(self, state, pdf_fwd, pdf_rev, cos_out, delta=False, depth=None) -> SubpathMis:
+        """``scatter_light`` for a camera-subpath vertex ``depth`` segments from the sensor."""
+        return self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, "light", self._merges(depth))
 
     # -- the weights of the four kinds -----------------------------------------------------
 
@@ -263,37 +283,40 @@ class BdptWeights:
         return self.e["hit"] / (1.0 + w_camera)
 
     def nee(self, camera: SubpathMis, pdf_nee, pdf_emit, cos_light, cos_cam, dist2,
-            pdf_cam_fwd, pdf_cam_rev, delta=False):
+            pdf_cam_fwd, pdf_cam_rev, delta=False, depth=None):
         """s = 1, t >= 2: emitter sampling at a camera vertex. ``cos_light``, ``cos_cam``: |cos|
         at the emitter point and at the camera vertex along the segment, ``dist2`` its squared
         length (1, 1 for an infinite emitter); ``pdf_cam_fwd``: BSDF density at the camera vertex
         of the direction to the emitter, ``pdf_cam_rev``: of the direction back along the camera
-        subpath given the emitter's; ``delta``: delta emitter (it cannot be hit)."""
+        subpath given the emitter's; ``delta``: delta emitter (it cannot be hit); ``depth``: the
+        camera vertex's, in segments from the sensor."""
         p_cam0 = pdf_cam_fwd * cos_light / dist2
         w_light = _select(delta, 0.0 * p_cam0, _gate(self.e["hit"], self._m(p_cam0 / pdf_nee)))
-        inner = self.eta + self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev)
+        inner = self.eta * self._merges(depth) + self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev)
         w_camera = self._m(pdf_emit * cos_cam / (dist2 * pdf_nee)) * inner
         return self.e["nee"] / (w_light + 1.0 + w_camera)
 
     def connect(self, light: SubpathMis, camera: SubpathMis, pdf_light_fwd, pdf_light_rev,
-                pdf_cam_fwd, pdf_cam_rev, cos_light, cos_cam, dist2):
+                pdf_cam_fwd, pdf_cam_rev, cos_light, cos_cam, dist2, depth=None):
         """s >= 2, t >= 2: a connection between a light vertex and a camera vertex (neither a
         delta lobe). ``pdf_light_fwd``: density at the light vertex of the direction to the
         camera vertex, ``pdf_light_rev``: of the direction back along the light subpath given
-        that one; ``pdf_cam_*`` likewise; ``cos_*``: |cos| at each end; ``dist2``."""
+        that one; ``pdf_cam_*`` likewise; ``cos_*``: |cos| at each end; ``dist2``; ``depth``:
+        the camera vertex's, in segments from the sensor."""
         w_light = self._m(pdf_cam_fwd * cos_light / dist2) * (
             self.eta + self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
         w_camera = self._m(pdf_light_fwd * cos_cam / dist2) * (
-            self.eta + self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev))
+            self.eta * self._merges(depth) + self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev))
         return self.e["connect"] / (w_light + 1.0 + w_camera)
 
     def light_to_camera(self, light: SubpathMis, pdf_cam, cos_light, dist2, pdf_light_rev):
         """t = 1, s >= 2: a light vertex (not a delta lobe) joined to the sensor. ``pdf_cam``: the
         sensor's direction density towards it (as in ``start_camera``), ``cos_light`` |cos| at the
         light vertex, ``pdf_light_rev``: density at the light vertex of the direction back along
-        the light subpath given the sensor's."""
+        the light subpath given the sensor's. (The light vertex is the camera's first: merging
+        there counts unless ``merge_from`` > 1.)"""
         w_light = self._m(pdf_cam * cos_light / (dist2 * self.light_paths)) * (
-            self.eta + self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
+            self.eta * self._merges(1) + self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
         return self.e["light"] / (1.0 + w_light)
 
     def emitter_to_camera(self, pdf_cam, cos_light, dist2, pdf_pos, delta=False):
@@ -331,7 +354,8 @@ def feasible(delta):
 
 
 def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies="all",
-                        p_nee=None, light_paths: float = 1.0, merge_area: float = 0.0):
+                        p_nee=None, light_paths: float = 1.0, merge_area: float = 0.0,
+                        merge_from: int = 1):
     """The weights of every technique computed directly from the path's densities (numpy).
 
     ``p_light[i]``: area density of x_i generated from the light side (``p_light[0]`` the
@@ -341,7 +365,8 @@ def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies=
     strategy's density is multiplied by ``light_paths``. ``delta`` as in ``feasible``.
     Merging at x_i (i = 1 .. k - 1, not a delta vertex), when ``strategies`` has ``merge``: the
     light subpath builds x_0 .. x_i, the camera subpath x_k .. x_i, density
-    p_light[0..i] p_camera[i..k] ``merge_area`` (pi r^2 N_light). Returns p^beta / sum over the
+    p_light[0..i] p_camera[i..k] ``merge_area`` (pi r^2 N_light), where x_i is at least
+    ``merge_from`` segments from the sensor (k - i >= merge_from; else weight 0). Returns p^beta / sum over the
     enabled feasible techniques of p^beta, 0 for a disabled or infeasible one: rows s = 0 .. k,
     then (with merging) rows for merging at x_1 .. x_{k-1}. Computed in logarithms, so densities
     may span any range.
@@ -368,7 +393,7 @@ def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies=
         delta = np.asarray(delta, dtype=bool)
         for i in range(1, k):
             log_p = log_l[:i + 1].sum(axis=0) + log_c[i:].sum(axis=0) + np.log(merge_area)
-            logs.append(np.where(~delta[i], beta * log_p, -np.inf))
+            logs.append(np.where(~delta[i] & (k - i >= merge_from), beta * log_p, -np.inf))
     logs = np.array(logs)
     top = logs.max(axis=0)
     top = np.where(np.isfinite(top), top, 0.0)

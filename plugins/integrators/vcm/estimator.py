@@ -5,11 +5,18 @@ from mitsuba_lab.plugins import params as declarations
 from mitsuba_lab.plugins.integrators.bdpt.estimator import Bidirectional
 
 
+def merges_first(params: dict) -> bool:
+    """Whether lab_vcm with these (resolved) parameters merges at the camera's first vertex:
+    ``merge_first``, and always in mode ppm (its one merge is at the first smooth vertex)."""
+    return params.get("mode", "vcm") == "ppm" or bool(params.get("merge_first", False))
+
+
 class VertexMerging(Bidirectional):
     """lab_vcm's estimator: the techniques of its ``mode`` (``params.VCM_MODES``) under one MIS."""
     plugin_name = "lab_vcm"
     PARAMETERS = declarations.LAB_VCM
-    OWN_PARAMETERS = ("mode", "radius", "alpha", "light_paths", "heuristic", "beta", "max_vertices")
+    OWN_PARAMETERS = ("mode", "radius", "alpha", "light_paths", "merge_first", "heuristic", "beta",
+                      "max_vertices")
 
     def kinds(self) -> tuple[str, ...]:
         return declarations.VCM_MODES[self.mode]
@@ -30,9 +37,15 @@ class VertexMerging(Bidirectional):
         if problem:
             return False, problem
         mode = params.get("mode", "vcm")
-        missing = cls._subset_problem(traits, declarations.VCM_MODES[mode])
+        kinds = declarations.VCM_MODES[mode]
+        missing = cls._subset_problem(traits, kinds)
         if missing:
             return False, f"lab_vcm with mode={mode} {missing}"
+        if (not merges_first(params) and traits.emits_light and traits.delta_emitters
+                and not set(kinds) & {"nee", "light"}):
+            return False, (f"lab_vcm with mode={mode} and merge_first=false cannot render direct light from "
+                           f"delta emitters on what the camera sees (that needs merging at the first vertex, "
+                           f"'nee' or 'light')")
         return True, ""
 
     @classmethod

@@ -11,7 +11,7 @@ from mitsuba_lab.plugins.integrators.bdpt.integrator import LabBDPTIntegrator
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, iteration_sizes
 from mitsuba_lab.plugins.integrators.photon.integrator import automatic_radius
 
-from .estimator import VertexMerging
+from .estimator import VertexMerging, merges_first
 from .merging import VertexGrid, table
 
 
@@ -52,8 +52,9 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     and stores its vertices, builds a hashed grid over them, then traces one camera subpath per pixel sample.
     At each camera vertex every technique of ``lab_bdpt`` runs (emitter hit, next-event
     estimation, connections to the lane's light subpath, light tracing from the light side),
-    plus *merging*: a density estimate from the light vertices of all light subpaths within
-    radius r_i (constant kernel 1 / (pi r_i^2)). One MIS, balance or power heuristic, weights
+    plus *merging* (from the camera's second vertex on, unless ``merge_first``): a density
+    estimate from the light vertices of all light subpaths within radius r_i (constant kernel
+    1 / (pi r_i^2)). One MIS, balance or power heuristic, weights
     them all, merging counted as a technique of density pi r_i^2 N_light (Georgiev, Krivanek,
     Davidovic & Slusallek 2012; Hachisuka, Pantaleoni & Jensen 2012). Caustics come from
     merging as in photon mapping, diffuse light from connections as in BDPT, in one image.
@@ -66,7 +67,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     ============= ====== ========================================================
     mode          string ``vcm`` (every technique), ``bpt`` (connections only:
                          lab_bdpt's estimator), ``bpm`` (emitter hits and merging
-                         at every camera vertex, with MIS among the merges:
+                         at every camera vertex that merges, with MIS among them:
                          bidirectional photon mapping), ``ppm`` (merging at the
                          first camera vertex with a smooth lobe, delta lobes
                          followed, emitters seen along them; no MIS: progressive
@@ -83,6 +84,17 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                          its light tracing; camera subpath i connects to light
                          subpath i. More of them make merging's estimate less
                          noisy for the same camera work (Default: 1)
+    merge_first   bool   Merge at the camera's first vertex too (modes vcm and
+                         bpm), as Georgiev et al.'s VCM does. false: no
+                         merging there, as a technique or in any other
+                         technique's MIS sum, so the light arriving at what
+                         the camera sees directly comes from light tracing,
+                         NEE and connections. The merges of one iteration
+                         share its light vertices, and at the first vertex
+                         they add variance that light tracing does not
+                         (README: equal or lower error on every scene of
+                         experiments/vcm.toml without them). ppm always
+                         merges there (Default: false)
     max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices: as lab_bdpt.
     ============= ====== ========================================================
 
@@ -103,7 +115,12 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         super().__init__(props)
         self.merging = "merge" in self.kinds
         if self.values["mode"] == "ppm":
+            if "merge_first" in props and not self.values["merge_first"]:
+                raise ValueError("lab_vcm: mode 'ppm' merges only at the first smooth camera vertex: "
+                                 "merge_first = false does not apply to it")
             self.weights_class = PpmWeights
+        # (no first merge: merging from the camera's second vertex on; ``BdptWeights.merge_from``)
+        self.merge_from = 1 if merges_first(self.values) or not self.merging else 2
         self._radius = 0.0
 
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
