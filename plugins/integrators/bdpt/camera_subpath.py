@@ -203,7 +203,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         # ---------------- merging with the light vertices around (lab_vcm) ----------------
         if dr.hint(merging, mode="scalar"):
             L += cp.grid.merge(cp, si, bsdf, beta, mis, depth, iteration,
-                               smooth & (depth < max_depth) & (depth >= w.merge_from))
+                               smooth & (depth < max_depth) & w.merges_at(depth))
 
         # ---------------- BSDF sampling (sampled above) ----------------
         wo_world = si.to_world(bs.wo)

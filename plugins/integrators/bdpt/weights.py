@@ -208,14 +208,15 @@ class BdptWeights:
         """``state.dvcm`` times its enable factor (0 for a disabled kind, whatever dvcm is)."""
         return _gate(self._flag(state, start_kind), state.dvcm)
 
+    def merges_at(self, depth):
+        """Whether a camera vertex ``depth`` segments from the sensor merges (``merge_from``)."""
+        return depth >= self.merge_from
+
     def _merges(self, depth):
-        """1.0 where a camera vertex ``depth`` segments from the sensor merges, else 0.0
-        (``merge_from``); ``depth`` None: every camera vertex does."""
+        """``merges_at`` as a factor, 1.0 or 0.0; ``depth`` None: every camera vertex merges."""
         if depth is None or self.merge_from <= 1 or not self.merging:
             return 1.0
-        if isinstance(depth, (int, float)):
-            return 1.0 if depth >= self.merge_from else 0.0
-        return _select(depth >= self.merge_from, 1.0, 0.0)
+        return _select(self.merges_at(depth), 1.0, 0.0)
 
     # -- starting and extending subpaths ---------------------------------------------------
 
