@@ -231,8 +231,8 @@ LAB_VCM = (
     Param("alpha", float, 0.75, "radius schedule r_i = r_1 i^((alpha - 1) / 2), iteration i = sample i",
           check=lambda v: 0.0 < v < 1.0, expected="a number in (0, 1)"),
     Param("light_paths", float, 1.0, "light subpaths traced per camera subpath in each iteration: all of "
-          "them merge and splat, camera subpath i connects to light subpath i",
-          check=lambda v: 1.0 <= v <= 64, expected="a number in [1, 64]"),
+          "them merge and splat; camera subpath i connects to light subpath i (below 1: i mod N, shared)",
+          check=lambda v: 1.0 / 64 <= v <= 64, expected="a number in [1/64, 64]"),
     Param("merge_first", bool, False, "merge at the camera's first vertex too (modes vcm and bpm; Georgiev's "
           "VCM); false leaves the light arriving there to light tracing, NEE and connections, and that merge "
           "out of every MIS sum (ppm always merges there)"),

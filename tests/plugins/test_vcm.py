@@ -14,6 +14,7 @@
 """
 import os
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
@@ -87,6 +88,37 @@ def test_more_light_paths_agree_with_mitsuba_path(name):
     lab = renders(scene, integrator, 16, SEEDS_LAB)
     assert integrator.bdpt_stats()["light_subpaths"] == 4 * RES * RES * 16
     assert_agrees(lab, path_stack(scene), f"lab_vcm light_paths=4 on {name}")
+
+
+@pytest.mark.parametrize("name", ["cornell_box.xml", "caustic.xml"])
+def test_fewer_light_paths_agree_with_mitsuba_path(name):
+    """light_paths = 1/4: a quarter as many light subpaths as camera subpaths in each iteration
+    (merging density pi r^2 N with N a quarter of the camera's; camera subpaths share each light
+    subpath's connections), 16 iterations in one pass: 576 x 16 / 4 rounded down to whole blocks
+    of 64 lanes per iteration."""
+    scene = load_scene(scene_path(name), res=RES)
+    integrator = vcm(radius=SMALL_RADIUS, light_paths=0.25)
+    lab = renders(scene, integrator, 16, SEEDS_LAB)
+    assert integrator.bdpt_stats()["light_subpaths"] == 2 * 64 * 16
+    assert_agrees(lab, path_stack(scene), f"lab_vcm light_paths=1/4 on {name}")
+
+
+@pytest.mark.parametrize("pixels, spp, light_paths", [(576, 16, 0.25), (4096, 64, 1 / 64), (4096, 7, 0.3),
+                                                      (1000, 3, 0.5), (576, 16, 1.0)])
+def test_a_camera_lane_connects_to_a_light_subpath_of_its_own_iteration(pixels, spp, light_paths):
+    """Camera lane i connects to light subpath i mod N; both must belong to the same iteration of
+    the pass (the one whose radius and N_k the lane's weights use)."""
+    from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights
+
+    integrator = vcm(light_paths=light_paths)
+    lanes = pixels * spp
+    count = integrator.pass_light_subpaths(max(1, round(lanes * light_paths)), spp, lanes)
+    assert 0 < count <= max(round(lanes * light_paths), 64 * spp)
+    weights = BdptWeights("power", 2.0, "all")
+    weights.lane_tables = (None, None, mi.UInt32(spp))
+    lane = dr.arange(mi.UInt32, lanes)
+    own, light = weights.lane_iteration(lane), weights.lane_iteration(lane % count)
+    assert dr.all(own == light), f"{dr.count(own != light)} of {lanes} lanes connect across iterations"
 
 
 def test_a_wrong_merging_normalisation_is_caught(monkeypatch):
@@ -165,7 +197,7 @@ def test_refusals_are_one_line():
     for params, match in (({"mode": "ppm2"}, "parameter 'mode' must be one of vcm, bpt, bpm, ppm, lt, pt"),
                           ({"alpha": 1.0}, "parameter 'alpha' must be a number in \\(0, 1\\)"),
                           ({"radius": -1.0}, "parameter 'radius' must be"),
-                          ({"light_paths": 0.5}, "parameter 'light_paths' must be a number in \\[1, 64\\]"),
+                          ({"light_paths": 0.01}, "parameter 'light_paths' must be a number in \\[1/64, 64\\]"),
                           ({"merge_first": 0}, "parameter 'merge_first' expects a boolean"),
                           ({"mode": "ppm", "merge_first": False}, "ppm.*merge_first = false does not apply"),
                           ({"strategies": "all"}, "strategies")):

@@ -196,7 +196,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             fit = max(1, int(v["max_vertices"] / (1.25 * self.vertices_per_path)))
             spp_pass = max(1, min(spp - done, int(fit // (film_px * light_paths)), self.pass_spp_limit(film_px),
                                   1 if mi.is_spectral else spp))        # spectral: one set of wavelengths per pass
-            count = max(1, min(round(film_px * spp_pass * light_paths), fit))
+            count = self.pass_light_subpaths(max(1, min(round(film_px * spp_pass * light_paths), fit)), spp_pass,
+                                             crop_px * spp_pass)
             plan = PassPlan(index, done, spp_pass, count, crop_px * spp_pass)
             tracer.weights = self.pass_weights(plan)
             u = u_passes[index] if u_passes else None
@@ -243,6 +244,12 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     def pass_spp_limit(self, film_pixels: int) -> int:
         """Most samples per pixel in one pass besides ``max_vertices`` (lab_vcm: a bound)."""
         return 1 << 30
+
+    def pass_light_subpaths(self, count: int, spp_pass: int, camera_lanes: int) -> int:
+        """The light subpaths a pass of ``spp_pass`` samples per pixel and ``camera_lanes`` camera
+        subpaths traces, given the ``count`` that ``light_paths`` and ``max_vertices`` ask for
+        (lab_vcm: whole blocks per iteration)."""
+        return count
 
     def pass_weights(self, plan: PassPlan) -> BdptWeights:
         """The MIS weights of a pass (lab_vcm adds merging)."""

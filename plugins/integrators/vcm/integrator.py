@@ -8,7 +8,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators.bdpt.integrator import LabBDPTIntegrator
-from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, iteration_sizes
+from mitsuba_lab.plugins.integrators.bdpt.weights import LANE_BLOCK, BdptWeights, iteration_sizes
 from mitsuba_lab.plugins.integrators.photon.integrator import automatic_radius
 
 from .estimator import VertexMerging, merges_first
@@ -80,10 +80,13 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     alpha         float  Radius schedule r_i = r_1 i^((alpha - 1) / 2), in (0, 1)
                          (Default: 0.75)
     light_paths   float  Light subpaths per camera subpath in each iteration, in
-                         [1, 64]: every one is stored, merged with and splats
+                         [1/64, 64]: every one is stored, merged with and splats
                          its light tracing; camera subpath i connects to light
                          subpath i. More of them make merging's estimate less
-                         noisy for the same camera work (Default: 1)
+                         noisy for the same camera work; below 1 camera
+                         subpaths of an iteration share them (i mod N, N whole
+                         blocks of 64 per iteration), and the light pass, grid
+                         and merges cost less (Default: 1)
     merge_first   bool   Merge at the camera's first vertex too (modes vcm and
                          bpm), as Georgiev et al.'s VCM does. false: no
                          merging there, as a technique or in any other
@@ -145,7 +148,18 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         per_path = self.stats.light_vertices_stored / traced if traced else None
         subpaths = FIRST_PASS_LIGHT_SUBPATHS if per_path is None else min(
             MAX_PASS_LIGHT_SUBPATHS, max(MIN_PASS_LIGHT_SUBPATHS, int(PASS_LIGHT_VERTICES / max(per_path, 1e-3))))
-        return max(1, int(subpaths / (film_pixels * self.values["light_paths"])))
+        # (below one light subpath per camera subpath, as many camera lanes: bounded wavefronts)
+        return max(1, int(subpaths / (film_pixels * max(1.0, self.values["light_paths"]))))
+
+    def pass_light_subpaths(self, count: int, spp_pass: int, camera_lanes: int) -> int:
+        """Below one light subpath per camera subpath (``light_paths`` < 1), camera lane i uses
+        light subpath i mod N; with N a multiple of ``LANE_BLOCK`` x iterations, both lie in the
+        same iteration (``BdptWeights.lane_iteration``), so a lane connects only to light vertices
+        of its own iteration, whose radius and N_k its weights carry."""
+        if not self.merging or spp_pass == 1 or count >= camera_lanes:
+            return count
+        block = LANE_BLOCK * spp_pass
+        return block * max(1, count // block)
 
     @staticmethod
     def _light_subpaths(plan) -> list[int]:
