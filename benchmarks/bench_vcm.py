@@ -20,6 +20,7 @@ left out by the warm-up and reported (kernels compiled during the timed renders,
 should be 0). The machine is shared, so single timings are noisy.
 
     .venv/bin/python benchmarks/bench_vcm.py [--rounds 3] [--res 64] [--spp 16] [--quick] [--merge-first]
+                                             [--light-paths 1]
     .venv/bin/python benchmarks/bench_vcm.py --pass-sizes --spp 64   # lab_vcm's pass sizes against fixed ones
 """
 from __future__ import annotations
@@ -49,12 +50,12 @@ def timed_render(scene, integrator, spp, seed):
     return wall, compiled, stats
 
 
-def measure(name, res, spp, depth, radius, rounds, merge_first=False):
+def measure(name, res, spp, depth, radius, rounds, merge_first=False, light_paths=1.0):
     scene = load_scene(os.path.join(ROOT, "scenes", name), res=res)
     methods = {
         "vcm": make_integrator("lab_vcm", {"mode": "vcm", "max_depth": depth, "radius": radius,
-                                           "merge_first": merge_first}),
-        "bpt": make_integrator("lab_vcm", {"mode": "bpt", "max_depth": depth}),
+                                           "merge_first": merge_first, "light_paths": light_paths}),
+        "bpt": make_integrator("lab_vcm", {"mode": "bpt", "max_depth": depth, "light_paths": light_paths}),
         "ptracer": make_integrator("ptracer", {"max_depth": depth}),
         "path": make_integrator("path", {"max_depth": depth}),
     }
@@ -77,7 +78,7 @@ def measure(name, res, spp, depth, radius, rounds, merge_first=False):
         "vcm_ms": 1e3 * med(w for w, _, _ in vcm) / spp,
         "bpt_ms": 1e3 * med(w for w, _, _ in bpt) / spp,
         "path_ms": 1e3 * med(w for w, _, _ in runs["path"]) / spp,
-        "light_ns_per_path": 1e9 * light / (pixels * spp),
+        "light_ns_per_path": 1e9 * light / med(s["light_subpaths"] for _, _, s in vcm),
         "ptracer_ns_per_path": 1e9 * med(w for w, _, _ in runs["ptracer"]) / (pixels * spp),
         "passes": vcm[0][2]["passes"],
         "compiled": sum(c for key in runs for _, c, _ in runs[key]),
@@ -121,6 +122,8 @@ def main(argv=None) -> int:
                         help="instead: lab_vcm's ms per iteration with its own pass sizes and with fixed ones")
     parser.add_argument("--merge-first", action="store_true",
                         help="lab_vcm with merge_first = true (merging at the camera's first vertex too)")
+    parser.add_argument("--light-paths", type=float, default=1.0,
+                        help="lab_vcm's light_paths in modes vcm and bpt, in [1/64, 64] (default: 1)")
     parser.add_argument("--quick", action="store_true",
                         help="smoke run: 32x32, 4 spp, 1 round, cornell box only (not a measurement)")
     args = parser.parse_args(argv)
@@ -128,6 +131,8 @@ def main(argv=None) -> int:
         args.res, args.spp, args.rounds, args.scenes = 32, 4, 1, ["cornell_box.xml"]
     if min(args.rounds, args.res, args.spp) < 1 or not args.radius > 0:
         parser.error("--rounds, --res and --spp must be >= 1 and --radius > 0")
+    if not 1.0 / 64 <= args.light_paths <= 64:
+        parser.error("--light-paths must be in [1/64, 64]")
     missing = [n for n in args.scenes if not os.path.isfile(os.path.join(ROOT, "scenes", n))]
     if missing:
         parser.error(f"no such scene under scenes/: {', '.join(missing)}")
@@ -141,13 +146,14 @@ def main(argv=None) -> int:
             print(" | ".join([name, *(f"{ms:.2f} ({passes})" for ms, passes in m.values())]), flush=True)
         return 0
     print(f"{args.res}x{args.res}, {args.spp} iterations, max_depth {args.max_depth}, medians of {args.rounds} "
-          f"rounds, merge_first {str(args.merge_first).lower()}; milliseconds per iteration (one sample "
-          f"per pixel)")
+          f"rounds, merge_first {str(args.merge_first).lower()}, light_paths {args.light_paths:g}; milliseconds per "
+          f"iteration (one sample per pixel)")
     header = ("scene", "light", "grid", "camera+conn", "merging", "vcm total", "bpt total", "path",
               "light ns/path", "ptracer ns/path", "ratio", "passes", "compiled")
     print(" | ".join(header))
     for name in args.scenes:
-        m = measure(name, args.res, args.spp, args.max_depth, args.radius, args.rounds, args.merge_first)
+        m = measure(name, args.res, args.spp, args.max_depth, args.radius, args.rounds, args.merge_first,
+                    args.light_paths)
         print(" | ".join([m["scene"], *(f"{m[k]:.2f}" for k in ("light_ms", "grid_ms", "camera_ms", "merge_ms",
                                                                  "vcm_ms", "bpt_ms", "path_ms")),
                           f"{m['light_ns_per_path']:.0f}", f"{m['ptracer_ns_per_path']:.0f}",

@@ -8,14 +8,15 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-@pytest.mark.parametrize("extra", [[], ["--merge-first"]])
+@pytest.mark.parametrize("extra", [[], ["--merge-first"], ["--light-paths", "0.25"]])
 def test_bench_vcm_quick(capsys, extra):
     spec = importlib.util.spec_from_file_location("bench_vcm", os.path.join(ROOT, "benchmarks", "bench_vcm.py"))
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     assert bench.main(["--quick", *extra]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert f"merge_first {'true' if extra else 'false'}" in lines[-3]
+    assert f"merge_first {'true' if '--merge-first' in extra else 'false'}" in lines[-3]
+    assert f"light_paths {'0.25' if '--light-paths' in extra else '1'};" in lines[-3]
     assert lines[-2].startswith("scene | light | grid | camera+conn | merging")
     row = lines[-1].split(" | ")
     assert row[0] == "cornell_box.xml" and len(row) == 13
