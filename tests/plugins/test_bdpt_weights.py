@@ -240,10 +240,8 @@ MERGE_SUBSETS = [("hit", "nee", "light", "connect", "merge"), ("merge",), ("ligh
                  ("hit", "nee", "merge"), ("connect", "merge")]
 
 
-def recursive_weights_with_merging(g, mis):
-    """``recursive_weights`` plus, for each interior vertex x_i (i = 1 .. k - 1), the weight of
-    merging a light vertex with a camera vertex there (rows k + 1 ..): the camera vertex's BSDF
-    gives both directions' densities (``to_light`` and ``to_cam`` at x_i)."""
+def merging_states(g, mis):
+    """(light, camera): each subpath's MIS state on arrival at x_i, i = 1 .. k - 1."""
     k = g["d2"].shape[0]
     d2, cl, cc, fw, rv, delta = g["d2"], g["cos_l"], g["cos_c"], g["to_cam"], g["to_light"], g["delta"]
     light, state = {}, mis.start_light(g["pos"] * fw[0], g["nee"], cc[0], delta[0])
@@ -256,6 +254,16 @@ def recursive_weights_with_merging(g, mis):
         state = mis.after_hit(state, d2[i], cc[i])
         camera[i] = state
         state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i], depth=k - i)
+    return light, camera
+
+
+def recursive_weights_with_merging(g, mis):
+    """``recursive_weights`` plus, for each interior vertex x_i (i = 1 .. k - 1), the weight of
+    merging a light vertex with a camera vertex there (rows k + 1 ..): the camera vertex's BSDF
+    gives both directions' densities (``to_light`` and ``to_cam`` at x_i)."""
+    k = g["d2"].shape[0]
+    fw, rv, delta = g["to_cam"], g["to_light"], g["delta"]
+    light, camera = merging_states(g, mis)
     # (the integrator does not merge at a camera vertex nearer the sensor than merge_from)
     merges = [np.where(delta[i] | (k - i < mis.merge_from), 0.0, mis.merge(light[i], camera[i], rv[i], fw[i]))
               for i in range(1, k)]
@@ -287,6 +295,27 @@ def test_merging_weights_equal_brute_force_and_sum_to_one(subset, beta, merge_fr
         assert np.all(got.sum(axis=0)[~reach] == 0.0)
     print(f"{'+'.join(subset)}, beta {beta}, merge_from {merge_from}: max relative error {worst:.2e}")
     assert worst < RTOL
+
+
+@pytest.mark.parametrize("subset", MERGE_SUBSETS)
+def test_no_merge_weight_exceeds_the_camera_sides_bound(subset):
+    """``merge_bound`` (merging's Russian roulette runs a merge with probability bound / 0.5) is
+    at least the merge weight with every light vertex; below 1 only where techniques with fewer
+    camera vertices (light tracing, connections) compete."""
+    lowest = 1.0
+    for k in range(2, 8):
+        g = random_paths(k, seed=500 + k)
+        mis = BdptWeights("power", 2.0, strategies=subset, light_paths=g["light_paths"], merge_area=7.0)
+        light, camera = merging_states(g, mis)
+        with np.errstate(all="ignore"):
+            for i in range(1, k):
+                weight = mis.merge(light[i], camera[i], g["to_light"][i], g["to_cam"][i])
+                bound = np.broadcast_to(mis.merge_bound(camera[i]), weight.shape)
+                ok = np.isfinite(weight)
+                assert np.all(weight[ok] <= bound[ok] * (1 + 1e-12)), (subset, k, i)
+                lowest = min(lowest, float(np.min(bound)))
+    print(f"{'+'.join(subset)}: smallest bound {lowest:.2e}")
+    assert (lowest < 1e-3) if {"light", "connect"} & set(subset) else (lowest == 1.0)
 
 
 @pytest.mark.parametrize("mistake", ["scatter_camera", "nee", "connect", "light_to_camera"])

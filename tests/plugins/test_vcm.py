@@ -143,6 +143,27 @@ def test_a_wrong_merging_normalisation_is_caught(monkeypatch):
     assert z > Z_BOUND
 
 
+def test_merging_roulette_keeps_the_estimate_where_it_skips_most_merges(monkeypatch):
+    """Merging's Russian roulette with MERGE_ROULETTE = 4 (a merge runs with probability bound / 4,
+    at most 1/4) against every merge run, the same biased estimator (r_1 = 0.1, 4 light subpaths
+    per camera subpath, merge_first: merges carry 19% of the caustic scene's light at res 24):
+    counted 1 / probability they agree, and a roulette that forgets that factor is caught (power)."""
+    from mitsuba_lab.plugins.integrators.vcm import merging
+
+    scene = load_scene(scene_path("caustic.xml"), res=RES)
+    params = {"radius": 0.1, "light_paths": 4, "merge_first": True}
+    right = merging.merge_roulette
+    monkeypatch.setattr(merging, "merge_roulette", lambda w, camera, u: (True, 1.0))
+    every = renders(scene, vcm(**params), 16, SEEDS_REF)
+    monkeypatch.setattr(merging, "merge_roulette", right)
+    monkeypatch.setattr(merging, "MERGE_ROULETTE", 4.0)
+    assert_agrees(renders(scene, vcm(**params), 16, SEEDS_LAB), every, "merges run with probability bound / 4")
+    monkeypatch.setattr(merging, "merge_roulette", lambda w, camera, u: (right(w, camera, u)[0], 1.0))
+    z = z_scores(renders(scene, vcm(**params), 16, SEEDS_LAB), every).max_abs_z
+    print(f"merges run with probability bound / 4, counted once: max |z| {z:.2f}")
+    assert z > Z_BOUND
+
+
 def test_bias_shrinks_with_the_radius():
     """bpm (merging at every camera vertex) with r_1 = 0.8 (two fifths of the Cornell box's wall) and alpha = 0.25: the blur darkens
     the image near edges and corners; after 16x the iterations the radius is 2.8x smaller

@@ -328,6 +328,11 @@ class BdptWeights:
         return self.e["light"] / (1.0 + w_light)
 
 
+    def merge_bound(self, camera: SubpathMis):
+        """An upper bound on ``merge`` at a camera vertex, whatever light vertex it merges with:
+        its weight without the terms that depend on the light vertex (all of them >= 0)."""
+        return self.e["merge"] / (1.0 + self._gated(camera, "light") * self.inv_eta)
+
     def merge(self, light: SubpathMis, camera: SubpathMis, pdf_cam_fwd, pdf_cam_rev):
         """Merging a light vertex with a camera vertex at (about) the same point x_i, neither a
         delta lobe (``light`` and ``camera``: their states after ``after_hit``). The camera

@@ -44,6 +44,9 @@ class PpmWeights(BdptWeights):
     def merge(self, light, camera, pdf_cam_fwd, pdf_cam_rev):
         return self.e["merge"]
 
+    def merge_bound(self, camera):
+        return self.e["merge"]
+
 
 class LabVCMIntegrator(LabBDPTIntegrator):
     r"""Vertex connection and merging (:monosp:`lab_vcm`)

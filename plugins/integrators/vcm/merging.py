@@ -37,6 +37,25 @@ from mitsuba_lab.plugins.integrators.photon.gather import NORMAL_COS
 from mitsuba_lab.plugins.integrators.photon.grid import cell_of, counting_sort, hash_cell, table_size_for
 
 
+#: Merging's Russian roulette: at a camera vertex whose merge weight cannot exceed a bound b
+#: (``BdptWeights.merge_bound``), the merge runs with probability min(1, b / MERGE_ROULETTE) and
+#: counts 1 / that probability, so no merge that runs carries more than MERGE_ROULETTE's share
+#: of its estimate. Unbiased; it skips the lookups of merges that MIS would mostly discard (with
+#: few light vertices per camera subpath, in diffuse scenes).
+MERGE_ROULETTE = 0.5
+
+
+def merge_roulette(weights, camera: SubpathMis, u):
+    """(whether the merge at a camera vertex with MIS state ``camera`` runs, for the uniform
+    ``u``; the factor it then counts, 1 / its probability). ``u`` None: every merge runs (no
+    technique with fewer camera vertices competes, so every bound is 1)."""
+    if u is None:
+        return True, 1.0
+    probability = dr.minimum(1.0, finite_or_zero(weights.merge_bound(camera)) * (1.0 / MERGE_ROULETTE))
+    taken = u < probability
+    return taken, dr.select(taken, dr.rcp(probability), 0.0)
+
+
 def table(values) -> mi.Float:
     """One value per iteration, in memory (a kernel reads it, whatever the values)."""
     out = mi.Float(values)
@@ -89,9 +108,10 @@ class VertexGrid:
         dr.eval(self.order, self.buckets, self.points, self.records)
 
     @dr.syntax
-    def merge(self, cp, si, bsdf, beta, mis: SubpathMis, depth, iteration, active):
+    def merge(self, cp, si, bsdf, beta, mis: SubpathMis, depth, iteration, active, u):
         """The weighted merging estimate at camera vertex ``si`` (``depth`` segments from the
-        sensor, MIS state ``mis`` after ``after_hit``, in ``iteration`` of the pass), per lane."""
+        sensor, MIS state ``mis`` after ``after_hit``, in ``iteration`` of the pass), per lane;
+        ``u`` (uniform or None) decides its Russian roulette (``merge_roulette``)."""
         w = cp.weights
         ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
         ctx = mi.BSDFContext(mi.TransportMode.Radiance)
@@ -102,9 +122,10 @@ class VertexGrid:
         # its cell's middle, on each axis
         scaled = si.p * inv_cell
         corner = mi.Vector3i(dr.floor(scaled) + dr.select(scaled - dr.floor(scaled) >= 0.5, 0.0, -1.0))
+        taken, scale = merge_roulette(w, mis, u)
         result = mi.Spectrum(0)
         k = mi.UInt32(0)
-        active = mi.Bool(active)
+        active = mi.Bool(active) & taken
         while dr.hint(active & (k < 8), label="lab_vcm merge cells"):
             cell = corner + mi.Vector3i(mi.Int32(k & 1), mi.Int32((k >> 1) & 1), mi.Int32(k >> 2))
             bucket = hash_cell(cell, self.mask, iteration)
@@ -136,4 +157,4 @@ class VertexGrid:
                     result += dr.select(cos_g > 0, f_cos * beta_y * (weight / dr.maximum(cos_g, 1e-30)), 0.0)
                 j += 1
             k += 1
-        return beta * result * dr.gather(mi.Float, self.normalisation, iteration)
+        return beta * result * (scale * dr.gather(mi.Float, self.normalisation, iteration))
