@@ -106,7 +106,11 @@ class LabVCMIntegrator(LabBDPTIntegrator):
 
     A light vertex merges with a camera vertex when within r_i, facing the same way (normals
     within ~37 degrees, as lab_photon) and when the merged path is no longer than
-    ``max_depth``. Supports what lab_bdpt supports (RGB, mono and spectral variants; spectral:
+    ``max_depth``. Where light tracing or connections compete with merging, a camera vertex's
+    merges run under a Russian roulette: their weights cannot exceed a bound b known before any
+    light vertex is read, so they run with probability min(1, 2b) and count 1 / it (unbiased;
+    it skips the lookups MIS would mostly discard, as in diffuse scenes with few light
+    vertices). Supports what lab_bdpt supports (RGB, mono and spectral variants; spectral:
     one iteration per pass). Statistics of the
     last render (``bdpt_stats()``): light, grid and camera time, the radii.
 
