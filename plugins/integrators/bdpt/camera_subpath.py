@@ -53,6 +53,7 @@ class CameraPass:
     only: tuple = ()
     light_count: int = 0                 # light subpaths of the pass (camera lane i uses i mod it)
     grid: object = None                  # lab_vcm: the light vertices' grid (``merge``), else None
+    connect_share: float = 0.0           # lab_vcm: connections' Russian roulette (``connection_roulette``)
 
 
 def sensor_constants(sensor: mi.Sensor) -> tuple[float, tuple]:
@@ -74,11 +75,25 @@ def sensor_constants(sensor: mi.Sensor) -> tuple[float, tuple]:
     return value, (float(axis.x[0]), float(axis.y[0]), float(axis.z[0]))
 
 
+def connection_roulette(value, estimate, share: float, u, slot):
+    """(whether a connection of unoccluded contribution ``value`` runs; the factor it then
+    counts): below ``share`` of the lane's ``estimate`` so far it runs with probability
+    value / (share x estimate), decided by a hash of the uniform ``u`` and the light vertex's
+    ``slot``, and counts 1 / that probability (unbiased; its shadow ray is skipped otherwise).
+    Connections that could only add a sliver to the pixel seldom pay for their shadow ray."""
+    scale = dr.max(mi.unpolarized_spectrum(estimate)) * share
+    probability = dr.select(scale > 0, dr.minimum(1.0, dr.max(mi.unpolarized_spectrum(value)) / scale), 1.0)
+    taken = mi.sample_tea_float32(dr.reinterpret_array(mi.UInt32, u), slot) < probability
+    return taken, dr.select(taken, dr.rcp(probability), 0.0)
+
+
 @dr.syntax
-def connect_to_light_subpath(scene, cp: CameraPass, si, bsdf, beta, mis: SubpathMis, depth, head, active):
+def connect_to_light_subpath(scene, cp: CameraPass, si, bsdf, beta, mis: SubpathMis, depth, head, active,
+                             estimate=None, u=None):
     """The s >= 2 strategies at camera vertex ``si`` (``depth`` segments from the sensor): the
     weighted contributions of its connections to every stored vertex of the light subpath that
-    ends at slot ``head``."""
+    ends at slot ``head``; with ``cp.connect_share`` > 0, under ``connection_roulette`` against
+    the lane's ``estimate`` so far, for the uniform ``u``."""
     w, floor = cp.weights, cp.offset_floor
     ctx = mi.BSDFContext(mi.TransportMode.Radiance)
     ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
@@ -101,6 +116,10 @@ def connect_to_light_subpath(scene, cp: CameraPass, si, bsdf, beta, mis: Subpath
                            dr.abs(dr.dot(y.n, d)), dr.abs(dr.dot(si.n, d)), dist2, depth)
         value = spectrum_or_zero(beta * f_x * f_y * beta_y * (finite_or_zero(weight) / dist2))
         use &= dr.max(mi.unpolarized_spectrum(value)) > 0
+        if dr.hint(cp.connect_share > 0, mode="scalar"):
+            taken, factor = connection_roulette(value, estimate, cp.connect_share, u, slot)
+            use &= taken
+            value *= factor
         use &= ~scene.ray_test(spawn.spawn_ray_to(si, y.p, floor), use)
         L += dr.select(use, value, 0.0)
         slot = dr.select(on, prev, NONE)
@@ -197,8 +216,9 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
 
         # ---------------- s >= 2: connections to the light subpath ----------------
         if dr.hint("connect" in w.enabled, mode="scalar"):
+            u_connect = sampler.next_1d() if cp.connect_share > 0 else None
             L += connect_to_light_subpath(scene, cp, si, bsdf, beta, mis, depth, head,
-                                          smooth & (depth + 2 <= max_depth))
+                                          smooth & (depth + 2 <= max_depth), L, u_connect)
 
         # ---------------- merging with the light vertices around (lab_vcm) ----------------
         if dr.hint(merging, mode="scalar"):

@@ -211,7 +211,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             self._pass = CameraPass(vertices, last, tracer.weights, tracer.table, inv_area, axis,
                                     self.max_depth, v["rr_depth"], v["hide_emitters"], floor,
                                     traits.hittable_emitters, only, count,
-                                    self.pass_grid(vertices, stored, plan, stats))
+                                    self.pass_grid(vertices, stored, plan, stats), self.connect_share)
             start = time.perf_counter()
             try:
                 if u is None:
@@ -240,6 +240,9 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     weights_class = None
     #: The first camera depth that merges (lab_vcm's merge_first; ``BdptWeights.merge_from``).
     merge_from = 1
+    #: Connections' Russian roulette against this share of the lane's estimate so far
+    #: (``camera_subpath.connection_roulette``); 0: every connection runs (lab_bdpt).
+    connect_share = 0.0
 
     def pass_spp_limit(self, film_pixels: int) -> int:
         """Most samples per pixel in one pass besides ``max_vertices`` (lab_vcm: a bound)."""

@@ -120,10 +120,15 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     """
     ESTIMATOR = VertexMerging
     PARAMETERS = VertexMerging.PARAMETERS
+    #: In mode vcm, a connection that would add less than this share of its lane's estimate so
+    #: far runs with probability (its share / this) (``camera_subpath.connection_roulette``;
+    #: README: the Cornell box 9% faster for 1% more variance); mode bpt keeps lab_bdpt's image.
+    CONNECT_SHARE = 0.1
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
         self.merging = "merge" in self.kinds
+        self.connect_share = self.CONNECT_SHARE if self.merging else 0.0
         if self.values["mode"] == "ppm":
             if "merge_first" in props and not self.values["merge_first"]:
                 raise ValueError("lab_vcm: mode 'ppm' merges only at the first smooth camera vertex: "
