@@ -222,8 +222,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
 
         # ---------------- merging with the light vertices around (lab_vcm) ----------------
         if dr.hint(merging, mode="scalar"):
-            # (merging's roulette draws only where its weight can fall below 1: ``merge_bound``)
-            u_merge = sampler.next_1d() if w.enabled & {"light", "connect"} else None
+            u_merge = sampler.next_1d() if w.merge_bounded else None     # (merging's roulette)
             L += cp.grid.merge(cp, si, bsdf, beta, mis, depth, iteration,
                                smooth & (depth < max_depth) & w.merges_at(depth), u_merge)
 
