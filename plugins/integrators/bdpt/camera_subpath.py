@@ -75,15 +75,17 @@ def sensor_constants(sensor: mi.Sensor) -> tuple[float, tuple]:
     return value, (float(axis.x[0]), float(axis.y[0]), float(axis.z[0]))
 
 
-def connection_roulette(value, estimate, share: float, u, slot):
+def connection_roulette(value, estimate, share: float, u, depth_y):
     """(whether a connection of unoccluded contribution ``value`` runs; the factor it then
     counts): below ``share`` of the lane's ``estimate`` so far it runs with probability
     value / (share x estimate), decided by a hash of the uniform ``u`` and the light vertex's
-    ``slot``, and counts 1 / that probability (unbiased; its shadow ray is skipped otherwise).
-    Connections that could only add a sliver to the pixel seldom pay for their shadow ray."""
+    depth ``depth_y`` (one per vertex of a light subpath; not its slot, which the light pass's
+    atomics number differently from run to run), and counts 1 / that probability (unbiased;
+    its shadow ray is skipped otherwise). Connections that could only add a sliver to the pixel
+    seldom pay for their shadow ray."""
     scale = dr.max(mi.unpolarized_spectrum(estimate)) * share
     probability = dr.select(scale > 0, dr.minimum(1.0, dr.max(mi.unpolarized_spectrum(value)) / scale), 1.0)
-    taken = mi.sample_tea_float32(dr.reinterpret_array(mi.UInt32, u), slot) < probability
+    taken = mi.sample_tea_float32(dr.reinterpret_array(mi.UInt32, u), depth_y) < probability
     return taken, dr.select(taken, dr.rcp(probability), 0.0)
 
 
@@ -117,7 +119,7 @@ def connect_to_light_subpath(scene, cp: CameraPass, si, bsdf, beta, mis: Subpath
         value = spectrum_or_zero(beta * f_x * f_y * beta_y * (finite_or_zero(weight) / dist2))
         use &= dr.max(mi.unpolarized_spectrum(value)) > 0
         if dr.hint(cp.connect_share > 0, mode="scalar"):
-            taken, factor = connection_roulette(value, estimate, cp.connect_share, u, slot)
+            taken, factor = connection_roulette(value, estimate, cp.connect_share, u, depth_y)
             use &= taken
             value *= factor
         use &= ~scene.ray_test(spawn.spawn_ray_to(si, y.p, floor), use)
@@ -222,7 +224,8 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
 
         # ---------------- merging with the light vertices around (lab_vcm) ----------------
         if dr.hint(merging, mode="scalar"):
-            u_merge = sampler.next_1d() if w.merge_bounded else None     # (merging's roulette)
+            # (merging's roulette draws only where its weight can fall below 1: ``merge_bound``)
+            u_merge = sampler.next_1d() if w.enabled & {"light", "connect"} else None
             L += cp.grid.merge(cp, si, bsdf, beta, mis, depth, iteration,
                                smooth & (depth < max_depth) & w.merges_at(depth), u_merge)
 
