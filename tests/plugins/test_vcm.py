@@ -284,6 +284,18 @@ def test_passes_hold_about_a_fixed_number_of_stored_vertices():
     assert 6 < per_path and int(PASS_LIGHT_VERTICES / per_path) // (64 * 64) == 37
 
 
+def test_below_one_light_subpath_a_pass_holds_up_to_2_20_camera_subpaths():
+    """light_paths = 1/16 on the Cornell box at 64x64: a pass's 2^18 light subpaths would serve
+    1024 iterations, so 2^20 camera subpaths (256 iterations) bound it: 512 iterations take 2
+    passes (at the 2^18 camera subpaths of before, 8). At 1/2 the light vertices bound it again
+    (2^18 subpaths / 2048 per iteration = 128 iterations)."""
+    scene = load_scene(scene_path("cornell_box.xml"), res=64)
+    for light_paths, spp, passes in ((1 / 16, 512, 2), (0.5, 256, 2)):
+        integrator = vcm(radius=0.03, light_paths=light_paths)
+        render(scene, integrator, spp=spp)
+        assert integrator.bdpt_stats()["passes"] == passes, (light_paths, integrator.bdpt_stats())
+
+
 def test_bpm_without_the_first_merge_is_left_out_where_delta_lights_shine():
     """bpm's direct light from a point light reaches what the camera sees only by merging there:
     with merge_first = false the planner leaves it out (and a render warns), with the reason;

@@ -27,10 +27,14 @@ def vcm_radius(r1: float, iteration: int, alpha: float) -> float:
 #: kernel launches, about 10 ms), but a grid larger than the caches makes merging slower. So
 #: a pass holds about PASS_LIGHT_VERTICES stored vertices, measured by the render's first pass
 #: (of FIRST_PASS_LIGHT_SUBPATHS subpaths), within [MIN, MAX]_PASS_LIGHT_SUBPATHS subpaths
-#: (``benchmarks/bench_vcm.py`` compares the pass sizes).
+#: (``benchmarks/bench_vcm.py`` compares the pass sizes). Below one light subpath per camera
+#: subpath, a pass holds at most MAX_PASS_CAMERA_LANES camera subpaths: they keep no state
+#: between vertices in memory, so a longer wavefront only saves passes (Veach's plates at
+#: light_paths 1/16: 0.88 -> 0.69 ms per sample per pixel against 2^18, README).
 PASS_LIGHT_VERTICES = 1 << 20
 FIRST_PASS_LIGHT_SUBPATHS = 1 << 18
 MIN_PASS_LIGHT_SUBPATHS, MAX_PASS_LIGHT_SUBPATHS = 1 << 14, 1 << 18
+MAX_PASS_CAMERA_LANES = 1 << 20
 
 
 class PpmWeights(BdptWeights):
@@ -160,8 +164,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         per_path = self.stats.light_vertices_stored / traced if traced else None
         subpaths = FIRST_PASS_LIGHT_SUBPATHS if per_path is None else min(
             MAX_PASS_LIGHT_SUBPATHS, max(MIN_PASS_LIGHT_SUBPATHS, int(PASS_LIGHT_VERTICES / max(per_path, 1e-3))))
-        # (below one light subpath per camera subpath, as many camera lanes: bounded wavefronts)
-        return max(1, int(subpaths / (film_pixels * max(1.0, self.values["light_paths"]))))
+        iterations = int(subpaths / (film_pixels * self.values["light_paths"]))
+        return max(1, min(iterations, MAX_PASS_CAMERA_LANES // film_pixels))
 
     def pass_light_subpaths(self, count: int, spp_pass: int, camera_lanes: int) -> int:
         """Below one light subpath per camera subpath (``light_paths`` < 1), camera lane i uses
