@@ -72,6 +72,12 @@ def config_error(text, tmp_path):
     (lambda t: t.replace("[experiment]", "[experiment]\nbogus = 1"), "experiment.bogus: expected one of the keys"),
     (lambda t: t.replace("spp = [2, 8]", ""), "experiment.spp: expected an spp ladder"),
     (lambda t: t + "\n[[oops", "not valid TOML"),
+    (lambda t: t.replace("resolution = 16", "resolution = 16\nreference = { spp = 96, chunks = 5 }"),
+     "scenes.cornell.reference.chunks: expected an integer >= 2 that divides scenes.cornell.reference.spp = 96"),
+    (lambda t: t.replace("resolution = 16", 'resolution = 16\nreference = { cache = "x" }'),
+     "scenes.cornell.reference.cache: expected one of the keys chunks, integrator, spp (unknown key)"),
+    (lambda t: t.replace("resolution = 16", "resolution = 16\nreference = { integrator = { max_depth = 3 } }"),
+     "scenes.cornell.reference.integrator.type: expected the integrator plugin name"),
 ])
 def test_config_errors_name_the_key(mutation, expected, tmp_path):
     text = mutation(TINY.format(cache=tmp_path / "cache", root=ROOT))
@@ -88,6 +94,23 @@ def test_config_defaults_and_plan_ids(tiny_config):
                    "cornell/mis/independent/spp2", "cornell/mis/independent/spp8"]
     assert build_plan(config).points == plan.points          # stable
     assert all(p.seeds == (1, 2) and p.warmup_seed == 0 for p in plan.points)
+
+
+def test_a_scene_may_have_its_own_reference(tmp_path):
+    """[scenes.X.reference] replaces what it names of [reference] for that scene (a hard region
+    whose floor needs a better estimator or more samples); the cache stays the experiment's,
+    and a sweep renders and reports that scene against it."""
+    text = TINY.format(cache=tmp_path / "cache", root=ROOT).replace(
+        "resolution = 16", 'resolution = 16\nreference = { integrator = { type = "lab_bdpt" }, spp = 32 }').replace(
+        "spp = [2, 8]", "spp = [2]")
+    (tmp_path / "own.toml").write_text(text)
+    config = load_config(str(tmp_path / "own.toml"))
+    own = config.reference_for(config.scenes[0])
+    assert (own.integrator.type, own.spp, own.chunks, own.cache) == ("lab_bdpt", 32, 4, config.reference.cache)
+    assert (config.reference.integrator.type, config.reference.spp) == ("path", 64)
+    proc = run_cli("sweep", str(tmp_path / "own.toml"), "-o", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stderr
+    assert "Reference: lab_bdpt" in (tmp_path / "out" / "report" / "summary.md").read_text()
 
 
 def test_plan_leaves_out_and_aliases():

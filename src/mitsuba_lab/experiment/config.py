@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from ..errors import LabError
 
@@ -69,20 +69,21 @@ class PluginSpec:
 
 
 @dataclass(frozen=True)
+class ReferenceSpec:
+    integrator: PluginSpec
+    spp: int
+    chunks: int
+    cache: str                      # folder, absolute
+
+
+@dataclass(frozen=True)
 class SceneSpec:
     name: str
     path: str                       # absolute
     resolution: int | None          # square film override, or None to keep the scene's
     defaults: dict                  # values for the scene's <default> parameters
     regions: dict                   # name -> (x0, y0, x1, y1): pixels (ints) or fractions (floats)
-
-
-@dataclass(frozen=True)
-class ReferenceSpec:
-    integrator: PluginSpec
-    spp: int
-    chunks: int
-    cache: str                      # folder, absolute
+    reference: ReferenceSpec | None = None      # [scenes.X.reference]; None: the experiment's
 
 
 @dataclass(frozen=True)
@@ -115,6 +116,10 @@ class Config:
     strategy_grid: StrategyGridSpec | None = None
     progressive: bool = DEFAULT_PROGRESSIVE     # one accumulating render per seed (experiment.progressive)
     checkpoints: str = "doubling"   # progressive passes: "doubling" or "ladder" (plan.ladder_passes)
+
+    def reference_for(self, scene: SceneSpec) -> ReferenceSpec:
+        """The reference ``scene`` is measured against: its own table, else the experiment's."""
+        return scene.reference or self.reference
 
 
 class TableReader:
@@ -237,7 +242,7 @@ def _scenes(reader: TableReader, base_dir: str) -> tuple[SceneSpec, ...]:
     scenes = []
     for name, _ in reader.table.items():
         item = reader.sub(name)
-        item.unknown({"path", "resolution", "defaults", "regions", "regions_file"})
+        item.unknown({"path", "resolution", "defaults", "regions", "regions_file", "reference"})
         rel = item.get("path", str, expected="the scene's XML path (relative to the config file)")
         path = os.path.normpath(os.path.join(base_dir, rel))
         if not os.path.isfile(path):
@@ -362,22 +367,16 @@ def parse_config(data: dict, source: str, base_dir: str | None = None) -> Config
 
     ref = top.sub("reference", {})
     ref.unknown({"integrator", "spp", "chunks", "cache"})
-    ref_integrator = ref.get("integrator", dict, {"type": "path"}, expected="a table like "
-                             "{ type = \"path\" }")
-    ref_plugin = _plugins(TableReader(source, {"integrator": ref_integrator}, "reference"), "integrator")[0]
-    ref_spp = ref.get("spp", int, 4096, check=lambda v: v > 0, expected="a positive integer")
-    chunks = ref.get("chunks", int, 8, check=lambda v: v >= 2 and ref_spp % v == 0,
-                     expected=f"an integer >= 2 that divides reference.spp = {ref_spp} (the noise "
-                              "floor needs two equal chunks)")
     cache = os.path.abspath(os.path.expanduser(os.environ.get("MITSUBA_LAB_CACHE") or
                                                ref.get("cache", str, DEFAULT_CACHE)))
+    reference = _reference(ref, ReferenceSpec(PluginSpec("integrator", "path"), 4096, 8, cache))
 
     executor = top.sub("executor", {})
     executor.unknown({"cluster"})
     cluster = executor.get("cluster", str, None, check=lambda v: "://" in v,
                            expected='a Dask scheduler address such as "tcp://host:8786"')
 
-    scenes = _scenes(top.sub("scenes"), base_dir)
+    scenes = _scene_references(top.sub("scenes"), _scenes(top.sub("scenes"), base_dir), reference)
     strategies = _plugins(top.sub("strategies"), "integrator")
     _check_pass_parameters(top.sub("strategies"), strategies)
     samplers = _plugins(top.sub("samplers"), "sampler") if "samplers" in data else \
@@ -389,9 +388,36 @@ def parse_config(data: dict, source: str, base_dir: str | None = None) -> Config
                   strategies=strategies, samplers=samplers, spp=spp,
                   time_budgets=tuple(sorted(set(float(b) for b in budgets))), repetitions=repetitions,
                   seed=seed, max_depth=max_depth,
-                  reference=ReferenceSpec(ref_plugin, ref_spp, chunks, cache), metrics=tuple(metrics),
+                  reference=reference, metrics=tuple(metrics),
                   cluster=cluster, strategy_grid=grid, progressive=progressive,
                   checkpoints=checkpoints)
+
+
+def _reference(ref: TableReader, default: ReferenceSpec) -> ReferenceSpec:
+    """``[reference]`` (or a scene's ``reference`` table; its cache is the experiment's): what
+    it leaves out is ``default``'s."""
+    integrator = ref.get("integrator", dict, None, expected="a table like { type = \"path\" }")
+    plugin = default.integrator if integrator is None else \
+        _plugins(TableReader(ref.source, {"integrator": integrator}, ref.path), "integrator")[0]
+    spp = ref.get("spp", int, default.spp, check=lambda v: v > 0, expected="a positive integer")
+    chunks = ref.get("chunks", int, default.chunks, check=lambda v: v >= 2 and spp % v == 0,
+                     expected=f"an integer >= 2 that divides {ref.key('spp')} = {spp} (the noise "
+                              "floor needs two equal chunks)")
+    return ReferenceSpec(plugin, spp, chunks, default.cache)
+
+
+def _scene_references(reader: TableReader, scenes, default: ReferenceSpec) -> tuple[SceneSpec, ...]:
+    """``scenes`` with their own ``reference`` tables (integrator, spp, chunks; the rest from
+    ``[reference]``), for a scene whose hard region needs a lower noise floor than the others."""
+    out = []
+    for scene in scenes:
+        item = reader.sub(scene.name)
+        if "reference" in item.table:
+            ref = item.sub("reference")
+            ref.unknown({"integrator", "spp", "chunks"})
+            scene = replace(scene, reference=_reference(ref, default))
+        out.append(scene)
+    return tuple(out)
 
 
 def with_depth(spec: PluginSpec, max_depth: int | None) -> PluginSpec:

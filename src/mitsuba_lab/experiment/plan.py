@@ -180,6 +180,6 @@ def estimated_seconds(plan: Plan, config: Config, rates: dict[str, float], pixel
             renders = len(point.seeds) + 1
             total += renders * (point.budget_s if point.spp is None else px * point.spp / rate)
         if scene.name not in cached_references:
-            total += px * config.reference.spp / rate
+            total += px * config.reference_for(scene).spp / rate
         seconds[scene.name] = total
     return seconds

@@ -118,7 +118,7 @@ class SweepRunner:
         return counts
 
     def reference(self, scene: SceneSpec) -> Reference:
-        spec = self.config.reference
+        spec = self.config.reference_for(scene)
         integrator = with_depth(spec.integrator, self.config.max_depth)
         self.progress("reference", scene=scene.name)
         ref, cached = get_reference(scene.path, scene.resolution, scene.defaults, integrator, spec.spp,

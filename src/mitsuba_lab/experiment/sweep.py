@@ -48,7 +48,7 @@ def pilot_rates(config) -> tuple[dict, dict]:
     rates, pixels = {}, {}
     for scene in config.scenes:
         scene_obj = load_scene_variant(scene.path, scene.resolution, None, scene.defaults)
-        spec = with_depth(config.reference.integrator, config.max_depth)
+        spec = with_depth(config.reference_for(scene).integrator, config.max_depth)
         integrator = make_integrator(spec.type, spec.params)
         render(scene_obj, integrator, spp=2, seed=0)
         image, stats = render(scene_obj, integrator, spp=2, seed=1)
@@ -101,10 +101,10 @@ def print_dry_run(config, plan, out) -> None:
     rates, pixels = pilot_rates(config)
     cached = set()
     for scene in config.scenes:
-        spec = with_depth(config.reference.integrator, config.max_depth)
-        key = reference_key(scene.path, scene.resolution, scene.defaults, spec, config.reference.spp,
-                            config.reference.chunks)
-        if load_cached(config.reference.cache, key):
+        ref = config.reference_for(scene)
+        key = reference_key(scene.path, scene.resolution, scene.defaults, with_depth(ref.integrator, config.max_depth),
+                            ref.spp, ref.chunks)
+        if load_cached(ref.cache, key):
             cached.add(scene.name)
     seconds = estimated_seconds(plan, config, rates, pixels, cached)
     for name, s in seconds.items():

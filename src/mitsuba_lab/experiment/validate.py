@@ -49,8 +49,10 @@ def validate(config: Config) -> None:
     for strategy in config.strategies:
         spec = sample_count_plugin(with_depth(strategy, config.max_depth), 1)[0]
         attempt(f"strategies.{strategy.name}", lambda spec=spec: make_integrator(spec.type, spec.params))
-    ref = with_depth(config.reference.integrator, config.max_depth)
-    attempt("reference.integrator", lambda: make_integrator(ref.type, ref.params))
+    for key, spec in [("reference", config.reference)] + [(f"scenes.{s.name}.reference", s.reference)
+                                                          for s in config.scenes if s.reference]:
+        ref = with_depth(spec.integrator, config.max_depth)
+        attempt(f"{key}.integrator", lambda ref=ref: make_integrator(ref.type, ref.params))
     usable = [s for s in config.samplers
               if attempt(f"samplers.{s.name}", lambda s=s: make_sampler(s.type, s.params))]
     for scene in config.scenes:
