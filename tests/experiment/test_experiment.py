@@ -111,6 +111,10 @@ def test_a_scene_may_have_its_own_reference(tmp_path):
     proc = run_cli("sweep", str(tmp_path / "own.toml"), "-o", str(tmp_path / "out"))
     assert proc.returncode == 0, proc.stderr
     assert "Reference: lab_bdpt" in (tmp_path / "out" / "report" / "summary.md").read_text()
+    (tmp_path / "bad.toml").write_text(text.replace('type = "lab_bdpt"', 'type = "lab_nope"'))
+    bad = run_cli("sweep", str(tmp_path / "bad.toml"), "-o", str(tmp_path / "bad"))
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
+    assert "scenes.cornell.reference.integrator" in bad.stderr and "lab_nope" in bad.stderr, bad.stderr
 
 
 def test_plan_leaves_out_and_aliases():
