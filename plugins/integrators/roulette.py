@@ -47,6 +47,13 @@ def rr_scale(q):
     return dr.select(q > 0, dr.rcp(q), 0.0)
 
 
+def kept(probability, u):
+    """(whether a sample kept with ``probability`` survives the uniform ``u``; the factor it then
+    counts: 1 / probability, else 0), so that its expectation is unchanged."""
+    taken = u < probability
+    return taken, dr.select(taken, rr_scale(probability), 0.0)
+
+
 def russian_roulette(beta, u, rr_active, eta=None, start=None):
     """(beta, survives) after Russian roulette with the uniform sample ``u``.
 

@@ -25,7 +25,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators import spawn
 from mitsuba_lab.plugins.integrators.direct import finite_or_zero as spectrum_or_zero
-from mitsuba_lab.plugins.integrators.roulette import russian_roulette
+from mitsuba_lab.plugins.integrators.roulette import kept, russian_roulette
 
 from .endpoints import EmitterTable, nee_density
 from .light_subpath import carried, finite_or_zero, reverse_pdf, strategy_mask, transported
@@ -85,8 +85,7 @@ def connection_roulette(value, estimate, share: float, u, depth_y):
     seldom pay for their shadow ray."""
     scale = dr.max(mi.unpolarized_spectrum(estimate)) * share
     probability = dr.select(scale > 0, dr.minimum(1.0, dr.max(mi.unpolarized_spectrum(value)) / scale), 1.0)
-    taken = mi.sample_tea_float32(dr.reinterpret_array(mi.UInt32, u), depth_y) < probability
-    return taken, dr.select(taken, dr.rcp(probability), 0.0)
+    return kept(probability, mi.sample_tea_float32(dr.reinterpret_array(mi.UInt32, u), depth_y))
 
 
 @dr.syntax
@@ -224,8 +223,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
 
         # ---------------- merging with the light vertices around (lab_vcm) ----------------
         if dr.hint(merging, mode="scalar"):
-            # (merging's roulette draws only where its weight can fall below 1: ``merge_bound``)
-            u_merge = sampler.next_1d() if w.enabled & {"light", "connect"} else None
+            u_merge = sampler.next_1d() if w.merge_bounded else None     # (merging's roulette)
             L += cp.grid.merge(cp, si, bsdf, beta, mis, depth, iteration,
                                smooth & (depth < max_depth) & w.merges_at(depth), u_merge)
 

@@ -328,6 +328,12 @@ class BdptWeights:
         return self.e["light"] / (1.0 + w_light)
 
 
+    @property
+    def merge_bounded(self) -> bool:
+        """Whether ``merge_bound`` can fall below 1: only light tracing and connections put
+        terms into the camera side's sum (else merging's roulette has nothing to skip)."""
+        return bool(self.enabled & {"light", "connect"})
+
     def merge_bound(self, camera: SubpathMis):
         """An upper bound on ``merge`` at a camera vertex, whatever light vertex it merges with:
         its weight without the terms that depend on the light vertex (all of them >= 0)."""

@@ -29,8 +29,8 @@ def vcm_radius(r1: float, iteration: int, alpha: float) -> float:
 #: (of FIRST_PASS_LIGHT_SUBPATHS subpaths), within [MIN, MAX]_PASS_LIGHT_SUBPATHS subpaths
 #: (``benchmarks/bench_vcm.py`` compares the pass sizes). Below one light subpath per camera
 #: subpath, a pass holds at most MAX_PASS_CAMERA_LANES camera subpaths: they keep no state
-#: between vertices in memory, so a longer wavefront only saves passes (Veach's plates at
-#: light_paths 1/16: 0.88 -> 0.69 ms per sample per pixel against 2^18, README).
+#: between vertices in memory, so a longer wavefront only saves passes (README: Veach's plates
+#: at light_paths 1/16).
 PASS_LIGHT_VERTICES = 1 << 20
 FIRST_PASS_LIGHT_SUBPATHS = 1 << 18
 MIN_PASS_LIGHT_SUBPATHS, MAX_PASS_LIGHT_SUBPATHS = 1 << 14, 1 << 18
@@ -46,9 +46,6 @@ class PpmWeights(BdptWeights):
         return self.e["hit"]
 
     def merge(self, light, camera, pdf_cam_fwd, pdf_cam_rev):
-        return self.e["merge"]
-
-    def merge_bound(self, camera):
         return self.e["merge"]
 
 

@@ -35,6 +35,7 @@ from mitsuba_lab.plugins.integrators.bdpt.vertices import (POINT, POINT_WIDTH, R
 from mitsuba_lab.plugins.integrators.bdpt.weights import SubpathMis
 from mitsuba_lab.plugins.integrators.photon.gather import NORMAL_COS
 from mitsuba_lab.plugins.integrators.photon.grid import cell_of, counting_sort, hash_cell, table_size_for
+from mitsuba_lab.plugins.integrators.roulette import kept
 
 
 #: Merging's Russian roulette: at a camera vertex whose merge weight cannot exceed a bound b
@@ -51,9 +52,7 @@ def merge_roulette(weights, camera: SubpathMis, u):
     technique with fewer camera vertices competes, so every bound is 1)."""
     if u is None:
         return True, 1.0
-    probability = dr.minimum(1.0, finite_or_zero(weights.merge_bound(camera)) * (1.0 / MERGE_ROULETTE))
-    taken = u < probability
-    return taken, dr.select(taken, dr.rcp(probability), 0.0)
+    return kept(dr.minimum(1.0, finite_or_zero(weights.merge_bound(camera)) * (1.0 / MERGE_ROULETTE)), u)
 
 
 def table(values) -> mi.Float:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from ..errors import LabError
 
@@ -238,7 +238,9 @@ def _regions(reader: TableReader, base_dir: str) -> dict:
     return regions
 
 
-def _scenes(reader: TableReader, base_dir: str) -> tuple[SceneSpec, ...]:
+def _scenes(reader: TableReader, base_dir: str, reference: ReferenceSpec) -> tuple[SceneSpec, ...]:
+    """``[scenes]``; a scene's own ``reference`` table (integrator, spp, chunks) replaces what it
+    names of ``reference`` (``[reference]``), for a hard region that needs a lower noise floor."""
     scenes = []
     for name, _ in reader.table.items():
         item = reader.sub(name)
@@ -249,7 +251,12 @@ def _scenes(reader: TableReader, base_dir: str) -> tuple[SceneSpec, ...]:
             item.fail("path", f"an existing scene file, but {path} does not exist")
         resolution = item.get("resolution", int, None, check=lambda v: v > 0, expected="a positive integer")
         defaults = item.sub("defaults", {}).table
-        scenes.append(SceneSpec(name, path, resolution, dict(defaults), _regions(item, base_dir)))
+        own = None
+        if "reference" in item.table:
+            table = item.sub("reference")
+            table.unknown({"integrator", "spp", "chunks"})
+            own = _reference(table, reference)
+        scenes.append(SceneSpec(name, path, resolution, dict(defaults), _regions(item, base_dir), own))
     if not scenes:
         reader.fail("", "at least one scene")
     return tuple(scenes)
@@ -376,7 +383,7 @@ def parse_config(data: dict, source: str, base_dir: str | None = None) -> Config
     cluster = executor.get("cluster", str, None, check=lambda v: "://" in v,
                            expected='a Dask scheduler address such as "tcp://host:8786"')
 
-    scenes = _scene_references(top.sub("scenes"), _scenes(top.sub("scenes"), base_dir), reference)
+    scenes = _scenes(top.sub("scenes"), base_dir, reference)
     strategies = _plugins(top.sub("strategies"), "integrator")
     _check_pass_parameters(top.sub("strategies"), strategies)
     samplers = _plugins(top.sub("samplers"), "sampler") if "samplers" in data else \
@@ -404,20 +411,6 @@ def _reference(ref: TableReader, default: ReferenceSpec) -> ReferenceSpec:
                      expected=f"an integer >= 2 that divides {ref.key('spp')} = {spp} (the noise "
                               "floor needs two equal chunks)")
     return ReferenceSpec(plugin, spp, chunks, default.cache)
-
-
-def _scene_references(reader: TableReader, scenes, default: ReferenceSpec) -> tuple[SceneSpec, ...]:
-    """``scenes`` with their own ``reference`` tables (integrator, spp, chunks; the rest from
-    ``[reference]``), for a scene whose hard region needs a lower noise floor than the others."""
-    out = []
-    for scene in scenes:
-        item = reader.sub(scene.name)
-        if "reference" in item.table:
-            ref = item.sub("reference")
-            ref.unknown({"integrator", "spp", "chunks"})
-            scene = replace(scene, reference=_reference(ref, default))
-        out.append(scene)
-    return tuple(out)
 
 
 def with_depth(spec: PluginSpec, max_depth: int | None) -> PluginSpec:
