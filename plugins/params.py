@@ -220,6 +220,9 @@ VCM_MODES = {
     "pt": ("hit", "nee"),                    # camera side only: lab_mis's estimator
 }
 
+#: Density-estimation kernels (``integrators/kernels.py``), lab_vcm's ``kernel``.
+KERNELS = ("epanechnikov", "constant")
+
 #: lab_vcm (vertex connection and merging).
 LAB_VCM = (
     Param("mode", str, "vcm", "which techniques: vcm (all), bpt (connections: lab_bdpt), bpm (merging), "
@@ -233,6 +236,9 @@ LAB_VCM = (
     Param("light_paths", float, 1.0, "light subpaths traced per camera subpath in each iteration: all of "
           "them merge and splat; camera subpath i connects to light subpath i (below 1: i mod N, shared)",
           check=lambda v: 1.0 / 64 <= v <= 64, expected="a number in [1/64, 64]"),
+    Param("kernel", str, "epanechnikov", "merging's density kernel over the disc of radius r_i: epanechnikov "
+          "(2 / pi) (1 - d^2 / r^2) / r^2, as lab_photon (2/3 the blur's bias, 4/3 the variance), or constant "
+          "1 / (pi r^2), as SmallVCM", choices=KERNELS),
     Param("merge_first", bool, False, "merge at the camera's first vertex too (modes vcm and bpm; Georgiev's "
           "VCM); false leaves the light arriving there to light tracing, NEE and connections, and that merge "
           "out of every MIS sum (ppm always merges there)"),

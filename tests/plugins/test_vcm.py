@@ -9,9 +9,11 @@
   fails it (power). The same with and without ``merge_first`` (merging at the camera's first
   vertex, Georgiev et al.'s VCM, or not: lab_vcm's default).
 * Consistency: with a large first radius the bias is plain (blur at the box's edges and
-  corners) and shrinks as the radius shrinks with the iterations.
+  corners) and shrinks as the radius shrinks with the iterations; the Epanechnikov kernel (the
+  default) blurs less than the constant one at the same radius, and both agree with `path`.
 * No NaN, Inf or negative pixel on the stiff scenes; bad parameters are one line.
 """
+import functools
 import os
 
 import drjit as dr
@@ -80,6 +82,15 @@ def test_merging_agrees_with_mitsuba_path(name, mode, merge_first):
 
 
 @pytest.mark.parametrize("name", ["cornell_box.xml", "caustic.xml"])
+def test_the_constant_kernel_agrees_with_mitsuba_path(name):
+    """kernel = constant (SmallVCM's 1 / (pi r^2)) in bpm, merging at every camera vertex, where
+    merging carries most of the image; the default Epanechnikov kernel is every other test's."""
+    scene = load_scene(scene_path(name), res=RES)
+    lab = renders(scene, vcm(mode="bpm", radius=SMALL_RADIUS, merge_first=True, kernel="constant"), 16, SEEDS_LAB)
+    assert_agrees(lab, path_stack(scene), f"lab_vcm bpm, constant kernel, on {name}")
+
+
+@pytest.mark.parametrize("name", ["cornell_box.xml", "caustic.xml"])
 def test_more_light_paths_agree_with_mitsuba_path(name):
     """light_paths = 4: four light subpaths per camera subpath in each iteration, all merged with
     (merging density pi r^2 N with N four times larger) and all splatting."""
@@ -123,8 +134,8 @@ def test_a_camera_lane_connects_to_a_light_subpath_of_its_own_iteration(pixels, 
 
 def test_a_wrong_merging_normalisation_is_caught(monkeypatch):
     """Power: merges 10% too bright (bpm merging at every camera vertex, where merging carries most
-    of the image; 32
-    iterations x 16 seeds) fail. (3% at 16 iterations gave |z| 1.9: bpm's noise at r_1 = 0.02
+    of the image; 64 iterations x 16 seeds: |z| 5.1 at 32 with the Epanechnikov kernel's 4/3
+    the variance) fail. (3% at 16 iterations gave |z| 1.9: bpm's noise at r_1 = 0.02
     hides it; lab_bdpt's test catches 3% in the connection weights.)"""
     from mitsuba_lab.plugins.integrators.vcm import merging
 
@@ -137,7 +148,7 @@ def test_a_wrong_merging_normalisation_is_caught(monkeypatch):
         self.normalisation = self.normalisation * 1.10
 
     monkeypatch.setattr(merging.VertexGrid, "__init__", brighter)
-    wrong = renders(scene, vcm(mode="bpm", radius=SMALL_RADIUS, merge_first=True), 32, SEEDS_LAB)
+    wrong = renders(scene, vcm(mode="bpm", radius=SMALL_RADIUS, merge_first=True), 64, SEEDS_LAB)
     z = z_scores(wrong, ref).max_abs_z
     print(f"merges x 1.10: max |z| {z:.2f}")
     assert z > Z_BOUND
@@ -193,22 +204,41 @@ def test_a_seed_renders_the_same_image_twice(name):
     np.testing.assert_allclose(first, second, rtol=1e-5, atol=1e-6)
 
 
-def test_bias_shrinks_with_the_radius():
-    """bpm (merging at every camera vertex) with r_1 = 0.8 (two fifths of the Cornell box's wall) and alpha = 0.25: the blur darkens
-    the image near edges and corners; after 16x the iterations the radius is 2.8x smaller
-    (r_i = r_1 i^((alpha - 1) / 2)) and so is the darkening, beyond 3 standard errors."""
+@functools.lru_cache(maxsize=None)
+def blur_bias(iterations: int, seeds: int, kernel: str = "epanechnikov"):
+    """Each seed's relative bias of the image mean for bpm (merging at every camera vertex) with
+    r_1 = 0.8 (two fifths of the Cornell box's wall) and alpha = 0.25 on the box at 16x16,
+    against a 4096-spp `path` mean: the blur darkens edges and corners."""
     scene = load_scene(scene_path("cornell_box.xml"), res=16)
-    ref = renders(scene, make_integrator("path", {"max_depth": MAX_DEPTH}), 1024, range(1000, 1004))
-    ref_mean = ref[..., :3].mean()
-    bias = {}
-    for n, seeds in ((16, 48), (256, 12)):
-        lab = renders(scene, vcm(mode="bpm", radius=0.8, alpha=0.25, merge_first=True), n, range(seeds))[..., :3]
-        means = lab.mean(axis=(1, 2, 3)) / ref_mean - 1.0
-        bias[n] = (means.mean(), means.std(ddof=1) / np.sqrt(len(means)))
-        print(f"{n} iterations: relative bias {bias[n][0]:+.4f} +- {bias[n][1]:.4f}")
-    (b16, s16), (b256, s256) = bias[16], bias[256]
+    ref_mean = renders(scene, make_integrator("path", {"max_depth": MAX_DEPTH}), 1024, range(1000, 1004))[..., :3].mean()
+    lab = renders(scene, vcm(mode="bpm", radius=0.8, alpha=0.25, merge_first=True, kernel=kernel), iterations,
+                  range(seeds))[..., :3]
+    means = lab.mean(axis=(1, 2, 3)) / ref_mean - 1.0
+    print(f"{kernel}, {iterations} iterations: relative bias %+.4f +- %.4f" % mean_and_error(means))
+    return means
+
+
+def mean_and_error(values):
+    return values.mean(), values.std(ddof=1) / np.sqrt(len(values))
+
+
+def test_bias_shrinks_with_the_radius():
+    """After 16x the iterations the radius is 2.8x smaller (r_i = r_1 i^((alpha - 1) / 2)) and
+    so is the blur's darkening, beyond 3 standard errors."""
+    (b16, s16), (b256, s256) = mean_and_error(blur_bias(16, 48)), mean_and_error(blur_bias(256, 12))
     assert b16 < -3 * s16                                  # plainly biased at first
     assert abs(b256) < abs(b16) - 3 * np.hypot(s16, s256)  # and much less so later
+
+
+def test_the_epanechnikov_kernel_blurs_less_than_the_constant_one():
+    """At the same radius, iterations and seeds (the same light and camera subpaths, so the
+    difference is paired) both kernels darken the image, Epanechnikov's less (its second moment
+    r^2 / 3 against the disc's r^2 / 2), by more than 3 standard errors of the difference."""
+    epanechnikov, constant = blur_bias(16, 48), blur_bias(16, 48, "constant")
+    (bc, sc), (d, sd) = mean_and_error(constant), mean_and_error(epanechnikov - constant)
+    print(f"Epanechnikov - constant: {d:+.4f} +- {sd:.4f}")
+    assert bc < -3 * sc
+    assert d > 3 * sd
 
 
 STIFF = sorted(f for f in os.listdir(os.path.join(ROOT, "scenes", "stiff")) if f.endswith(".xml"))

@@ -52,6 +52,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators import direct, spawn
 from mitsuba_lab.plugins.integrators.counters import RayCounters
+from mitsuba_lab.plugins.integrators.kernels import kernel
 from mitsuba_lab.plugins.integrators.mis import MIS
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 
@@ -59,7 +60,6 @@ from .grid import NEIGHBOURS, PhotonGrid, cell_of, hash_cell, neighbour_cell
 
 #: Photons whose geometric normal is more than ~37 degrees off x's are rejected.
 NORMAL_COS = 0.8
-KERNEL_NORM = 2.0 / dr.pi
 #: Direct light in ``direct = nee`` mode: one emitter sample and one BSDF sample, power heuristic.
 DIRECT_MIS = MIS({"heuristic": "power", "beta": 2.0, "emitter_samples": 1})
 #: BSDFContext type mask of the delta lobes alone (null pass-through, delta reflection and
@@ -96,9 +96,9 @@ def density_estimate(grid: PhotonGrid, si: mi.SurfaceInteraction3f, bsdf: mi.BSD
             wi_world = dr.gather(mi.Vector3f, rec.wi, j, ok)
             f_cos = bsdf.eval(ctx, si, si.to_local(wi_world), ok)       # f |wi . n_s|
             cos_g = dr.abs(dr.dot(wi_world, n_p))                      # the flux's |wi . n_g|
-            kernel = KERNEL_NORM * (1.0 - dist2 * inv_r2)
+            weight = kernel("epanechnikov", dist2 * inv_r2)
             power = dr.gather(mi.Spectrum, rec.power, j, ok)
-            result += dr.select(ok & (cos_g > 0), f_cos * power * (kernel / dr.maximum(cos_g, 1e-30)), 0.0)
+            result += dr.select(ok & (cos_g > 0), f_cos * power * (weight / dr.maximum(cos_g, 1e-30)), 0.0)
             j += 1
         k += 1
     return result * inv_r2

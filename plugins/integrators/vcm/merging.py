@@ -2,16 +2,20 @@
 
 Merging a camera vertex x (smooth BSDF, camera throughput beta) with the light vertices y
 within radius r of it, out of the N light subpaths of its iteration, estimates the light x
-reflects towards the camera as a density estimate with the constant kernel 1 / (pi r^2)
-(Georgiev et al. 2012; SmallVCM's normalisation):
+reflects towards the camera as a kernel density estimate (Georgiev et al. 2012; SmallVCM's
+normalisation, with a kernel K of ``kernels``):
 
-    L += beta / (pi r^2 N) * sum_y w_merge f(x, wo, wi_y) (|wi_y . n_s| / |wi_y . n_y|) beta_y
+    L += beta / (r^2 N) * sum_y w_merge K(|x - y| / r) f(x, wo, wi_y) (|wi_y . n_s| / |wi_y . n_y|) beta_y
 
 beta_y is the light subpath's throughput on arrival at y (its flux over the subpath's density:
 a photon's power times N); f |wi_y . n_s| is Mitsuba's ``BSDF.eval`` at x with the light
 vertex's incoming direction, divided by y's geometric cosine as ``lab_photon`` does (the flux
-is per unit of geometric area). The kernel is constant so that its density is the pi r^2 of
-the MIS weights (``weights.BdptWeights.merge``, merge_area = pi r^2 N). A light vertex counts
+is per unit of geometric area). The MIS weights count merging with the disc's area, density
+pi r^2 N (``weights.BdptWeights.merge``), whatever the kernel: the constant kernel 1 / pi is
+that density exactly (SmallVCM); any kernel that integrates to 1 gives the same expected
+estimate as r shrinks, so the weights of every technique of a path still sum to 1 in the
+limit, which is all consistency asks, and the Epanechnikov kernel (lab_vcm's default) blurs
+less for finite r (``kernels``). A light vertex counts
 only when its normal is within ``NORMAL_COS`` of x's (not the far side of a thin wall) and the
 merged path, light depth + camera depth segments, is no longer than ``max_depth``.
 
@@ -24,8 +28,6 @@ still walk each lane's list.
 """
 from __future__ import annotations
 
-import math
-
 import drjit as dr
 import mitsuba as mi
 
@@ -33,6 +35,7 @@ from mitsuba_lab.plugins.integrators.bdpt.light_subpath import finite_or_zero, r
 from mitsuba_lab.plugins.integrators.bdpt.vertices import (POINT, POINT_WIDTH, RECORD, RECORD_WIDTH, read,
                                                            spectrum_at, unbits, vector)
 from mitsuba_lab.plugins.integrators.bdpt.weights import SubpathMis
+from mitsuba_lab.plugins.integrators.kernels import kernel
 from mitsuba_lab.plugins.integrators.photon.gather import NORMAL_COS
 from mitsuba_lab.plugins.integrators.photon.grid import cell_of, counting_sort, hash_cell, table_size_for
 from mitsuba_lab.plugins.integrators.roulette import kept
@@ -66,23 +69,25 @@ class VertexGrid:
     """The first ``count`` vertices of a ``LightVertices`` buffer, bucketed per iteration.
 
     ``radii``: each iteration's merging radius; ``light_subpaths``: N_k, each iteration's light
-    subpaths (the estimate's normalisation). Per-iteration values are opaque arrays, so another
-    radius or pass size reuses the compiled camera kernel."""
+    subpaths (the estimate's normalisation); ``kernel``: the density kernel's name
+    (``kernels``). Per-iteration values are opaque arrays, so another radius or pass size
+    reuses the compiled camera kernel."""
 
     #: Merge at the first camera vertex with a smooth lobe only, then follow delta lobes alone
     #: (lab_vcm's ppm mode; set by the integrator).
     first_only = False
 
-    def __init__(self, vertices, count: int, radii, light_subpaths: int):
+    def __init__(self, vertices, count: int, radii, light_subpaths: int, kernel: str = "epanechnikov"):
         if not all(r > 0 for r in radii):
             raise ValueError(f"lab_vcm: merging radii must be > 0, got {list(radii)}")
         self.vertices = vertices
         self.count = count
         self.radii = [float(r) for r in radii]
+        self.kernel = kernel
         size = table_size_for(2 * count)       # (>= 4 buckets per vertex: fewer foreign ones per query)
         self.inv_cell_size = table([1.0 / (2.0 * r) for r in self.radii])     # cells of 2r: 8 per query
         self.radius2 = table([r * r for r in self.radii])
-        self.normalisation = table([1.0 / (math.pi * r * r * n) for r, n in zip(self.radii, light_subpaths)])
+        self.normalisation = table([1.0 / (r * r * n) for r, n in zip(self.radii, light_subpaths)])
         self.mask = dr.opaque(mi.UInt32, size - 1)
         if count == 0:                 # (every bucket empty: no merge reads a vertex)
             self.buckets, self.order = dr.zeros(mi.UInt32, 2 * size), mi.UInt32(0)
@@ -138,7 +143,8 @@ class VertexGrid:
                 slot = mi.UInt32(j)
                 point = read(self.points, POINT_WIDTH, slot)
                 p, n_y = vector(point, POINT["p"], mi.Point3f), vector(point, POINT["n"], mi.Normal3f)
-                ok = (dr.squared_norm(p - si.p) < radius2) & (dr.dot(n_y, si.n) > NORMAL_COS)
+                d2 = dr.squared_norm(p - si.p)
+                ok = (d2 < radius2) & (dr.dot(n_y, si.n) > NORMAL_COS)
                 ok &= dr.all(cell_of(p, inv_cell) == cell) & (unbits(point[POINT["iteration"]]) == iteration)
                 depth_y = unbits(point[POINT["depth"]])
                 ok &= depth_y + depth <= max_depth
@@ -150,7 +156,7 @@ class VertexGrid:
                     pdf_rev = reverse_pdf(bsdf, ctx_imp, si, wi, ok)
                     light = SubpathMis(record[RECORD["dvcm"]], record[RECORD["dvc"]],
                                        dr.select(depth_y == 1, 1.0, 0.0), record[RECORD["dvm"]])
-                    weight = finite_or_zero(w.merge(light, mis, pdf_fwd, pdf_rev))
+                    weight = finite_or_zero(w.merge(light, mis, pdf_fwd, pdf_rev)) * kernel(self.kernel, d2 / radius2)
                     cos_g = dr.abs(dr.dot(wi_world, n_y))
                     beta_y = spectrum_at(record, RECORD["beta"])
                     result += dr.select(cos_g > 0, f_cos * beta_y * (weight / dr.maximum(cos_g, 1e-30)), 0.0)
