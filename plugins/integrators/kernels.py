@@ -6,16 +6,14 @@ K(t) / r^2 with t = d / r, and integrates to 1 over the disc: int_0^1 K(t) 2 pi 
 
 * ``epanechnikov``: K(t) = (2 / pi) (1 - t^2). Its second moment int t^2 K is 1/3 of the
   disc's r^2, against 1/2 for the constant kernel, so where the light varies smoothly its blur
-  costs 2/3 the bias (4/9 the bias^2; less of a gain at edges and corners); its int K^2 is 4 / (3 pi) against 1 / pi, so 4/3 the variance for
-  the same light vertices (Silverman 1986, table 3.1, in two dimensions).
+  costs 2/3 the bias (4/9 the bias^2; less of a gain at edges and corners); its int K^2 is
+  4 / (3 pi) against 1 / pi, so 4/3 the variance for the same light vertices (Silverman 1986, table 3.1, in two dimensions).
 * ``constant``: K(t) = 1 / pi, the disc's area (Jensen's photon map; Georgiev et al.'s VCM and
   SmallVCM).
 """
 from __future__ import annotations
 
 import drjit as dr
-
-from mitsuba_lab.plugins.params import KERNELS  # noqa: F401 (the names, declared with the parameters)
 
 
 def kernel(name: str, t2):
@@ -24,4 +22,4 @@ def kernel(name: str, t2):
         return (2.0 / dr.pi) * (1.0 - t2)
     if name == "constant":
         return dr.full(type(t2), 1.0 / dr.pi, dr.width(t2))
-    raise ValueError(f"unknown kernel {name!r}")
+    raise ValueError(f"unknown kernel {name!r}")     # (``params.KERNELS`` lists the names)

@@ -122,6 +122,7 @@ class VertexGrid:
         max_depth = dr.opaque(mi.UInt32, cp.max_depth)
         inv_cell = dr.gather(mi.Float, self.inv_cell_size, iteration)
         radius2 = dr.gather(mi.Float, self.radius2, iteration)
+        inv_radius2 = dr.rcp(radius2)
         # the disc of radius r around x lies in the 2 x 2 x 2 cells of size 2r on x's side of
         # its cell's middle, on each axis
         scaled = si.p * inv_cell
@@ -156,7 +157,7 @@ class VertexGrid:
                     pdf_rev = reverse_pdf(bsdf, ctx_imp, si, wi, ok)
                     light = SubpathMis(record[RECORD["dvcm"]], record[RECORD["dvc"]],
                                        dr.select(depth_y == 1, 1.0, 0.0), record[RECORD["dvm"]])
-                    weight = finite_or_zero(w.merge(light, mis, pdf_fwd, pdf_rev)) * kernel(self.kernel, d2 / radius2)
+                    weight = finite_or_zero(w.merge(light, mis, pdf_fwd, pdf_rev)) * kernel(self.kernel, d2 * inv_radius2)
                     cos_g = dr.abs(dr.dot(wi_world, n_y))
                     beta_y = spectrum_at(record, RECORD["beta"])
                     result += dr.select(cos_g > 0, f_cos * beta_y * (weight / dr.maximum(cos_g, 1e-30)), 0.0)
