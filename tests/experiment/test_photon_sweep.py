@@ -110,6 +110,26 @@ def test_region_at_budgets_gives_the_equal_time_ratio_to_the_best():
     assert cells["mis"]["x_best"] == pytest.approx(0.05 * 2.0 / (0.005 * 2.5))
 
 
+
+def test_region_at_budgets_gives_the_ratio_one_standard_error_either_way():
+    """Relative standard errors 10% (mis) and 20% (ph, the best) combine on the ratio's log:
+    sqrt(0.1^2 + 0.2^2) = 0.224, so the ratio 8 reads 8 exp(-0.224) = 6.40 to 10.0; a single
+    seed (no standard error) gives no range."""
+    def region(rel, se):
+        return {"caustic": {"rel_mse": rel, "mse": 0.0, "rel_mse_se": se}}
+    points = [stats(100, 0, 0, budget=2.0, strategy="mis", regions=region(0.041, 0.004), time_s=2.0),
+              stats(10, 0, 0, budget=2.0, strategy="ph", regions=region(0.006, 0.001), time_s=2.0)]
+    cells = region_at_budgets(points, lambda p: p.strategy, "caustic", rel_floor=0.001)[2.0]
+    assert cells["mis"]["x_best"] == pytest.approx(8.0)
+    low, high = cells["mis"]["x_best_range"]
+    spread = math.exp(math.hypot(0.1, 0.2))
+    assert (low, high) == pytest.approx((8.0 / spread, 8.0 * spread))
+    assert cells["ph"]["x_best_range"] == (1.0, 1.0)
+    points[0].regions["caustic"]["rel_mse_se"] = math.nan
+    cells = region_at_budgets(points, lambda p: p.strategy, "caustic", rel_floor=0.001)[2.0]
+    assert all(math.isnan(v) for v in cells["mis"]["x_best_range"])
+
+
 TINY = """
 [experiment]
 spp = [1, 4]

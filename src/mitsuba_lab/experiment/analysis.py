@@ -118,7 +118,9 @@ def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
     regions = {}
     for name in first.get("regions", {}):
         region_mse = _mean([r["regions"][name]["mse"] for r in rows])
-        regions[name] = {"mse": region_mse, "rel_mse": _mean([r["regions"][name]["rel_mse"] for r in rows])}
+        region_rel = [r["regions"][name]["rel_mse"] for r in rows]
+        regions[name] = {"mse": region_mse, "rel_mse": _mean(region_rel),
+                         "rel_mse_se": _std(region_rel) / math.sqrt(len(region_rel))}
     corrected = _mean(mse) - floor
     rel_variance, rel_bias2, rel_bias2_se = relative_bias_variance(stack, reference)
     return PointStats(
@@ -201,26 +203,47 @@ def region_floor(reference, rect) -> dict:
 
 
 def region_at_budgets(points: list[PointStats], label, region: str, rel_floor: float) -> dict:
-    """Per time budget, each strategy's region relMSE (raw and minus the region's floor), median
-    time, and its cost ratio to the best: (corrected relMSE x time) / the smallest such product
-    at that budget. The product, not the relMSE alone, because calibrated renders miss their
-    budget by a little; for an estimator whose error falls as 1/time it is the equal-time ratio.
+    """Per time budget, each strategy's region relMSE (raw and minus the region's floor), its
+    standard error over the seeds, median time, and its cost ratio to the best: (corrected
+    relMSE x time) / the smallest such product at that budget. The product, not the relMSE
+    alone, because calibrated renders miss their budget by a little; for an estimator whose
+    error falls as 1/time it is the equal-time ratio.
 
-    Returns {budget: {label: {rel_mse, rel_mse_corrected, time_s, cost, x_best}}}."""
+    ``x_best_range`` is that ratio one standard error either way: both strategies' relative
+    standard errors combined on the log of the ratio (independent seeds; (1, 1) for the best
+    itself, NaN without the errors). A few seeds of a heavy-tailed region swing the ratio far,
+    so a target read from one sweep needs it.
+
+    Returns {budget: {label: {rel_mse, rel_mse_corrected, rel_mse_se, time_s, cost, x_best,
+    x_best_range}}}."""
     table = {}
     for p in points:
         if p.budget_s is None or region not in p.regions:
             continue
         raw = p.regions[region]["rel_mse"]
-        cell = {"rel_mse": raw, "rel_mse_corrected": raw - rel_floor, "time_s": p.time_s}
+        cell = {"rel_mse": raw, "rel_mse_corrected": raw - rel_floor, "time_s": p.time_s,
+                "rel_mse_se": p.regions[region].get("rel_mse_se", math.nan)}
         cell["cost"] = cell["rel_mse_corrected"] * p.time_s if cell["rel_mse_corrected"] > 0 else math.nan
         table.setdefault(p.budget_s, {})[label(p)] = cell
     for cells in table.values():
         costs = [c["cost"] for c in cells.values() if not math.isnan(c["cost"])]
-        best = min(costs) if costs else math.nan
+        best = min(cells.values(), key=lambda c: c["cost"]) if costs else None
         for c in cells.values():
-            c["x_best"] = c["cost"] / best if costs else math.nan
+            c["x_best"] = c["cost"] / best["cost"] if best else math.nan
+            c["x_best_range"] = ratio_range(c, best) if best else (math.nan, math.nan)
     return dict(sorted(table.items()))
+
+
+def ratio_range(cell: dict, best: dict) -> tuple[float, float]:
+    """``cell``'s cost over ``best``'s, one standard error down and up (``region_at_budgets``)."""
+    if cell is best:
+        return 1.0, 1.0
+    log_se = math.hypot(cell["rel_mse_se"] / cell["rel_mse_corrected"],
+                        best["rel_mse_se"] / best["rel_mse_corrected"])
+    if math.isnan(log_se) or math.isnan(cell["cost"]):
+        return math.nan, math.nan
+    ratio = cell["cost"] / best["cost"]
+    return ratio * math.exp(-log_se), ratio * math.exp(log_se)
 
 
 def bias_by_passes(points: list[PointStats], passes_of) -> dict:

@@ -22,6 +22,16 @@ from .config import PASS_PARAMETER
 from .spectrum import fit_slope, slope_cell, slope_note
 
 
+def budget_cell(c: dict) -> str:
+    """One cell of a region's table at a budget (``region_at_budgets``); a single seed has no
+    standard error, so none is printed."""
+    lo, hi = c["x_best_range"]
+    ratio = f"{fmt(c['x_best'], 3)}x" if lo == hi or math.isnan(lo) else \
+        f"{fmt(c['x_best'], 3)}x, {fmt(lo, 3)} to {fmt(hi, 3)}"
+    se = "" if math.isnan(c["rel_mse_se"]) else f" +- {fmt(c['rel_mse_se'], 2)}"
+    return f"{fmt(c['rel_mse_corrected'])}{se} ({fmt(c['time_s'], 2)} s, {ratio})"
+
+
 class SectionTables:
     def efficiency_table(self, groups, label) -> list[str]:
         """Each group's longest point, ranked by efficiency; a group whose longest render is
@@ -152,13 +162,14 @@ class SectionTables:
             if not table:
                 continue
             names = sorted({n for cells in table.values() for n in cells})
-            body = [[f"{budget:g} s", *(f"{fmt(c['rel_mse_corrected'])} ({fmt(c['time_s'], 2)} s, "
-                                        f"{fmt(c['x_best'], 3)}x)" if (c := cells.get(n)) else "n/a" for n in names)]
+            body = [[f"{budget:g} s", *(budget_cell(c) if (c := cells.get(n)) else "n/a" for n in names)]
                     for budget, cells in table.items()]
             md += ["", f"### Region `{name}` at each time budget", "",
-                   f"Cells: relMSE minus the region's reference floor ({fmt(floor['rel_mse'])}), median time "
-                   f"of one render, and (corrected relMSE x time) / the best strategy's at that budget: "
-                   f"the equal-time relMSE ratio to the best.", "", *markdown_table(["budget", *names], body)]
+                   f"Cells: relMSE minus the region's reference floor ({fmt(floor['rel_mse'])}) +- one "
+                   f"standard error over the seeds, median time of one render, and (corrected relMSE x "
+                   f"time) / the best strategy's at that budget, the equal-time relMSE ratio to the best, "
+                   f"with its range at one standard error of both (a ratio whose range includes a target "
+                   f"has not shown it either way).", "", *markdown_table(["budget", *names], body)]
         return md
 
     def passes_section(self, scene, groups, label) -> list[str]:
