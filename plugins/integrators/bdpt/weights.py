@@ -66,18 +66,11 @@ from mitsuba_lab.plugins.params import BDPT_KINDS as KINDS, BDPT_PRESETS as PRES
 ALL_KINDS = KINDS + ("merge",)
 
 
-#: Lanes per block of one iteration (``BdptWeights.lane_iteration``).
-LANE_BLOCK = 64
-
-
 def iteration_sizes(lanes: int, iterations: int) -> list[int]:
-    """How many of ``lanes`` lanes each iteration holds (``BdptWeights.lane_iteration``)."""
-    blocks, rest = divmod(lanes, LANE_BLOCK)
-    sizes = [LANE_BLOCK * (blocks // iterations)] * iterations
-    for k in range(blocks % iterations):
-        sizes[k] += LANE_BLOCK
-    sizes[blocks % iterations] += rest
-    return sizes
+    """How many of ``lanes`` lanes each iteration holds: lane i belongs to iteration i mod K
+    (``BdptWeights.lane_iteration``)."""
+    size, rest = divmod(lanes, iterations)
+    return [size + (k < rest) for k in range(iterations)]
 
 
 class SubpathMis(NamedTuple):
@@ -182,9 +175,12 @@ class BdptWeights:
 
     def lane_iteration(self, lane):
         """The iteration of the pass that lanes ``lane`` belong to (0 without ``lane_tables``):
-        blocks of ``LANE_BLOCK`` lanes in turn (``iteration_sizes``), so that neighbouring lanes,
-        which run together, merge in the same iteration's cells (3x faster than lane mod K)."""
-        return 0 if self.lane_tables is None else (lane // LANE_BLOCK) % self.lane_tables[2]
+        lane i is in iteration i mod K (``iteration_sizes``). A camera pass lays out a pixel's K
+        samples in K neighbouring lanes, so each of them merges with another iteration's light
+        vertices; blocks of 64 lanes per iteration, which kept a SIMD packet in one iteration's
+        cells, gave all of a pixel's samples in a pass the same light vertices (README: 1.3x to
+        2.3x the merging variance on sds, for merging 0 to 20% faster)."""
+        return 0 if self.lane_tables is None else lane % self.lane_tables[2]
 
     def _m(self, x):
         """x^beta (the heuristic applied to a density ratio)."""

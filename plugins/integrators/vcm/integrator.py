@@ -8,7 +8,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators.bdpt.integrator import LabBDPTIntegrator
-from mitsuba_lab.plugins.integrators.bdpt.weights import LANE_BLOCK, BdptWeights, iteration_sizes
+from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, iteration_sizes
 from mitsuba_lab.plugins.integrators.photon.integrator import automatic_radius
 
 from .estimator import VertexMerging, merges_first
@@ -88,8 +88,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                          its light tracing; camera subpath i connects to light
                          subpath i. More of them make merging's estimate less
                          noisy for the same camera work; below 1 camera
-                         subpaths of an iteration share them (i mod N, N whole
-                         blocks of 64 per iteration), and the light pass, grid
+                         subpaths of an iteration share them (i mod N, N a
+                         multiple of a pass's iterations), and the light pass, grid
                          and merges cost less (Default: 1)
     kernel        string Merging's density kernel over the disc of radius r_i:
                          ``epanechnikov`` (2 / pi) (1 - d^2 / r_i^2) / r_i^2, as
@@ -173,13 +173,12 @@ class LabVCMIntegrator(LabBDPTIntegrator):
 
     def pass_light_subpaths(self, count: int, spp_pass: int, camera_lanes: int) -> int:
         """Below one light subpath per camera subpath (``light_paths`` < 1), camera lane i uses
-        light subpath i mod N; with N a multiple of ``LANE_BLOCK`` x iterations, both lie in the
-        same iteration (``BdptWeights.lane_iteration``), so a lane connects only to light vertices
-        of its own iteration, whose radius and N_k its weights carry."""
+        light subpath i mod N; with N a multiple of the pass's iterations K, both lie in the same
+        iteration, i mod K (``BdptWeights.lane_iteration``), so a lane connects only to light
+        vertices of its own iteration, whose radius and N_k its weights carry."""
         if not self.merging or spp_pass == 1 or count >= camera_lanes:
             return count
-        block = LANE_BLOCK * spp_pass
-        return block * max(1, count // block)
+        return spp_pass * max(1, count // spp_pass)
 
     @staticmethod
     def _light_subpaths(plan) -> list[int]:

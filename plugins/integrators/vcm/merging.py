@@ -20,11 +20,12 @@ only when its normal is within ``NORMAL_COS`` of x's (not the far side of a thin
 merged path, light depth + camera depth segments, is no longer than ``max_depth``.
 
 A pass holds K iterations (camera lane i and light subpath i belong to iteration
-``BdptWeights.lane_iteration(i)``: blocks of 64 lanes in turn), each with its own radius: a vertex is bucketed by its cell at its
-iteration's radius with the iteration mixed into the hash (``photon.grid``'s counting sort),
-and a camera vertex looks only in its own iteration's cells. The grid holds each bucket's range
-of an index array (``order``) into the vertex buffer, which keeps its own order, so connections
-still walk each lane's list.
+``BdptWeights.lane_iteration(i)``, i mod K: a pixel's K samples in a pass use K iterations),
+each with its own radius: a vertex is bucketed by its cell at its iteration's radius with the
+iteration mixed into the hash (``photon.grid``'s counting sort), and a camera vertex looks
+only in its own iteration's cells. The grid holds each bucket's range of an index array
+(``order``) into the vertex buffer, which keeps its own order, so connections still walk each
+lane's list.
 """
 from __future__ import annotations
 
