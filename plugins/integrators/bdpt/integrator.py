@@ -251,7 +251,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     def pass_light_subpaths(self, count: int, spp_pass: int, camera_lanes: int) -> int:
         """The light subpaths a pass of ``spp_pass`` samples per pixel and ``camera_lanes`` camera
         subpaths traces, given the ``count`` that ``light_paths`` and ``max_vertices`` ask for
-        (lab_vcm: whole blocks per iteration)."""
+        (lab_vcm: a multiple of the pass's iterations)."""
         return count
 
     def pass_weights(self, plan: PassPlan) -> BdptWeights:

@@ -89,8 +89,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                          subpath i. More of them make merging's estimate less
                          noisy for the same camera work; below 1 camera
                          subpaths of an iteration share them (i mod N, N a
-                         multiple of a pass's iterations), and the light pass, grid
-                         and merges cost less (Default: 1)
+                         multiple of a pass's iterations), and the light pass,
+                         grid and merges cost less (Default: 1)
     kernel        string Merging's density kernel over the disc of radius r_i:
                          ``epanechnikov`` (2 / pi) (1 - d^2 / r_i^2) / r_i^2, as
                          lab_photon, or ``constant`` 1 / (pi r_i^2), as SmallVCM.
