@@ -17,9 +17,10 @@ import drjit as dr
 
 
 def kernel(name: str, t2):
-    """K(t) for t^2 = ``t2`` in [0, 1) (callers reject t >= 1): the kernel ``name`` times r^2."""
+    """K(t) for t^2 = ``t2`` in [0, 1) (callers reject t >= 1): the kernel ``name`` times r^2
+    (a plain number where it does not depend on t)."""
     if name == "epanechnikov":
         return (2.0 / dr.pi) * (1.0 - t2)
     if name == "constant":
-        return dr.full(type(t2), 1.0 / dr.pi, dr.width(t2))
+        return 1.0 / dr.pi
     raise ValueError(f"unknown kernel {name!r}")     # (``params.KERNELS`` lists the names)

@@ -130,6 +130,19 @@ def test_region_at_budgets_gives_the_ratio_one_standard_error_either_way():
     assert all(math.isnan(v) for v in cells["mis"]["x_best_range"])
 
 
+
+def test_a_strategy_at_the_floor_does_not_hide_the_best():
+    """A strategy whose relMSE is at the region's floor has no cost (NaN); listed first, it must
+    not become the best that the others are divided by."""
+    region = lambda rel: {"caustic": {"rel_mse": rel, "mse": 0.0, "rel_mse_se": rel / 10}}
+    points = [stats(100, 0, 0, budget=2.0, strategy="floor", regions=region(0.001), time_s=2.0),
+              stats(100, 0, 0, budget=2.0, strategy="mis", regions=region(0.041), time_s=2.0),
+              stats(10, 0, 0, budget=2.0, strategy="ph", regions=region(0.006), time_s=2.0)]
+    cells = region_at_budgets(points, lambda p: p.strategy, "caustic", rel_floor=0.001)[2.0]
+    assert math.isnan(cells["floor"]["x_best"])
+    assert cells["ph"]["x_best"] == pytest.approx(1.0) and cells["mis"]["x_best"] == pytest.approx(8.0)
+
+
 TINY = """
 [experiment]
 spp = [1, 4]

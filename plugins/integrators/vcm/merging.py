@@ -15,9 +15,9 @@ pi r^2 N (``weights.BdptWeights.merge``), whatever the kernel: the constant kern
 that density exactly (SmallVCM); any kernel that integrates to 1 gives the same expected
 estimate as r shrinks, so the weights of every technique of a path still sum to 1 in the
 limit, which is all consistency asks, and the Epanechnikov kernel (lab_vcm's default) blurs
-less for finite r (``kernels``). A light vertex counts
-only when its normal is within ``NORMAL_COS`` of x's (not the far side of a thin wall) and the
-merged path, light depth + camera depth segments, is no longer than ``max_depth``.
+less for finite r (``kernels``). A light vertex counts only when its normal is within
+``NORMAL_COS`` of x's (not the far side of a thin wall) and the merged path, light depth +
+camera depth segments, is no longer than ``max_depth``.
 
 A pass holds K iterations (camera lane i and light subpath i belong to iteration
 ``BdptWeights.lane_iteration(i)``, i mod K: a pixel's K samples in a pass use K iterations),

@@ -226,8 +226,8 @@ def region_at_budgets(points: list[PointStats], label, region: str, rel_floor: f
         cell["cost"] = cell["rel_mse_corrected"] * p.time_s if cell["rel_mse_corrected"] > 0 else math.nan
         table.setdefault(p.budget_s, {})[label(p)] = cell
     for cells in table.values():
-        costs = [c["cost"] for c in cells.values() if not math.isnan(c["cost"])]
-        best = min(cells.values(), key=lambda c: c["cost"]) if costs else None
+        measured = [c for c in cells.values() if not math.isnan(c["cost"])]     # (NaN: at the floor)
+        best = min(measured, key=lambda c: c["cost"], default=None)
         for c in cells.values():
             c["x_best"] = c["cost"] / best["cost"] if best else math.nan
             c["x_best_range"] = ratio_range(c, best) if best else (math.nan, math.nan)
@@ -238,9 +238,11 @@ def ratio_range(cell: dict, best: dict) -> tuple[float, float]:
     """``cell``'s cost over ``best``'s, one standard error down and up (``region_at_budgets``)."""
     if cell is best:
         return 1.0, 1.0
+    if math.isnan(cell["cost"]):                 # (at or below the floor: no ratio)
+        return math.nan, math.nan
     log_se = math.hypot(cell["rel_mse_se"] / cell["rel_mse_corrected"],
                         best["rel_mse_se"] / best["rel_mse_corrected"])
-    if math.isnan(log_se) or math.isnan(cell["cost"]):
+    if math.isnan(log_se):
         return math.nan, math.nan
     ratio = cell["cost"] / best["cost"]
     return ratio * math.exp(-log_se), ratio * math.exp(log_se)
