@@ -242,6 +242,12 @@ LAB_VCM = (
     Param("merge_first", bool, False, "merge at the camera's first vertex too (modes vcm and bpm; Georgiev's "
           "VCM); false leaves the light arriving there to light tracing, NEE and connections, and that merge "
           "out of every MIS sum (ppm always merges there)"),
+    Param("pilot", bool, False, "efficiency-aware choice for the whole image (modes vcm and bpt): a pilot (1/8 "
+          "of the iterations in all) measures relative variance x time per iteration with every technique and with "
+          "path tracing alone, and the render uses the lower (path tracing alone: mode pt, lab_mis's estimator)"),
+    Param("connections", str, "all", "connections at a camera vertex (modes vcm and bpt): all, to every vertex of "
+          "its light subpath (lab_bdpt), or one, to one of them picked uniformly and counted n times, the MIS "
+          "weights counting a connection as 1 / (mean vertices per light subpath)", choices=("all", "one")),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
                                             "max_vertices"))
 

@@ -1,4 +1,5 @@
-"""What a lab integrator says when it is given a scene it cannot render correctly.
+"""What a lab integrator says when it is given a scene it cannot render correctly, and how its
+own ``render`` reads Mitsuba's arguments.
 
 Used as a plugin inside a user's scene, it renders anyway (a scene may be right apart from
 one object) and logs one warning per render through Mitsuba's logger, naming the plugin and
@@ -21,3 +22,13 @@ def warn_if_unsupported(integrator, traits) -> str:
         mi.Log(mi.LogLevel.Warn, f"{reason} (rendering it anyway: the image will lack what the "
                                  f"integrator cannot render)")
     return reason
+
+
+def render_arguments(scene: mi.Scene, sensor, seed, spp: int):
+    """(sensor, seed, spp) of a ``render`` call as plain values: the sensor object (from its
+    index too), the seed as an int (a one-element Dr.Jit array too), and spp (0: the sensor's
+    sampler's)."""
+    if isinstance(sensor, int):
+        sensor = scene.sensors()[sensor]
+    seed = int(seed[0]) if hasattr(seed, "__len__") and not isinstance(seed, int) else int(seed)
+    return sensor, seed, spp or sensor.sampler().sample_count()

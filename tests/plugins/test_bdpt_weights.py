@@ -370,3 +370,35 @@ def test_a_missing_merge_term_is_caught():
         err = _max_rel(recursive_weights_with_merging(g, mis), ref)
     print(f"missing eta: max relative error {err:.2e}")
     assert err > 1e3 * RTOL
+
+
+@pytest.mark.parametrize("subset", [KINDS, MERGE_SUBSETS[0], ("nee", "connect")])
+@pytest.mark.parametrize("beta", [1.0, 2.0])
+def test_a_connection_count_weights_connections_as_the_brute_force_does(subset, beta):
+    """lab_vcm's ``connections = one`` counts each connection technique n_c < 1 times per camera
+    vertex: its density becomes n_c p, in every sum and in its own weight, and the weights of
+    every path still sum to 1; weighting connections as count 1 is caught."""
+    worst, wrong = 0.0, 0.0
+    merging = "merge" in subset
+    for k in range(1, 8):
+        g = random_paths(k, seed=700 * k + int(beta))
+        count = float(np.random.default_rng(k).uniform(0.05, 1.0))
+        area = 2.5 if merging else 0.0
+        mis = BdptWeights("power", beta, strategies=subset, light_paths=g["light_paths"], merge_area=area,
+                          merge_from=2 if merging else 1, connect_count=count)
+        p_light, p_camera = area_densities(g)
+        with np.errstate(all="ignore"):
+            got = recursive_weights_with_merging(g, mis) if merging else recursive_weights(g, mis)
+            ref = brute_force_weights(p_light, p_camera, g["delta"], beta, subset, g["nee"], g["light_paths"],
+                                      area, 2 if merging else 1, connect_count=count)
+            uncounted = brute_force_weights(p_light, p_camera, g["delta"], beta, subset, g["nee"],
+                                            g["light_paths"], area, 2 if merging else 1)
+        worst = max(worst, _max_rel(got, ref))
+        wrong = max(wrong, _max_rel(got, uncounted))
+        reach = ref.sum(axis=0) > 0
+        np.testing.assert_allclose(got.sum(axis=0)[reach], 1.0, rtol=RTOL)
+    print(f"{'+'.join(subset)}, beta {beta}: max relative error {worst:.2e} (against count 1: {wrong:.2e})")
+    assert worst < RTOL
+    assert wrong > 1e3 * RTOL
+    with pytest.raises(ValueError, match="connect_count"):
+        BdptWeights(connect_count=0.0)

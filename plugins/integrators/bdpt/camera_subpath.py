@@ -9,6 +9,8 @@ camera throughput and w the MIS weight of the strategy (``weights.BdptWeights``)
 * s >= 2, a connection to each stored vertex y of the lane's own light subpath
   (``vertices.LightVertices``, walked from its end), one shadow ray each:
                                                  L += beta f_s(x) G(x, y) f_s*(y) beta_y w
+  (lab_vcm's ``connections = one``: to one of them, picked uniformly from the n usable ones,
+  counted n times)
 
 f_s* is the adjoint BSDF at the light vertex (importance transport, with Veach's shading-normal
 correction), and G = 1 / |x - y|^2 (the cosines are in f_s and f_s*). The t = 1 strategy is
@@ -54,6 +56,7 @@ class CameraPass:
     light_count: int = 0                 # light subpaths of the pass (camera lane i uses i mod it)
     grid: object = None                  # lab_vcm: the light vertices' grid (``merge``), else None
     connect_share: float = 0.0           # lab_vcm: connections' Russian roulette (``connection_roulette``)
+    connect_one: bool = False            # lab_vcm: one connection per camera vertex (``connect_to_one_light_vertex``)
 
 
 def sensor_constants(sensor: mi.Sensor) -> tuple[float, tuple]:
@@ -88,43 +91,86 @@ def connection_roulette(value, estimate, share: float, u, depth_y):
     return kept(probability, mi.sample_tea_float32(dr.reinterpret_array(mi.UInt32, u), depth_y))
 
 
+def connection(scene, cp: CameraPass, si, bsdf, beta, mis: SubpathMis, depth, slot, on, estimate, u, scale=1.0):
+    """(weighted contribution, light vertex's previous slot) of the connection from camera vertex
+    ``si`` (``depth`` segments from the sensor) to the stored light vertex at ``slot`` (lanes
+    ``on``), counted ``scale`` times; with ``cp.connect_share`` > 0, under ``connection_roulette``
+    against the lane's ``estimate`` so far, for the uniform ``u``."""
+    w, floor = cp.weights, cp.offset_floor
+    ctx = mi.BSDFContext(mi.TransportMode.Radiance)
+    ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
+    max_depth = dr.opaque(mi.UInt32, cp.max_depth)
+    y, bsdf_y, beta_y, mis_y, depth_y, prev = cp.vertices.load(slot, si.wavelengths, on)
+    use = on & (depth_y + 1 + depth <= max_depth) & strategy_mask(cp.only, depth_y + 1, depth + 1)
+    d = y.p - si.p
+    dist2 = dr.squared_norm(d)
+    d = d * dr.rsqrt(dist2)
+    wo_x, wo_y = si.to_local(d), y.to_local(-d)
+    f_x, pdf_x_fwd = bsdf.eval_pdf(ctx, si, wo_x, use)
+    pdf_x_rev = reverse_pdf(bsdf, ctx_imp, si, wo_x, use)
+    f_y, pdf_y_rev = transported(bsdf_y, y, wo_y, use)
+    pdf_y_fwd = bsdf_y.pdf(ctx_imp, y, wo_y, use)
+    weight = w.connect(mis_y, mis, pdf_y_fwd, pdf_y_rev, pdf_x_fwd, pdf_x_rev,
+                       dr.abs(dr.dot(y.n, d)), dr.abs(dr.dot(si.n, d)), dist2, depth)
+    value = spectrum_or_zero(beta * f_x * f_y * beta_y * (finite_or_zero(weight) * scale / dist2))
+    use &= dr.max(mi.unpolarized_spectrum(value)) > 0
+    if cp.connect_share > 0:
+        taken, factor = connection_roulette(value, estimate, cp.connect_share, u, depth_y)
+        use &= taken
+        value *= factor
+    use &= ~scene.ray_test(spawn.spawn_ray_to(si, y.p, floor), use)
+    return dr.select(use, value, 0.0), prev
+
+
 @dr.syntax
 def connect_to_light_subpath(scene, cp: CameraPass, si, bsdf, beta, mis: SubpathMis, depth, head, active,
                              estimate=None, u=None):
     """The s >= 2 strategies at camera vertex ``si`` (``depth`` segments from the sensor): the
     weighted contributions of its connections to every stored vertex of the light subpath that
-    ends at slot ``head``; with ``cp.connect_share`` > 0, under ``connection_roulette`` against
-    the lane's ``estimate`` so far, for the uniform ``u``."""
-    w, floor = cp.weights, cp.offset_floor
-    ctx = mi.BSDFContext(mi.TransportMode.Radiance)
-    ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
-    max_depth = dr.opaque(mi.UInt32, cp.max_depth)
+    ends at slot ``head`` (``connection``)."""
     L = dr.zeros(mi.Spectrum, dr.width(head))
     slot = dr.select(active, head, NONE)
     while dr.hint(slot != NONE, max_iterations=-1, label="lab_bdpt connections"):
         on = slot != NONE
-        y, bsdf_y, beta_y, mis_y, depth_y, prev = cp.vertices.load(slot, si.wavelengths, on)
-        use = on & (depth_y + 1 + depth <= max_depth) & strategy_mask(cp.only, depth_y + 1, depth + 1)
-        d = y.p - si.p
-        dist2 = dr.squared_norm(d)
-        d = d * dr.rsqrt(dist2)
-        wo_x, wo_y = si.to_local(d), y.to_local(-d)
-        f_x, pdf_x_fwd = bsdf.eval_pdf(ctx, si, wo_x, use)
-        pdf_x_rev = reverse_pdf(bsdf, ctx_imp, si, wo_x, use)
-        f_y, pdf_y_rev = transported(bsdf_y, y, wo_y, use)
-        pdf_y_fwd = bsdf_y.pdf(ctx_imp, y, wo_y, use)
-        weight = w.connect(mis_y, mis, pdf_y_fwd, pdf_y_rev, pdf_x_fwd, pdf_x_rev,
-                           dr.abs(dr.dot(y.n, d)), dr.abs(dr.dot(si.n, d)), dist2, depth)
-        value = spectrum_or_zero(beta * f_x * f_y * beta_y * (finite_or_zero(weight) / dist2))
-        use &= dr.max(mi.unpolarized_spectrum(value)) > 0
-        if dr.hint(cp.connect_share > 0, mode="scalar"):
-            taken, factor = connection_roulette(value, estimate, cp.connect_share, u, depth_y)
-            use &= taken
-            value *= factor
-        use &= ~scene.ray_test(spawn.spawn_ray_to(si, y.p, floor), use)
-        L += dr.select(use, value, 0.0)
+        value, prev = connection(scene, cp, si, bsdf, beta, mis, depth, slot, on, estimate, u)
+        L += value
         slot = dr.select(on, prev, NONE)
     return L
+
+
+@dr.syntax
+def pick_light_vertex(cp: CameraPass, head, depth, active, u):
+    """(slot, n): one of the n stored vertices of the light subpath ending at ``head`` that a
+    connection from a camera vertex ``depth`` segments from the sensor may use, each with
+    probability 1 / n (reservoir sampling along the list, hashing the uniform ``u`` with the
+    count so far); NONE where n = 0. Walking the list reads two numbers per vertex."""
+    max_depth = dr.opaque(mi.UInt32, cp.max_depth)
+    key = dr.reinterpret_array(mi.UInt32, u)
+    chosen = dr.full(mi.UInt32, NONE, dr.width(head))
+    n = dr.zeros(mi.UInt32, dr.width(head))
+    slot = dr.select(active, head, NONE)
+    while dr.hint(slot != NONE, max_iterations=-1, label="lab_vcm pick a light vertex"):
+        on = slot != NONE
+        depth_y, prev = cp.vertices.depth_and_prev(slot, on)
+        ok = on & (depth_y + 1 + depth <= max_depth) & strategy_mask(cp.only, depth_y + 1, depth + 1)
+        n += dr.select(ok, 1, 0)
+        take = ok & (mi.sample_tea_float32(key, n) * mi.Float(n) < 1.0)
+        chosen = dr.select(take, slot, chosen)
+        slot = dr.select(on, prev, NONE)
+    return chosen, n
+
+
+def connect_to_one_light_vertex(scene, cp: CameraPass, si, bsdf, beta, mis: SubpathMis, depth, head, active,
+                                estimate, u, u_pick):
+    """lab_vcm's ``connections = one``: the connection to one vertex of the lane's light subpath,
+    picked uniformly from the n it may use (``pick_light_vertex``) and counted n times, so its
+    expectation is the sum over all n (unbiased; the weights count each connection technique
+    1 / L times, L the mean stored vertices per light subpath: ``BdptWeights`` connect_count)."""
+    slot, n = pick_light_vertex(cp, head, depth, active, u_pick)
+    on = slot != NONE
+    value, _ = connection(scene, cp, si, bsdf, beta, mis, depth, dr.select(on, slot, 0), on, estimate, u,
+                          mi.Float(n))
+    return value
 
 
 @dr.syntax
@@ -218,8 +264,13 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         # ---------------- s >= 2: connections to the light subpath ----------------
         if dr.hint("connect" in w.enabled, mode="scalar"):
             u_connect = sampler.next_1d() if cp.connect_share > 0 else None
-            L += connect_to_light_subpath(scene, cp, si, bsdf, beta, mis, depth, head,
-                                          smooth & (depth + 2 <= max_depth), L, u_connect)
+            if dr.hint(cp.connect_one, mode="scalar"):
+                L += connect_to_one_light_vertex(scene, cp, si, bsdf, beta, mis, depth, head,
+                                                 smooth & (depth + 2 <= max_depth), L, u_connect,
+                                                 sampler.next_1d())
+            else:
+                L += connect_to_light_subpath(scene, cp, si, bsdf, beta, mis, depth, head,
+                                              smooth & (depth + 2 <= max_depth), L, u_connect)
 
         # ---------------- merging with the light vertices around (lab_vcm) ----------------
         if dr.hint(merging, mode="scalar"):

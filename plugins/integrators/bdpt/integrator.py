@@ -9,7 +9,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators import spawn, spectral
-from mitsuba_lab.plugins.integrators.support import warn_if_unsupported
+from mitsuba_lab.plugins.integrators.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.params import UNBOUNDED, bdpt_only_strategy
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
@@ -42,6 +42,8 @@ class BdptStats:
     grid_s: float = 0.0               # lab_vcm: building the light vertices' grids
     radius_first: float = 0.0         # lab_vcm: the merging radius of the first and last pass
     radius_last: float = 0.0
+    pilot_s: float = 0.0              # lab_vcm pilot: the pilot's time
+    chose_path_tracing: bool = False  # lab_vcm pilot: the pilot chose path tracing alone
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -173,10 +175,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         if problem:
             raise ValueError(problem)
         warn_if_unsupported(self, traits)         # media, or light a strategy subset cannot reach
-        if isinstance(sensor, int):
-            sensor = scene.sensors()[sensor]
-        seed = int(seed[0]) if hasattr(seed, "__len__") and not isinstance(seed, int) else int(seed)
-        spp = spp or sensor.sampler().sample_count()
+        sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
         bind_film_layout(scene, sensor)
         film = sensor.film()
         film_px = int(film.size()[0]) * int(film.size()[1])
@@ -188,6 +187,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         tracer = LightTracer(scene, sensor, light_depth, v["rr_depth"], None, floor, only, v["hide_emitters"])
         inv_area, axis = sensor_constants(sensor)
         self.stats = stats = BdptStats()
+        self.connectable_per_path = FIRST_GUESS_VERTICES    # (the same first guess in every render)
         total, done, index = None, 0, 0
         light_paths = v.get("light_paths", 1.0)         # (lab_vcm: 1)
         u_passes = spectral.pass_samples(seed, spp) if mi.is_spectral else None   # a pass is one spp there
@@ -211,7 +211,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             self._pass = CameraPass(vertices, last, tracer.weights, tracer.table, inv_area, axis,
                                     self.max_depth, v["rr_depth"], v["hide_emitters"], floor,
                                     traits.hittable_emitters, only, count,
-                                    self.pass_grid(vertices, stored, plan, stats), self.connect_share)
+                                    self.pass_grid(vertices, stored, plan, stats), self.connect_share,
+                                    self.connect_one)
             start = time.perf_counter()
             try:
                 if u is None:
@@ -243,6 +244,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     #: Connections' Russian roulette against this share of the lane's estimate so far
     #: (``camera_subpath.connection_roulette``); 0: every connection runs (lab_bdpt).
     connect_share = 0.0
+    #: Each camera vertex connects to one vertex of its light subpath (lab_vcm's ``connections``).
+    connect_one = False
 
     def pass_spp_limit(self, film_pixels: int) -> int:
         """Most samples per pixel in one pass besides ``max_vertices`` (lab_vcm: a bound)."""
@@ -306,6 +309,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                 return None
             capacity = n                               # same seed, same subpaths: now they fit
         self.vertices_per_path = max(0.25, n / count)
+        # (without merging only the subpaths that camera subpaths connect to store vertices)
+        self.connectable_per_path = n / (count if tracer.weights.merging else min(count, camera_lanes))
         stats.light_subpaths += count
         stats.light_vertices_reached += int(reached[0])
         stats.light_vertices_stored += n

@@ -116,6 +116,13 @@ class LightVertices:
         if self.tangents:
             write(self.frames, [*si.sh_frame.s, *si.dp_du, *si.dp_dv], TANGENT_WIDTH, slot, active)
 
+    def depth_and_prev(self, slot, active):
+        """(depth, previous stored slot) of the vertices at ``slot``: what walking a lane's list
+        needs, in two gathers."""
+        depth = dr.gather(mi.Float, self.points, slot * POINT_WIDTH + POINT["depth"], active)
+        prev = dr.gather(mi.Float, self.records, slot * RECORD_WIDTH + RECORD["prev"], active)
+        return unbits(depth), unbits(prev)
+
     def load(self, slot, wavelengths, active):
         """(SurfaceInteraction3f, BSDFPtr, beta, SubpathMis, depth, prev) of the vertices at
         ``slot``; the interaction carries the camera lane's ``wavelengths``."""

@@ -119,17 +119,26 @@ class BdptWeights:
     ``heuristic``: ``balance`` or ``power`` (exponent ``beta``); ``strategies``: a preset name
     (``all``, ``camera`` = hit + nee, ``light``) or an iterable of kinds; ``light_paths``: the
     number of light subpaths each camera subpath competes with in the t = 1 strategy (SmallVCM's
-    light-subpath count: light tracing splats one light subpath into many pixels).
+    light-subpath count: light tracing splats one light subpath into many pixels);
+    ``connect_count``: each connection technique's sample count per camera vertex, in (0, 1]
+    (lab_vcm's ``connections = one``: a camera vertex connects to one light vertex of its
+    subpath, picked uniformly, so a technique with s >= 2, t >= 2 is sampled about once per
+    L light vertices; the weights use 1 / L, L the mean stored vertices per light subpath).
+    Any counts > 0 give weights that sum to 1, so the estimate is unbiased whatever the count;
+    the closer it is to the true sampling rate, the lower the variance.
     """
 
     def __init__(self, heuristic: str = "power", beta: float = 2.0, strategies="all",
-                 light_paths: float = 1.0, merge_area: float = 0.0, merge_from: int = 1):
+                 light_paths: float = 1.0, merge_area: float = 0.0, merge_from: int = 1,
+                 connect_count: float = 1.0):
         if heuristic not in ("balance", "power"):
             raise ValueError(f"lab_bdpt: heuristic must be 'balance' or 'power', got '{heuristic}'")
         if heuristic == "power" and not beta > 0:
             raise ValueError(f"lab_bdpt: the power heuristic's exponent beta must be > 0, got {beta}")
         if not light_paths > 0:
             raise ValueError(f"lab_bdpt: light_paths must be > 0, got {light_paths}")
+        if not 0 < connect_count <= 1:
+            raise ValueError(f"lab_vcm: connect_count must be in (0, 1], got {connect_count}")
         kinds = bdpt_strategy_kinds(strategies) if isinstance(strategies, str) else tuple(strategies)
         if kinds is None or not kinds or any(k not in ALL_KINDS for k in kinds):
             raise ValueError(f"lab_bdpt: strategies must be one of {', '.join(PRESETS)} or a non-empty "
@@ -151,6 +160,8 @@ class BdptWeights:
         self.eta = self._m(float(merge_area)) if self.merging else 0.0
         self.inv_eta = self._m(1.0 / float(merge_area)) if self.merging else 0.0
         self.merge_from = merge_from
+        # a connection technique's sample count, to the power beta (its kind's enable factor)
+        self.connect_weight = self.e["connect"] * self._m(float(connect_count))
 
     #: lab_vcm: (eta table, 1 / eta table, iterations), one entry per iteration of a pass, each
     #: to the power beta (Dr.Jit arrays; see ``at_lanes``); None: ``eta`` holds for every lane.
@@ -198,7 +209,7 @@ class BdptWeights:
 
     def _flag(self, state: SubpathMis, start_kind: str):
         """Enable factor of the innermost ratio ``state.dvcm`` stands for."""
-        return state.first * self.e[start_kind] + (1.0 - state.first) * self.e["connect"]
+        return state.first * self.e[start_kind] + (1.0 - state.first) * self.connect_weight
 
     def _gated(self, state: SubpathMis, start_kind: str):
         """``state.dvcm`` times its enable factor (0 for a disabled kind, whatever dvcm is)."""
@@ -304,7 +315,10 @@ class BdptWeights:
             self.eta + self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
         w_camera = self._m(pdf_light_fwd * cos_cam / dist2) * (
             self.eta * self._merges(depth) + self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev))
-        return self.e["connect"] / (w_light + 1.0 + w_camera)
+        if not self.e["connect"]:
+            return 0.0 * w_light
+        # (this technique's term is its count n_c^beta, as each term of the sums carries its own)
+        return self.connect_weight / (w_light + self.connect_weight + w_camera)
 
     def light_to_camera(self, light: SubpathMis, pdf_cam, cos_light, dist2, pdf_light_rev):
         """t = 1, s >= 2: a light vertex (not a delta lobe) joined to the sensor. ``pdf_cam``: the
@@ -363,14 +377,15 @@ def feasible(delta):
 
 def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies="all",
                         p_nee=None, light_paths: float = 1.0, merge_area: float = 0.0,
-                        merge_from: int = 1):
+                        merge_from: int = 1, connect_count: float = 1.0):
     """The weights of every technique computed directly from the path's densities (numpy).
 
     ``p_light[i]``: area density of x_i generated from the light side (``p_light[0]`` the
     emission position density), ``p_camera[i]``: from the camera side (``p_camera[k]`` the
     sensor's own, common to all strategies); shape (k + 1,) or (k + 1, n paths). ``p_nee``: the
     density of x_0 under emitter sampling (s = 1, t >= 2; default ``p_light[0]``); the t = 1
-    strategy's density is multiplied by ``light_paths``. ``delta`` as in ``feasible``.
+    strategy's density is multiplied by ``light_paths``, a connection's (s >= 2, t >= 2) by
+    ``connect_count``. ``delta`` as in ``feasible``.
     Merging at x_i (i = 1 .. k - 1, not a delta vertex), when ``strategies`` has ``merge``: the
     light subpath builds x_0 .. x_i, the camera subpath x_k .. x_i, density
     p_light[0..i] p_camera[i..k] ``merge_area`` (pi r^2 N_light), where x_i is at least
@@ -395,6 +410,8 @@ def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies=
             log_p = log_p - log_l[0] + log_nee
         if kind == "light":
             log_p = log_p + np.log(light_paths)
+        if kind == "connect":
+            log_p = log_p + np.log(connect_count)
         usable = ok[s] & (kind in enabled)
         logs.append(np.where(usable, beta * log_p, -np.inf))
     if "merge" in enabled:

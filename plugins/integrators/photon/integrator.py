@@ -10,7 +10,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.integrators import spawn
-from mitsuba_lab.plugins.integrators.support import warn_if_unsupported
+from mitsuba_lab.plugins.integrators.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
 from mitsuba_lab.scene import SceneTraits
@@ -226,11 +226,8 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
                              "call render() with develop=True")
         traits = SceneTraits.from_scene(scene)
         warn_if_unsupported(self, traits)         # never an image silently missing light
-        if isinstance(sensor, int):
-            sensor = scene.sensors()[sensor]
-        seed = int(seed[0]) if hasattr(seed, "__len__") and not isinstance(seed, int) else int(seed)
+        sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
         cfg = self.settings_
-        spp = spp or sensor.sampler().sample_count()
         depth = cfg.depth_limit
         min_segments = 2 if cfg.direct == "nee" else 1
         floor = spawn.offset_floor(traits)

@@ -6,13 +6,16 @@ import time
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
-from mitsuba_lab.plugins.integrators.bdpt.integrator import LabBDPTIntegrator
+from mitsuba_lab.plugins.integrators.bdpt.integrator import BdptStats, LabBDPTIntegrator, pass_seed
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, iteration_sizes
 from mitsuba_lab.plugins.integrators.photon.integrator import automatic_radius
+from mitsuba_lab.plugins.integrators.support import render_arguments
 
 from .estimator import VertexMerging, merges_first
 from .merging import VertexGrid, table
+from .selection import PILOT_RENDERS, path_tracing_wins, pilot_iterations, relative_variances
 
 
 def vcm_radius(r1: float, iteration: int, alpha: float) -> float:
@@ -109,6 +112,23 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                          (README: equal or lower error on every scene of
                          experiments/vcm.toml without them). ppm always
                          merges there (Default: false)
+    connections   string ``all``: a camera vertex connects to every stored
+                         vertex of its light subpath (lab_bdpt); ``one``: to
+                         one of the n it may use, picked uniformly and counted
+                         n times (unbiased), with the MIS weights counting
+                         each connection technique 1 / L times per camera
+                         vertex (L: stored vertices per light subpath, from
+                         the passes so far). Modes vcm and bpt
+                         (Default: ``all``)
+    pilot         bool   Efficiency-aware choice for the whole image (modes
+                         vcm and bpt): a pilot (4 renders each with every
+                         technique and with path tracing alone, 1/32 of
+                         ``spp`` iterations each) measures the image's
+                         relative variance and time per iteration of both,
+                         and the render is lab_mis's (path tracing alone,
+                         mode pt's estimator; the pilot's path tracing
+                         averaged in) where that is lower, else every
+                         technique's (``selection``; Default: false)
     max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices: as lab_bdpt.
     ============= ====== ========================================================
 
@@ -120,7 +140,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     it skips the lookups MIS would mostly discard, as in diffuse scenes with few light
     vertices). Supports what lab_bdpt supports (RGB, mono and spectral variants; spectral:
     one iteration per pass). Statistics of the
-    last render (``bdpt_stats()``): light, grid and camera time, the radii.
+    last render (``bdpt_stats()``): light, grid and camera time, the radii; with ``pilot`` the
+    pilot's time and whether it chose path tracing alone.
 
     .. code-block:: python
 
@@ -137,6 +158,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         super().__init__(props)
         self.merging = "merge" in self.kinds
         self.connect_share = self.CONNECT_SHARE if self.merging else 0.0
+        self.connect_one = self.values["connections"] == "one" and "connect" in self.kinds
         if self.values["mode"] == "ppm":
             if "merge_first" in props and not self.values["merge_first"]:
                 raise ValueError("lab_vcm: mode 'ppm' merges only at the first smooth camera vertex: "
@@ -145,6 +167,12 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         # (no first merge: merging from the camera's second vertex on; ``BdptWeights.merge_from``)
         self.merge_from = 1 if merges_first(self.values) or not self.merging else 2
         self._radius = 0.0
+        if self.values["pilot"] and self.values["mode"] not in ("vcm", "bpt"):
+            raise ValueError(f"lab_vcm: pilot chooses between every technique and path tracing alone, which only "
+                             f"modes 'vcm' and 'bpt' have, not mode '{self.values['mode']}'")
+        if self.values["connections"] == "one" and "connect" not in self.kinds:
+            raise ValueError(f"lab_vcm: connections = 'one' picks the light vertex a camera vertex connects to; "
+                             f"mode '{self.values['mode']}' makes no connections")
 
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
@@ -154,7 +182,76 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                 chosen = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
                 r1 = automatic_radius(scene, chosen)
             self._radius = r1
+        if self._pass is None and self.values["pilot"]:
+            return self._render_chosen(scene, sensor, seed, spp, develop, evaluate)
         return super().render(scene, sensor, seed, spp, develop, evaluate)
+
+    # -- pilot: every technique or path tracing alone, whichever a pilot finds more efficient --------
+
+    #: The pilot renders' seeds: the render's seed with this mixed in, then one per render.
+    PILOT_SALT = 0x2545F491
+
+    def _companions(self):
+        """(lab_vcm with every technique of this one, lab_mis with its path length, roulette,
+        hidden emitters and heuristic: path tracing alone, the estimator of lab_vcm's mode pt),
+        for the pilot and the render."""
+        params = dict(self.values, pilot=False)
+        if self.merging:
+            params["radius"] = self._radius
+        shared = ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta")
+        return (mi.load_dict({"type": "lab_vcm", **params}),
+                mi.load_dict({"type": "lab_mis", **{k: self.values[k] for k in shared}}))
+
+    @staticmethod
+    def _timed(integrator, scene, sensor, seed: int, spp: int, develop=True, evaluate=True):
+        """(image, seconds) of a render, after Dr.Jit has finished it."""
+        start = time.perf_counter()
+        image = integrator.render(scene, sensor, seed, spp, develop, evaluate)
+        dr.eval(image)
+        dr.sync_thread()
+        return image, time.perf_counter() - start
+
+    def _pilot(self, scene, sensor, seed: int, spp: int, every, camera):
+        """(whether path tracing alone renders this image more efficiently; path tracing's pilot
+        image, the mean of its iterations; their number), from pilot renders of both
+        (``selection``)."""
+        iterations = pilot_iterations(spp)
+        channels = 1 if mi.is_monochromatic else 3
+        images = {"every": [], "camera": []}
+        times = {"every": [], "camera": []}
+        for r in range(PILOT_RENDERS):
+            for name, integrator in (("every", every), ("camera", camera)):
+                image, seconds = self._timed(integrator, scene, sensor, pass_seed(seed ^ self.PILOT_SALT, r + 1),
+                                             iterations)
+                images[name].append(np.array(image)[..., :channels])
+                if name == "every":     # (its passes' own times: a render's setup weighs less on the choice)
+                    stats = integrator.bdpt_stats()
+                    seconds = stats["light_s"] + stats["grid_s"] + stats["camera_s"]
+                times[name].append(seconds / iterations)
+        every_images, camera_images = np.array(images["every"]), np.array(images["camera"])
+        var_every, var_camera = relative_variances(every_images, camera_images, iterations)
+        # (the fastest render of each: the first may include compiling the kernels)
+        wins = path_tracing_wins(var_every, var_camera, min(times["every"]), min(times["camera"]))
+        return wins, camera_images.mean(axis=0), PILOT_RENDERS * iterations
+
+    def _render_chosen(self, scene, sensor, seed, spp, develop, evaluate):
+        sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
+        start = time.perf_counter()
+        every, camera = self._companions()
+        path_tracing, pilot_image, pilot_spp = self._pilot(scene, sensor, seed, spp, every, camera)
+        pilot_s = time.perf_counter() - start
+        if not path_tracing:
+            image = super().render(scene, sensor, seed, spp, develop, evaluate)
+        else:
+            image, seconds = self._timed(camera, scene, sensor, seed, spp, develop, evaluate)
+            self.stats = BdptStats(passes=1, camera_s=seconds)
+            # the pilot's path tracing is this render's estimator: its iterations count too
+            out = np.array(image)
+            channels = pilot_image.shape[-1]
+            out[..., :channels] = (spp * out[..., :channels] + pilot_spp * pilot_image) / (spp + pilot_spp)
+            image = mi.TensorXf(out)
+        self.stats.pilot_s, self.stats.chose_path_tracing = pilot_s, path_tracing
+        return image
 
     def _radii(self, plan) -> list[float]:
         """The merging radius of each iteration of a pass (iterations done + 1 .. done + spp)."""
@@ -188,6 +285,11 @@ class LabVCMIntegrator(LabBDPTIntegrator):
 
     def pass_weights(self, plan):
         weights = super().pass_weights(plan)
+        if self.connect_one:
+            # a connection technique is sampled about once per L stored light vertices (L: their mean
+            # per light subpath, from the passes so far); opaque, as it changes from pass to pass
+            count = min(1.0, 1.0 / max(self.connectable_per_path, 1.0))
+            weights.connect_weight = dr.opaque(mi.Float, weights._m(count))
         if self.merging:
             # merging in iteration k: density pi r_k^2 N_k, N_k = the iteration's light subpaths
             sizes = self._light_subpaths(plan)
