@@ -46,6 +46,16 @@ def test_render_writes_exr_with_metadata_and_png(tmp_path):
     assert "compile" in out and "kernels" in out and "shadow" in out
 
 
+def test_render_reports_what_lab_vcms_pilot_chose(tmp_path):
+    """The summary names a bidirectional integrator's statistics, lab_vcm's pilot choice among
+    them (path tracing alone on the Cornell box with one light subpath per 16 pixels)."""
+    code, out, err = run(["render", CORNELL, "-D", "res=16", "--spp", "256", "--integrator", "lab_vcm",
+                          "--param", "pilot=true", "--param", "light_paths=0.0625", "-o", str(tmp_path / "v.exr")])
+    assert code == 0, err
+    line = next(line for line in out.splitlines() if line.startswith("statistics: "))
+    assert "pilot_s" in line and "chose_path_tracing True" in line
+
+
 def test_param_values_are_parsed():
     assert cli.parse_assignments(["a=8", "b=0.5", "c=true", "d=power"], "--param") == \
         {"a": 8, "b": 0.5, "c": True, "d": "power"}

@@ -172,8 +172,9 @@ def run(args, out) -> int:
     print(format_stats(kind, stats), file=out)
     print(f"settings: {describe_settings(settings)}", file=out)
     if hasattr(integrator, "photon_stats"):
-        print("photons: " + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
-                                      for k, v in integrator.photon_stats().items()), file=out)
+        print(f"photons: {describe_stats(integrator.photon_stats())}", file=out)
+    if hasattr(integrator, "bdpt_stats"):
+        print(f"statistics: {describe_stats(integrator.bdpt_stats())}", file=out)
     print(f"wrote {output}" + ("" if args.no_png else f" and {png_path(output)}"), file=out)
     return 0
 
@@ -197,6 +198,12 @@ def cannot_run(scene, kind: str) -> str:
 
     estimator = lookup(kind)
     return estimator.unsupported(SceneTraits.from_scene(scene)) if estimator is not None else ""
+
+
+def describe_stats(stats: dict) -> str:
+    """An integrator's statistics of its last render on one line (``photon_stats()``,
+    ``bdpt_stats()``): floats to 4 digits."""
+    return ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in stats.items())
 
 
 def describe_settings(settings: dict) -> str:
