@@ -13,6 +13,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+from backend import HOME, variant
 from mitsuba_lab.plugins.integrators.mis_weight import mis_weight
 from mitsuba_lab.plugins.integrators.path import KernelPlan
 from mitsuba_lab.plugins.integrators.roulette import rr_scale, russian_roulette, survival_probability
@@ -227,12 +228,12 @@ def test_a_grey_rgb_emitter_is_not_dark_in_a_spectral_variant():
     import mitsuba_lab
 
     try:
-        mitsuba_lab.use_variant("llvm_ad_spectral")
+        mitsuba_lab.use_variant(variant("ad_spectral"))
         scene = mi.load_dict({"type": "scene", "floor": {"type": "rectangle"},
                               "light": {"type": "point", "position": [0, 0, 1],
                                         "intensity": {"type": "rgb", "value": [0.5, 0.5, 0.5]}}})
         t = SceneTraits.from_scene(scene)
         assert not t.dark_emitters and not any("emits nothing" in w for w in t.warnings())
     finally:
-        mitsuba_lab.use_variant("llvm_ad_rgb")
+        mitsuba_lab.use_variant(HOME)
 

@@ -40,6 +40,14 @@ def n_digits(spp: int, base: int) -> int:
     return k
 
 
+def refined_reciprocal(b, approx):
+    """float32(1 / b), correctly rounded, from ``approx`` within 3 ulps of it (dr.rcp is
+    CUDA's rcp.approx, off by up to an ulp; LLVM's is exact and stays so): one Newton step in
+    fmas, exact for every base of lab_halton (tests/plugins/test_samplers.py). The trace-time
+    path's constants are correctly rounded, so both paths give the same numbers on a GPU."""
+    return dr.fma(dr.fma(-b, approx, 1.0), approx, approx)
+
+
 def digit_constants(base, inv_base):
     """What the digit steps of one coordinate use: (b, 1/b, 1/(2b), b 2^-23, b - 1)."""
     return base, inv_base, 0.5 * inv_base, base * 2.0 ** -23, base - 1.0
@@ -143,12 +151,12 @@ class LabHaltonSampler(LabSampler):
         if all(isinstance(dim, int) for dim in dims):
             bases = [PRIMES[dim % len(PRIMES)] for dim in dims]
             self.base = mi.UInt32(PRIMES[(dims[-1] + 1) % len(PRIMES)])
-            # float32(1/b) is what dr.rcp gives (correctly rounded)
+            # float32(1/b), correctly rounded, as refined_reciprocal gives below
             return [(float(b), float(np.float32(1.0 / b))) for b in bases], max(n_digits(self.spp, b) for b in bases)
         out, base = [], self.base
         for dim in dims:
             b = to_float(base)
-            out.append((b, dr.rcp(b)))
+            out.append((b, refined_reciprocal(b, dr.rcp(b))))
             base = self._next_base(base, dim)
         self.base = base
         return out, None

@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 
 from agreement import pixel_problem, renders, z_scores
+from backend import HOME, variant
 from mitsuba_lab.scene import load_scene, make_integrator
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -229,14 +230,14 @@ def test_film_shape_crop_and_mono_agree_with_mitsuba_path():
     assert cropped.count("crop_width") == 1
 
     try:
-        for variant in ("llvm_ad_rgb", "llvm_ad_mono"):
-            mitsuba_lab.use_variant(variant)
+        for name in (variant("ad_rgb"), variant("ad_mono")):
+            mitsuba_lab.use_variant(name)
             sc = mi.load_string(cropped)
             lab = renders(sc, bdpt(), 16, SEEDS_LAB)
             assert lab.shape[1:3] == (16, 24)
-            assert_agrees(lab, path_stack(sc, 64), f"lab_bdpt, cropped non-square film, {variant}")
+            assert_agrees(lab, path_stack(sc, 64), f"lab_bdpt, cropped non-square film, {name}")
     finally:
-        mitsuba_lab.use_variant("llvm_ad_rgb")
+        mitsuba_lab.use_variant(HOME)
 
 
 # ---------------------------------------------------------------------------
@@ -318,7 +319,7 @@ def test_a_textured_light_seen_directly_agrees_with_mitsuba_path(tmp_path):
 
 
 def test_spectral_variant_agrees_with_mitsuba_path(tmp_path):
-    """llvm_ad_spectral: each pass draws one set of wavelengths from the sensor, emits every
+    """The spectral variant: each pass draws one set of wavelengths from the sensor, emits every
     light subpath at those and traces every camera ray at those, so connections and splats see
     one spectrum; the Cornell box (an RGB light: a D65-based spectrum) and the textured light.
     (A spectrum's sRGB may be out of gamut: negative channels are allowed, negative luminance
@@ -326,7 +327,7 @@ def test_spectral_variant_agrees_with_mitsuba_path(tmp_path):
     import mitsuba_lab
 
     try:
-        mitsuba_lab.use_variant("llvm_ad_spectral")
+        mitsuba_lab.use_variant(variant("ad_spectral"))
         scenes = {"cornell_box.xml": load_scene(scene_path("cornell_box.xml"), res=RES),
                   "textured light": mi.load_string(textured_light_scene(str(tmp_path)), res=RES)}
         for name, scene in scenes.items():
@@ -345,7 +346,7 @@ def test_spectral_variant_agrees_with_mitsuba_path(tmp_path):
         with pytest.raises(Exception, match="lab_bdpt: a blackbody emitter among 2 emitters cannot be emitted"):
             bdpt().render(several, spp=1)
     finally:
-        mitsuba_lab.use_variant("llvm_ad_rgb")
+        mitsuba_lab.use_variant(HOME)
 
 
 @pytest.mark.parametrize("name", ["cornell_box.xml", "stiff/light_in_glass.xml"])
@@ -410,13 +411,14 @@ def test_refusals_are_one_line():
     aov = mi.load_dict({"type": "aov", "aovs": "d:depth", "inner": {"type": "lab_bdpt"}})
     with pytest.raises(Exception, match="cannot be nested"):
         aov.render(scene, spp=1)
-    if "llvm_ad_rgb_polarized" in mi.variants():
+    if variant("ad_rgb_polarized") in mi.variants():
         try:
-            mitsuba_lab.use_variant("llvm_ad_rgb_polarized")
-            with pytest.raises(Exception, match="variant 'llvm_ad_rgb_polarized' is not supported: .*use llvm_ad_rgb"):
+            mitsuba_lab.use_variant(variant("ad_rgb_polarized"))
+            with pytest.raises(Exception, match=f"variant '{variant('ad_rgb_polarized')}' is not supported: "
+                                                f".*use {variant('ad_rgb')}"):
                 mi.load_dict({"type": "lab_bdpt"})
         finally:
-            mitsuba_lab.use_variant("llvm_ad_rgb")
+            mitsuba_lab.use_variant(HOME)
 
 
 def test_the_planner_knows_what_a_subset_cannot_render():

@@ -12,7 +12,7 @@ import pytest
 
 from mitsuba_lab.plugins.integrators.bdpt.light_subpath import render_light_tracing
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights
-from tests.agreement import renders, z_scores
+from agreement import renders, z_scores
 
 Z_BOUND = 5.0
 SEEDS_LAB = range(16)

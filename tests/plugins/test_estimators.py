@@ -10,6 +10,7 @@ import mitsuba as mi
 import pytest
 
 import mitsuba_lab
+from backend import variant
 from mitsuba_lab import plugins
 from mitsuba_lab.experiment.config import PASS_PARAMETER, PluginSpec, parse_config, sample_count_plugin
 from mitsuba_lab.experiment.plan import build_plan
@@ -158,10 +159,10 @@ def test_photon_follows_a_variant_switch():
     import numpy as np
 
     original = mi.variant()
-    if "llvm_ad_mono" not in mi.variants():
-        pytest.skip("this Mitsuba build has no llvm_ad_mono")
+    if variant("ad_mono") not in mi.variants():
+        pytest.skip(f"this Mitsuba build has no {variant('ad_mono')}")
     try:
-        mitsuba_lab.use_variant("llvm_ad_mono")
+        mitsuba_lab.use_variant(variant("ad_mono"))
         integrator = mi.load_dict({"type": "lab_photon", "photons_per_pass": 2000, "passes": 1, "max_depth": 4})
         image = np.array(mi.render(mi.load_dict(mi.cornell_box()), integrator=integrator, spp=1))
         assert image.shape[-1] == 1 and np.isfinite(image).all() and image.mean() > 0

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import mitsuba_lab
+from backend import HOME, variant
 from mitsuba_lab.errors import one_line
 from mitsuba_lab.metrics import rel_mse
 from mitsuba_lab.plugins.integrators.photon.gather import DELTA_MASK
@@ -227,16 +228,16 @@ def test_hide_emitters_matches_path():
 @pytest.fixture
 def variant_switch():
     yield mitsuba_lab.use_variant
-    mitsuba_lab.use_variant("llvm_ad_rgb")
+    mitsuba_lab.use_variant(HOME)
 
 
-@pytest.mark.skipif("llvm_ad_spectral" not in mi.variants(), reason="no spectral variant")
+@pytest.mark.skipif(variant("ad_spectral") not in mi.variants(), reason="no spectral variant")
 def test_spectral_converges_to_path(variant_switch):
-    """llvm_ad_spectral, the plastic + clear-coat box, direct=nee, 32 passes (one set of 4
+    """The spectral variant, the plastic + clear-coat box, direct=nee, 32 passes (one set of 4
     wavelengths per pass), against `path` (spectral) at 2048 spp: per-channel image means
     within 4%, relMSE < 0.006 (measured on the plastic box: 1.6% max channel error and relMSE
     0.0054 at 16 passes, 0.0015 at 64; 4 passes: 13%, the colour noise of 16 wavelengths)."""
-    variant_switch("llvm_ad_spectral")
+    variant_switch(variant("ad_spectral"))
     scene = spheres_box(PLASTIC, CLEARCOAT)
     ref = path_image(scene, 2048)
     img = np.array(mi.render(scene, integrator=photon(passes=32), spp=1, seed=5))
@@ -245,13 +246,13 @@ def test_spectral_converges_to_path(variant_switch):
     assert rel_mse(img, ref) < 0.006
 
 
-@pytest.mark.skipif("llvm_ad_spectral" not in mi.variants(), reason="no spectral variant")
+@pytest.mark.skipif(variant("ad_spectral") not in mi.variants(), reason="no spectral variant")
 def test_spectral_emitters_that_importance_sample_wavelengths(variant_switch):
     """A blackbody area light (wavelengths importance sampled from its own spectrum, not the
     uniform map of rgb spectra): photons are still emitted at the camera's wavelengths. 24x24,
     48 passes, direct=photons, against `path` at 2048 spp: per-channel means within 4%
     (measured 0.996, 1.006, 1.002 at 4096 spp; refused before, crashed before that)."""
-    variant_switch("llvm_ad_spectral")
+    variant_switch(variant("ad_spectral"))
     d = mi.cornell_box()
     d["sensor"]["film"].update({"width": 24, "height": 24, "rfilter": {"type": "box"}})
     d["light"]["emitter"]["radiance"] = {"type": "blackbody", "temperature": 3000}
@@ -262,15 +263,16 @@ def test_spectral_emitters_that_importance_sample_wavelengths(variant_switch):
     assert np.all(np.abs(ratio - 1) < 0.04), ratio
 
 
-@pytest.mark.parametrize("variant", ["llvm_ad_mono_polarized", "llvm_ad_spectral_polarized"])
-def test_polarized_variants_are_refused_in_one_line(variant, variant_switch):
-    if variant not in mi.variants():
-        pytest.skip(f"{variant} not built")
-    variant_switch(variant)
+@pytest.mark.parametrize("kind", ["ad_mono_polarized", "ad_spectral_polarized"])
+def test_polarized_variants_are_refused_in_one_line(kind, variant_switch):
+    name = variant(kind)
+    if name not in mi.variants():
+        pytest.skip(f"{name} not built")
+    variant_switch(name)
     with pytest.raises(Exception) as err:
         photon()
     text = one_line(err.value)
-    assert f"lab_photon: variant '{variant}' is not supported: photons carry unpolarized flux" in text
+    assert f"lab_photon: variant '{name}' is not supported: photons carry unpolarized flux" in text
     assert "\n" not in text
 
 

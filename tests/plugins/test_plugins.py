@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import mitsuba_lab
+from backend import variant
 from mitsuba_lab.render import render
 from mitsuba_lab.scene import load_scene, make_integrator
 
@@ -93,7 +94,7 @@ def test_no_nan_inf_or_negative_pixels():
 def test_plugins_follow_a_variant_switch():
     original = mi.variant()
     try:
-        mitsuba_lab.use_variant("llvm_ad_mono")
+        mitsuba_lab.use_variant(variant("ad_mono"))
         integrator = mi.load_dict({"type": "lab_mis", "max_depth": 3})
         scene = mi.load_dict(mi.cornell_box())
         image = np.array(mi.render(scene, integrator=integrator, spp=2))

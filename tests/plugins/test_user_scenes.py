@@ -1,5 +1,6 @@
 """Scenes written the way users write them (tests/user_scenes.py): every lab estimator that
-applies and every lab sampler agree with Mitsuba's `path`, under every llvm_ad variant.
+applies and every lab sampler agree with Mitsuba's `path`, in the rgb, mono and spectral
+variants of the run's backend (llvm_ad_* unless MITSUBA_LAB_VARIANT names a cuda_ad_* one).
 
 **Agreement.** On each scene, each lab sampler renders once with one path tracer, paired in a
 Latin square (slot i of scene k uses the applicable path tracer number (i + k) mod n): every
@@ -7,7 +8,7 @@ sampler and every applicable path tracer appear on every scene, every pair on se
 (``benchmarks/user_scenes.py`` runs the full product). Which path tracers apply is the
 estimators' own knowledge (``strategy_applicability``: lab_naive cannot reach delta lights).
 Samplers are written into the scene as users write them (lab_zsobol without ``width``, on
-non-square films and crop windows too). Under llvm_ad_mono and llvm_ad_spectral, each
+non-square films and crop windows too). Under the mono and spectral variants, each
 applicable path tracer runs once on each scene of OTHER_VARIANT_SCENES, with a sampler that
 rotates over scenes and variants. Each case is rendered with SEEDS = 32 seeds at the scene's
 spp and compared with one `path` reference per scene and variant (32 other seeds at
@@ -43,6 +44,7 @@ import pytest
 
 import mitsuba_lab
 import user_scenes as us
+import backend
 from agreement import pixel_problem, renders, z_scores
 from mitsuba_lab.metrics import rel_mse
 from mitsuba_lab.scene import SceneTraits, make_integrator, strategy_applicability
@@ -55,7 +57,7 @@ SEED_OFFSET = int(os.environ.get("LAB_TEST_SEED_OFFSET", "0"))
 LAB_SEEDS = range(SEED_OFFSET, SEED_OFFSET + SEEDS)
 REF_SEEDS = range(SEED_OFFSET + 10_000, SEED_OFFSET + 10_000 + SEEDS)
 
-RGB, MONO, SPECTRAL = "llvm_ad_rgb", "llvm_ad_mono", "llvm_ad_spectral"
+RGB, MONO, SPECTRAL = (backend.variant(kind) for kind in ("ad_rgb", "ad_mono", "ad_spectral"))
 SAMPLERS = ("lab_independent", "lab_stratified", "lab_sobol", "lab_zsobol", "lab_halton")
 PATH_TRACERS = ("lab_naive", "lab_nee", "lab_mis")
 SCENE_NAMES = tuple(us.SCENES)
@@ -77,14 +79,14 @@ def assets(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def variant(request):
-    """Switch to the variant (re-registers the lab plugins), back to llvm_ad_rgb at teardown.
+    """Switch to the variant (re-registers the lab plugins), back to the run's own at teardown.
     Loaded scenes belong to the variant's plugins and are dropped at each switch; reference
     images (numpy, keyed by variant) are kept."""
     mitsuba_lab.use_variant(request.param)
     _scenes.clear()
     yield request.param
     _scenes.clear()
-    mitsuba_lab.use_variant(RGB)
+    mitsuba_lab.use_variant(backend.HOME)
 
 
 def scene(assets, name, sampler="independent"):
@@ -139,7 +141,7 @@ def describe(result, name, estimator, sampler, variant_name) -> str:
     pytest.param(RGB, name, slot, id=f"{name}-{SAMPLERS[slot]}")
     for name in SCENE_NAMES for slot in range(len(SAMPLERS))], indirect=["variant"])
 def test_path_tracers_agree_with_path(variant, assets, name, slot):
-    """llvm_ad_rgb: the Latin square (every sampler and every applicable path tracer on every scene)."""
+    """RGB: the Latin square (every sampler and every applicable path tracer on every scene)."""
     sampler = SAMPLERS[slot]
     estimator = latin_estimator(assets, name, slot)
     result = agreement(assets, name, estimator, sampler)

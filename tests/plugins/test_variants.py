@@ -1,5 +1,6 @@
-"""The lab's plugins in every LLVM variant this Mitsuba build offers (rgb, mono, spectral and
-their polarized forms): every unbiased lab estimator and every lab sampler agrees with
+"""The lab's plugins in every variant of the run's backend that this Mitsuba build offers (rgb,
+mono, spectral and their polarized forms; llvm_ad_* unless MITSUBA_LAB_VARIANT names a
+cuda_ad_* variant, tests/backend.py): every unbiased lab estimator and every lab sampler agrees with
 Mitsuba's `path` (with the independent sampler) in expectation, with no NaN, Inf or negative
 pixel.
 
@@ -13,6 +14,7 @@ seeds are fixed, so a run is deterministic. Power: a 3% bias gives |z| > 5 in ev
 import pytest
 
 import mitsuba as mi
+import backend
 import mitsuba_lab
 from agreement import pixel_problem, renders, z_scores
 from mitsuba_lab.scene import make_integrator
@@ -22,8 +24,8 @@ SEEDS = 16
 REF_SEEDS = range(1000, 1000 + SEEDS)
 LAB_SEEDS = range(SEEDS)
 SPP = 32
-VARIANTS = [v for v in ("llvm_ad_rgb", "llvm_ad_mono", "llvm_ad_spectral", "llvm_ad_mono_polarized",
-                        "llvm_ad_spectral_polarized") if v in mi.variants()]
+VARIANTS = [v for v in (backend.variant(kind) for kind in ("ad_rgb", "ad_mono", "ad_spectral", "ad_mono_polarized",
+                                                           "ad_spectral_polarized")) if v in mi.variants()]
 ESTIMATORS = {"lab_naive": {}, "lab_nee": {}, "lab_mis": {"heuristic": "power"},
               "lab_mis_balance_nl2": {"heuristic": "balance", "emitter_samples": 2}}
 SAMPLERS = {"lab_stratified": {}, "lab_sobol": {}, "lab_zsobol": {"width": 32}, "lab_halton": {}}
@@ -49,7 +51,7 @@ def variant(request):
     mitsuba_lab.use_variant(request.param)
     cache = {}
     yield request.param, cache
-    mitsuba_lab.use_variant("llvm_ad_rgb")
+    mitsuba_lab.use_variant(backend.HOME)
 
 
 def reference(cache):

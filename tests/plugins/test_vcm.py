@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from agreement import pixel_problem, renders, z_scores
+from backend import HOME, variant
 from mitsuba_lab.scene import load_scene, make_integrator
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -275,22 +276,22 @@ STIFF = sorted(f for f in os.listdir(os.path.join(ROOT, "scenes", "stiff")) if f
 
 @pytest.mark.parametrize("mode, light_paths", [("vcm", 1), ("ppm", 1), ("vcm", 4)])
 def test_spectral_variant_agrees_with_mitsuba_path(mode, light_paths):
-    """llvm_ad_spectral, as lab_photon: one set of wavelengths per pass (here one iteration), at
+    """The spectral variant, as lab_photon: one set of wavelengths per pass (here one iteration), at
     which light subpaths are emitted, merged and connected (sRGB of a spectrum may be out of
     gamut: negative channels are allowed, negative luminance is not)."""
     import mitsuba_lab
 
     try:
-        mitsuba_lab.use_variant("llvm_ad_spectral")
+        mitsuba_lab.use_variant(variant("ad_spectral"))
         scene = load_scene(scene_path("cornell_box.xml"), res=RES)
         lab = renders(scene, vcm(mode=mode, radius=SMALL_RADIUS, light_paths=light_paths), 16, SEEDS_LAB)
         assert pixel_problem(lab, True) == ""
         result = z_scores(lab, path_stack(scene))
-        print(f"lab_vcm mode={mode}, light_paths={light_paths} in llvm_ad_spectral: max |z| {result.max_abs_z:.2f}, "
+        print(f"lab_vcm mode={mode}, light_paths={light_paths} in {mi.variant()}: max |z| {result.max_abs_z:.2f}, "
               f"relative difference {result.rel_diff.round(4)}")
         assert result.max_abs_z <= Z_BOUND
     finally:
-        mitsuba_lab.use_variant("llvm_ad_rgb")
+        mitsuba_lab.use_variant(HOME)
 
 
 @pytest.mark.parametrize("merge_first", [True, False])
