@@ -50,12 +50,13 @@ def timed_render(scene, integrator, spp, seed):
     return wall, compiled, stats
 
 
-def measure(name, res, spp, depth, radius, rounds, merge_first=False, light_paths=1.0):
+def measure(name, res, spp, depth, radius, rounds, merge_first=False, light_paths=1.0, aim=0.0):
     scene = load_scene(os.path.join(ROOT, "scenes", name), res=res)
     methods = {
         "vcm": make_integrator("lab_vcm", {"mode": "vcm", "max_depth": depth, "radius": radius,
-                                           "merge_first": merge_first, "light_paths": light_paths}),
-        "bpt": make_integrator("lab_vcm", {"mode": "bpt", "max_depth": depth, "light_paths": light_paths}),
+                                           "merge_first": merge_first, "light_paths": light_paths, "aim": aim}),
+        "bpt": make_integrator("lab_vcm", {"mode": "bpt", "max_depth": depth, "light_paths": light_paths,
+                                           "aim": aim}),
         "ptracer": make_integrator("ptracer", {"max_depth": depth}),
         "path": make_integrator("path", {"max_depth": depth}),
     }
@@ -124,6 +125,9 @@ def main(argv=None) -> int:
                         help="lab_vcm with merge_first = true (merging at the camera's first vertex too)")
     parser.add_argument("--light-paths", type=float, default=1.0,
                         help="lab_vcm's light_paths in modes vcm and bpt, in [1/64, 64] (default: 1)")
+    parser.add_argument("--aim", type=float, default=0.0,
+                        help="lab_vcm's aim in modes vcm and bpt (share of emitted directions aimed at the "
+                             "specular shapes), in [0, 1) (default: 0)")
     parser.add_argument("--quick", action="store_true",
                         help="smoke run: 32x32, 4 spp, 1 round, cornell box only (not a measurement)")
     args = parser.parse_args(argv)
@@ -133,6 +137,8 @@ def main(argv=None) -> int:
         parser.error("--rounds, --res and --spp must be >= 1 and --radius > 0")
     if not 1.0 / 64 <= args.light_paths <= 64:
         parser.error("--light-paths must be in [1/64, 64]")
+    if not 0.0 <= args.aim < 1.0:
+        parser.error("--aim must be in [0, 1)")
     missing = [n for n in args.scenes if not os.path.isfile(os.path.join(ROOT, "scenes", n))]
     if missing:
         parser.error(f"no such scene under scenes/: {', '.join(missing)}")
@@ -146,14 +152,15 @@ def main(argv=None) -> int:
             print(" | ".join([name, *(f"{ms:.2f} ({passes})" for ms, passes in m.values())]), flush=True)
         return 0
     print(f"{args.res}x{args.res}, {args.spp} iterations, max_depth {args.max_depth}, medians of {args.rounds} "
-          f"rounds, merge_first {str(args.merge_first).lower()}, light_paths {args.light_paths:g}; milliseconds per "
+          f"rounds, merge_first {str(args.merge_first).lower()}, light_paths {args.light_paths:g}, aim {args.aim:g}; "
+          f"milliseconds per "
           f"iteration (one sample per pixel)")
     header = ("scene", "light", "grid", "camera+conn", "merging", "vcm total", "bpt total", "path",
               "light ns/path", "ptracer ns/path", "ratio", "passes", "compiled")
     print(" | ".join(header))
     for name in args.scenes:
         m = measure(name, args.res, args.spp, args.max_depth, args.radius, args.rounds, args.merge_first,
-                    args.light_paths)
+                    args.light_paths, args.aim)
         print(" | ".join([m["scene"], *(f"{m[k]:.2f}" for k in ("light_ms", "grid_ms", "camera_ms", "merge_ms",
                                                                  "vcm_ms", "bpt_ms", "path_ms")),
                           f"{m['light_ns_per_path']:.0f}", f"{m['ptracer_ns_per_path']:.0f}",

@@ -142,6 +142,16 @@ LAB_MIS = PATH_TRACER + (
     Param("emitter_samples", int, 1, "shadow rays per vertex, n_L", **_int_at_least(1)),
 )
 
+#: Aimed emission (``integrators/aim.py``): lab_photon, lab_bdpt and lab_vcm.
+AIM = (
+    Param("aim", float, 0.0, "share of an area light's emitted directions aimed at the bounding spheres of the "
+          "aim_at shapes (Jensen's projection map, simplest form); 0 = cosine-weighted only, as Mitsuba emits",
+          check=lambda v: 0.0 <= v < 1.0, expected="a number in [0, 1)"),
+    Param("aim_at", str, "specular", "shapes aimed at: specular (every shape whose BSDF has only delta lobes) "
+          "or shape ids joined by ','", check=lambda v: bool(v.strip()) and all(t.strip() for t in v.split(",")),
+          expected="'specular' or shape ids joined by ','"),
+)
+
 #: lab_photon (progressive photon mapping). Its max_depth is -1 or >= 1: a camera
 #: path needs one segment to reach a photon.
 LAB_PHOTON = (
@@ -159,7 +169,7 @@ LAB_PHOTON = (
     Param("max_records", int, 1 << 21, "most photon records held at once (a pass is split to fit)",
           **_int_at_least(PHOTON_MIN_RECORDS)),
     PATH_TRACER[2],                                   # hide_emitters, Mitsuba's meaning
-)
+) + AIM
 
 #: lab_bdpt's strategy kinds (``bdpt/weights.py``) and the named subsets of them.
 BDPT_KINDS = ("hit", "nee", "light", "connect")
@@ -208,7 +218,7 @@ LAB_BDPT = (
           "(Veach's per-strategy images); empty = every strategy",
           check=lambda v: bdpt_only_strategy(v) is not None,
           expected="empty or 's,t' with s >= 0, t >= 1 and s + t >= 2"),
-)
+) + AIM
 
 #: lab_vcm's modes: the strategy kinds each enables (SmallVCM's estimators behind one MIS).
 VCM_MODES = {
@@ -249,7 +259,7 @@ LAB_VCM = (
           "its light subpath (lab_bdpt), or one, to one of them picked uniformly and counted n times, the MIS "
           "weights counting a connection as 1 / (mean vertices per light subpath)", choices=("all", "one")),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
-                                            "max_vertices"))
+                                            "max_vertices", "aim", "aim_at"))
 
 #: Shared by every lab sampler (``LabSampler``).
 SAMPLER = (

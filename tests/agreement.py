@@ -8,6 +8,7 @@ is divided by its standard error estimated from the spread across seeds
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,6 +17,17 @@ from mitsuba_lab.metrics import luminance, z_score
 from mitsuba_lab.render import render
 
 BLOCK = 8
+#: The agreement tests' bound on |z| (blocks and image means).
+Z_BOUND = 5.0
+#: Disjoint seed ranges of the two sides.
+SEEDS_LAB = range(16)
+SEEDS_REF = range(1000, 1016)
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def scene_path(name: str) -> str:
+    """A scene of the project's scenes/ folder."""
+    return os.path.join(ROOT, "scenes", name)
 
 
 @dataclass
@@ -67,3 +79,14 @@ def pixel_problem(stack: np.ndarray, spectral: bool) -> str:
         return (f"negative {'luminance' if spectral else 'pixels'} (min {values.min():.3g}, "
                 f"{int(np.sum(values < floor))} values)")
     return ""
+
+
+def assert_agrees(lab: np.ndarray, ref: np.ndarray, what: str, bound: float = Z_BOUND) -> Agreement:
+    """Every pixel of ``lab`` finite and non-negative, and max |z| against ``ref`` within ``bound``
+    (printed, with the relative difference of the image means)."""
+    assert pixel_problem(lab, False) == "", f"{what}: {pixel_problem(lab, False)}"
+    result = z_scores(lab, ref)
+    print(f"{what}: max |z| {result.max_abs_z:.2f}, relative difference {result.rel_diff.round(4)}")
+    assert result.max_abs_z <= bound, (f"{what}: max |z| {result.max_abs_z:.2f}, image z {result.image_z}, "
+                                       f"relative difference {result.rel_diff}")
+    return result

@@ -8,7 +8,7 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-@pytest.mark.parametrize("extra", [[], ["--merge-first"], ["--light-paths", "0.25"]])
+@pytest.mark.parametrize("extra", [[], ["--merge-first"], ["--light-paths", "0.25"], ["--aim", "0.5"]])
 def test_bench_vcm_quick(capsys, extra):
     spec = importlib.util.spec_from_file_location("bench_vcm", os.path.join(ROOT, "benchmarks", "bench_vcm.py"))
     bench = importlib.util.module_from_spec(spec)
@@ -16,7 +16,8 @@ def test_bench_vcm_quick(capsys, extra):
     assert bench.main(["--quick", *extra]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert f"merge_first {'true' if '--merge-first' in extra else 'false'}" in lines[-3]
-    assert f"light_paths {'0.25' if '--light-paths' in extra else '1'};" in lines[-3]
+    assert f"light_paths {'0.25' if '--light-paths' in extra else '1'}," in lines[-3]
+    assert f"aim {'0.5' if '--aim' in extra else '0'};" in lines[-3]
     assert lines[-2].startswith("scene | light | grid | camera+conn | merging")
     row = lines[-1].split(" | ")
     assert row[0] == "cornell_box.xml" and len(row) == 13

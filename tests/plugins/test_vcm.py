@@ -21,7 +21,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from agreement import pixel_problem, renders, z_scores
+from agreement import assert_agrees, pixel_problem, renders, z_scores
 from backend import HOME, variant
 from mitsuba_lab.scene import load_scene, make_integrator
 
@@ -56,15 +56,6 @@ def test_modes_without_merging_are_lab_bdpt_and_lab_mis(name):
     for mode, other in pairs:
         np.testing.assert_allclose(render(scene, vcm(mode=mode)), render(scene, other), rtol=2e-4, atol=1e-5,
                                    err_msg=f"mode={mode} on {name}")
-
-
-def assert_agrees(lab, ref, what):
-    assert pixel_problem(lab, False) == "", f"{what}: {pixel_problem(lab, False)}"
-    result = z_scores(lab, ref)
-    print(f"{what}: max |z| {result.max_abs_z:.2f}, relative difference {result.rel_diff.round(4)}")
-    assert result.max_abs_z <= Z_BOUND, (f"{what}: max |z| {result.max_abs_z:.2f}, image z {result.image_z}, "
-                                         f"relative difference {result.rel_diff}")
-    return result
 
 
 def path_stack(scene, spp=64):

@@ -234,7 +234,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
             # emission density of x_0, the competitor of a direct hit; ``table.emission``)
             pdf_nee = nee_density(scene, prev_it, ds, infinite, hit & ((depth > 1) | ~infinite))
             cos_light = dr.select(infinite, 1.0, dr.abs(dr.dot(si.n, ray.d)))
-            pdf_pos, pdf_dir, _ = table.emission(emitter, cos_light, pdf_nee, hit)
+            pdf_pos, pdf_dir, _ = table.emission(emitter, cos_light, pdf_nee, hit, si.p, -ray.d)
             # (light tracing never splats an emitter at infinity: no competitor for x_0 there)
             w_hit = w.hit(mis, pdf_nee, pdf_pos * pdf_dir, dr.select(infinite, 0.0, pdf_pos))
             L += beta * finite_or_zero(w_hit) * emitter.eval(si, hit)
@@ -256,7 +256,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         dist2 = dr.select(infinite, 1.0, dr.square(ds.dist))
         cos_light = dr.select(ds.delta | infinite, 1.0, dr.abs(dr.dot(ds.n, ds.d)))
         pdf_nee = dr.select(ds.delta, ds.pdf, ds.pdf * cos_light / dist2)   # area (at infinity: solid angle)
-        pdf_pos, pdf_dir, delta = table.emission(ds.emitter, cos_light, pdf_nee, nee_on)
+        pdf_pos, pdf_dir, delta = table.emission(ds.emitter, cos_light, pdf_nee, nee_on, ds.p, -ds.d)
         w_nee = w.nee(mis, pdf_nee, pdf_pos * pdf_dir, cos_light, dr.abs(dr.dot(si.n, ds.d)), dist2,
                       pdf_fwd, pdf_rev, delta, depth)
         L += dr.select(nee_on, spectrum_or_zero(beta * f * em_weight * finite_or_zero(w_nee)), 0.0)

@@ -55,7 +55,9 @@ class EmitterTable:
     point; 1 for a directional emitter).
     """
 
-    def __init__(self, scene: mi.Scene):
+    def __init__(self, scene: mi.Scene, aim=None):
+        #: ``aim.AimedEmission`` when area lights aim a share of their directions at shapes
+        self.aim = aim if aim is not None and aim.enabled else None
         emitters = scene.emitters()
         ids = dr.reinterpret_array(mi.UInt32, scene.emitters_dr()).numpy().tolist() if emitters else []
         size = (max(ids) if ids else 0) + 1
@@ -92,19 +94,27 @@ class EmitterTable:
         """The emitter is ``constant``, ``envmap`` or ``directional`` (its x_0 is a direction)."""
         return dr.gather(mi.UInt32, self.kind, self.slot(emitter), active) >= _DIRECTIONAL
 
-    def emission(self, emitter, cos_out, pdf_nee=None, active=True):
+    def emission(self, emitter, cos_out, pdf_nee=None, active=True, point=None, direction=None):
         """(pdf_pos, pdf_dir, delta) of emitting from a point of ``emitter`` in a direction at
         |cos| ``cos_out`` to its normal. ``pdf_nee``: the point's density under emitter
         sampling (``nee_density``: area, or solid angle at infinity), needed for textured
         area lights and environments, which sample positions or directions the same way for
         emission as for emitter sampling (for the others it may be None). ``delta``: the
-        emitter cannot be hit (point, spot, directional)."""
+        emitter cannot be hit (point, spot, directional). ``point``, ``direction``: the emitted
+        point and direction (world space), which an area light's density depends on when it
+        aims (``aim``)."""
         slot = self.slot(emitter)
         kind = dr.gather(mi.UInt32, self.kind, slot, active)
         pmf = dr.gather(mi.Float, self.pmf, slot, active)
         position_delta = (kind == _POINT) | (kind == _SPOT)
         pos = dr.select(position_delta, pmf, pmf * dr.gather(mi.Float, self.inv_area, slot, active))
-        direction = dr.select(kind >= _POINT, dr.gather(mi.Float, self.cone, slot, active), cos_out * dr.inv_pi)
+        if self.aim is None:
+            area_dir = cos_out * dr.inv_pi
+        elif point is None or direction is None:
+            raise ValueError("lab_bdpt: an aiming emitter's density needs the emitted point and direction")
+        else:
+            area_dir = self.aim.pdf(cos_out, point, direction)
+        direction = dr.select(kind >= _POINT, dr.gather(mi.Float, self.cone, slot, active), area_dir)
         if pdf_nee is not None:
             pos = dr.select(kind == _AREA_TEXTURED, pdf_nee, pos)
             direction = dr.select(kind == _ENVIRONMENT, pdf_nee / dr.maximum(pmf, 1e-30), direction)

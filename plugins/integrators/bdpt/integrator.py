@@ -9,6 +9,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators import spawn, spectral
+from mitsuba_lab.plugins.integrators.aim import AimedEmission
 from mitsuba_lab.plugins.integrators.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.params import UNBOUNDED, bdpt_only_strategy
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
@@ -121,6 +122,15 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                          MIS weight (Veach's per-strategy images: over all (s, t)
                          the images sum to the full one). Empty: all strategies.
                          (Default: empty)
+    aim           float  Share in [0, 1) of an area light's emitted directions
+                         drawn in the cones towards the bounding spheres of the
+                         ``aim_at`` shapes (Jensen's projection map in its
+                         simplest form; ``aim.py``): more light subpaths through
+                         the glass that focuses a caustic. Unbiased: emission
+                         weights and MIS use the mixture's density. (Default: 0:
+                         Mitsuba's cosine-weighted emission)
+    aim_at        string ``specular`` (every shape whose BSDF has only delta
+                         lobes) or shape ids joined by ``,`` (Default: ``specular``)
     ============= ====== ========================================================
 
     Handles: area lights (any shape, textured or not), point, spot and directional lights,
@@ -184,7 +194,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         floor = spawn.offset_floor(traits)
         light_depth = -1 if self.max_depth == DEPTH_UNBOUNDED else self.max_depth
         only = self.only
-        tracer = LightTracer(scene, sensor, light_depth, v["rr_depth"], None, floor, only, v["hide_emitters"])
+        aim = AimedEmission(scene, v["aim"], v["aim_at"], self.ESTIMATOR.plugin_name)
+        tracer = LightTracer(scene, sensor, light_depth, v["rr_depth"], None, floor, only, v["hide_emitters"], aim)
         inv_area, axis = sensor_constants(sensor)
         self.stats = stats = BdptStats()
         self.connectable_per_path = FIRST_GUESS_VERTICES    # (the same first guess in every render)

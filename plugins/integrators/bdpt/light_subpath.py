@@ -120,7 +120,7 @@ class LightTracer:
 
     def __init__(self, scene: mi.Scene, sensor: mi.Sensor, max_depth: int = -1, rr_depth: int = 5,
                  weights: BdptWeights | None = None, offset_floor: float = 1.0, only: tuple = (),
-                 hide_emitters: bool = False):
+                 hide_emitters: bool = False, aim=None):
         if not isinstance(max_depth, int) or max_depth < -1 or max_depth == 0:
             raise ValueError(f"lab_bdpt: max_depth must be -1 (unbounded) or >= 1, got {max_depth!r}")
         if not isinstance(rr_depth, int) or rr_depth < 1:
@@ -131,7 +131,7 @@ class LightTracer:
         self.rr_depth = rr_depth
         self.weights = weights if weights is not None else BdptWeights(strategies="light")
         self.floor = offset_floor
-        self.table = EmitterTable(scene)
+        self.table = EmitterTable(scene, aim)     # (aim: aim.AimedEmission, or None)
         self.only = only                     # () or the one strategy (s, t) to splat
         self.hide_emitters = hide_emitters   # camera rays pass through area emitters
         self.spectra = spectral.EmitterSpectra(scene, "lab_bdpt") if mi.is_spectral else None
@@ -194,11 +194,17 @@ class LightTracer:
         delta_pos = mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition)
         infinite = table.at_infinity(emitter)
         on_surface = ~delta_pos & ~infinite
+        if dr.hint(table.aim is not None, mode="scalar"):
+            # an area light aims a share of its directions (aim.py): redrawn, weight corrected
+            u_aim, u_cone = rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32())
+            ray.d, factor = table.aim.sample(ps.p, ps.n, ray.d, u_aim, u_cone, on_surface)
+            ray_weight = ray_weight * factor
         cos_emit = dr.select(on_surface, dr.abs(dr.dot(ps.n, ray.d)), 1.0)
-        pdf_pos, pdf_dir, delta = table.emission(emitter, cos_emit)
+        pdf_pos, pdf_dir, delta = table.emission(emitter, cos_emit, None, True, ps.p, ray.d)
         pdf_pos = dr.select(on_surface, pmf * ps.pdf, pdf_pos)        # what sample_ray used, exactly
-        if dr.hint(self.floor < 1.0, mode="scalar"):
-            # An area emitter's ray starts at Mitsuba's absolute offset: use the lab's instead.
+        if dr.hint(self.floor < 1.0 or table.aim is not None, mode="scalar"):
+            # An area emitter's ray starts at Mitsuba's absolute offset (from the point, to the side
+            # of its own direction): use the lab's instead.
             it0 = dr.zeros(mi.Interaction3f)
             it0.p, it0.n = ps.p, ps.n
             ray.o = dr.select(on_surface, spawn.offset_point(it0, ray.d, self.floor), ray.o)
@@ -251,7 +257,7 @@ class LightTracer:
                 ds_0.d = dr.select(infinite, -ray.d, dr.normalize(ds_0.p - si.p))
                 ds_0.dist = dr.select(infinite, dr.inf, dr.norm(ds_0.p - si.p))
                 pdf_nee = dr.select(delta, pmf, nee_density(scene, si, ds_0, infinite, active & ~delta))
-                pdf_dir_0 = table.emission(emitter, cos_emit, pdf_nee, active)[1]
+                pdf_dir_0 = table.emission(emitter, cos_emit, pdf_nee, active, ds_0.p, ray.d)[1]
                 start = w.start_light(pdf_pos * pdf_dir_0, pdf_nee, cos_emit, delta)
                 dvcm, dvc, first = mi.Float(start.dvcm), mi.Float(start.dvc), mi.Float(start.first)
                 dvm = carried(w.merging, start.dvm, dvm)

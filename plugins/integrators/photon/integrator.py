@@ -10,6 +10,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.integrators import spawn
+from mitsuba_lab.plugins.integrators.aim import AimedEmission
 from mitsuba_lab.plugins.integrators.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
@@ -44,6 +45,8 @@ class PhotonSettings:
     direct: str
     max_records: int
     hide_emitters: bool = False
+    aim: float = 0.0
+    aim_at: str = "specular"
 
     @classmethod
     def resolve(cls, given: dict | None = None) -> "PhotonSettings":
@@ -165,6 +168,12 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
                             emitters to what lies behind them, and where they see
                             only the environment the pixel is invalid (black,
                             alpha 0) (Default: false)
+    aim              float  Share in [0, 1) of an area light's photons emitted
+                            towards the bounding spheres of the ``aim_at``
+                            shapes, their power scaled by the mixture's
+                            density, as lab_bdpt's light subpaths (Default: 0)
+    aim_at           string ``specular`` or shape ids joined by ``,``
+                            (Default: ``specular``)
     ================ ====== ======================================================
 
     Pass seeds come from the render's ``seed``: different seeds give independent
@@ -240,7 +249,8 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
 
         # Photons travel at most depth - 1 segments: the camera needs one to reach them.
         tracer = PhotonTracer(scene, max_segments=min(depth - 1, DEPTH_CAP), min_segments=min_segments,
-                              rr_depth=cfg.rr_depth, offset_floor=floor)
+                              rr_depth=cfg.rr_depth, offset_floor=floor,
+                              aim=AimedEmission(scene, cfg.aim, cfg.aim_at, "lab_photon"))
         r1 = cfg.radius if cfg.radius > 0 else automatic_radius(scene, sensor)
         radii = radius_schedule(r1, cfg.passes, cfg.alpha)
         stats.radius_first, stats.radius_last = radii[0], radii[-1]

@@ -111,6 +111,22 @@ def area_origin_fixes(scene: mi.Scene, floor: float) -> list:
     return [fixed(e) if e.get_shape() is not None else unchanged for e in scene.emitters()]
 
 
+def aimed_ray(aim, emitter, time, sample2, ray, weight, rng, floor: float):
+    """``sample_ray``'s (ray, weight) with its direction redrawn by ``aim`` (``aim.py``) where the
+    emitter is an area light (the same ``sample2`` gives its point again); the ray starts at the
+    lab's offset from that point."""
+    ps, _ = emitter.sample_position(time, sample2)
+    area = mi.has_flag(emitter.flags(), mi.EmitterFlags.Surface)
+    u_choice = rng.next_float32()
+    u_cone = mi.Point2f(rng.next_float32(), rng.next_float32())
+    d, factor = aim.sample(ps.p, ps.n, ray.d, u_choice, u_cone, area)
+    it = dr.zeros(mi.Interaction3f)
+    it.p, it.n = ps.p, ps.n
+    ray.o = dr.select(area, spawn.offset_point(it, d, floor), ray.o)
+    ray.d = d
+    return ray, weight * factor
+
+
 def selection_pmf(powers: list[float]) -> list[float]:
     """Probabilities proportional to power, with the MIN_SHARE floor; sums to 1."""
     k = len(powers)
@@ -132,7 +148,7 @@ class PhotonTracer:
     """
 
     def __init__(self, scene: mi.Scene, max_segments: int, min_segments: int, rr_depth: int,
-                 offset_floor: float = 1.0):
+                 offset_floor: float = 1.0, aim=None):
         if not scene.emitters():
             raise ValueError("lab_photon: the scene has no emitter")
         self.spectra = spectral.EmitterSpectra(scene) if mi.is_spectral else None
@@ -147,6 +163,8 @@ class PhotonTracer:
         self.pmf = selection_pmf(self.powers)
         self.distribution = mi.DiscreteDistribution(mi.Float(self.pmf))
         self.emitters = scene.emitters_dr()
+        #: ``aim.AimedEmission`` when a share of area lights' directions is aimed at shapes
+        self.aim = aim if aim is not None and aim.enabled else None
 
     @dr.syntax
     def trace(self, first: int, count: int, pass_seed: int, emitted_in_pass: int, capacity: int,
@@ -177,7 +195,9 @@ class PhotonTracer:
             ray, weight = self.spectra.emit(emitter, emitter_index, time, wavelengths, sample2, sample3)
         else:
             ray, weight = emitter.sample_ray(time, u_wavelength, sample2, sample3)
-        if dr.hint(self.origin_fixes is not None, mode="scalar"):
+        if dr.hint(self.aim is not None, mode="scalar"):
+            ray, weight = aimed_ray(self.aim, emitter, time, sample2, ray, weight, rng, self.offset_floor)
+        elif dr.hint(self.origin_fixes is not None, mode="scalar"):
             ray.o = dr.switch(emitter_index, self.origin_fixes, time, sample2, ray)
         n_emitted = dr.opaque(mi.Float, float(emitted_in_pass))
         beta = mi.Spectrum(weight) * dr.select(p_emitter > 0, dr.rcp(p_emitter * n_emitted), 0.0)

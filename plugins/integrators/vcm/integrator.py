@@ -129,7 +129,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                          mode pt's estimator; the pilot's path tracing
                          averaged in) where that is lower, else every
                          technique's (``selection``; Default: false)
-    max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices: as lab_bdpt.
+    max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices, aim, aim_at: as
+                         lab_bdpt (``aim``: the light subpaths that merge too).
     ============= ====== ========================================================
 
     A light vertex merges with a camera vertex when within r_i, facing the same way (normals

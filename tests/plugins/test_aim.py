@@ -1,0 +1,163 @@
+"""Aimed emission (``aim``, ``aim_at``; plugins/integrators/aim.py): an area light sends a share
+of its directions at the bounding spheres of chosen shapes.
+
+* The mixture's weight factor (cos / pi) / p(d | y) has expectation exactly 1 under p (the
+  cosine density integrates to 1 over the hemisphere), and p integrates to 1 over the sphere of
+  directions: both checked on sds.xml's light, whose points see its two targets from outside,
+  and on light_in_glass.xml's, inside its target's sphere; |z| <= 5 over 2^20 samples, and an
+  aimed density 10% off fails both (power).
+* In expectation: lab_bdpt, lab_vcm (bpt and vcm) with ``aim`` agree with Mitsuba's ``path``
+  (the z-test of tests/agreement.py, |z| <= 5); lab_photon with and without it have the same
+  expectation (same radii); on the caustic's floor lab_bdpt's mean is the same with and
+  without, and a 10% error in the aimed density, used by the weights and the MIS, fails
+  that by |z| > 10 (power).
+* ``aim = 0``, or no target in the scene, renders exactly the image without it.
+"""
+import math
+import tomllib
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from agreement import SEEDS_LAB, SEEDS_REF, Z_BOUND, assert_agrees, renders, scene_path
+from mitsuba_lab.errors import one_line
+from mitsuba_lab.plugins.integrators.aim import AimedEmission
+from mitsuba_lab.scene import load_scene, make_integrator
+
+RES = 24
+MAX_DEPTH = 8
+N = 1 << 20      # directions per mean check
+
+
+def light_points(scene, n, seed=1):
+    """n points (and normals) on the scene's first area light, uniform by area."""
+    emitter = [e for e in scene.emitters() if e.get_shape() is not None][0]
+    rng = mi.PCG32(n, seed)
+    ps, _ = emitter.sample_position(0.0, mi.Point2f(rng.next_float32(), rng.next_float32()))
+    return ps.p, ps.n, rng
+
+
+def mean_z(values, expected):
+    values = np.array(values, dtype=np.float64)
+    return (values.mean() - expected) / (values.std(ddof=1) / math.sqrt(len(values)))
+
+
+def factor_and_density_z(scene, aim):
+    """z of E[factor] = 1 under the mixture, and of E[4 pi p(d | y)] = 1 for uniform d."""
+    y, n, rng = light_points(scene, N)
+    d_cos = mi.Frame3f(n).to_world(mi.warp.square_to_cosine_hemisphere(mi.Point2f(rng.next_float32(),
+                                                                                      rng.next_float32())))
+    _, factor = aim.sample(y, n, d_cos, rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32()))
+    d = mi.warp.square_to_uniform_sphere(mi.Point2f(rng.next_float32(), rng.next_float32()))
+    density = 4 * math.pi * aim.pdf(dr.maximum(dr.dot(n, d), 0.0), y, d)
+    return mean_z(factor, 1.0), mean_z(density, 1.0)
+
+
+@pytest.mark.parametrize("name, targets", [("sds.xml", 2), ("stiff/light_in_glass.xml", 1)])
+def test_the_mixture_is_a_density_and_its_weights_have_mean_one(name, targets):
+    scene = load_scene(scene_path(name), res=16)
+    aim = AimedEmission(scene, 0.5)
+    assert aim.enabled and len(aim.spheres) == targets
+    z_factor, z_density = factor_and_density_z(scene, aim)
+    print(f"{name}: z of E[factor] - 1 {z_factor:+.2f}, of E[4 pi p] - 1 {z_density:+.2f}")
+    assert abs(z_factor) <= Z_BOUND and abs(z_density) <= Z_BOUND
+
+
+def test_a_wrong_aimed_density_fails_the_mean_check(monkeypatch):
+    scene = load_scene(scene_path("sds.xml"), res=16)
+    aim = AimedEmission(scene, 0.5)
+    right = AimedEmission._aimed_pdf
+    monkeypatch.setattr(AimedEmission, "_aimed_pdf", lambda self, y, d: 1.1 * right(self, y, d))
+    z_factor, z_density = factor_and_density_z(scene, aim)
+    print(f"aimed density x 1.1: z {z_factor:+.1f}, {z_density:+.1f}")
+    assert abs(z_factor) > 2 * Z_BOUND and abs(z_density) > 2 * Z_BOUND
+
+
+def test_targets_are_the_specular_shapes_or_the_named_ones():
+    scene = load_scene(scene_path("sds.xml"), res=16)
+    spheres = AimedEmission(scene, 0.5).spheres                  # glass sphere and pane
+    assert [r for _, r in spheres] == pytest.approx([0.5, math.hypot(2.5, 0.6)], rel=1e-3)
+    assert AimedEmission(scene, 0.5, "glass-sphere").spheres == spheres[:1]
+    assert not AimedEmission(load_scene(scene_path("cornell_box.xml"), res=16), 0.5).enabled
+    with pytest.raises(ValueError, match="lab_vcm: parameter 'aim_at' names shape 'nosuch', which the scene "
+                                         "does not have .*glass-sphere, pane"):
+        AimedEmission(scene, 0.5, "glass-sphere, nosuch")
+
+
+def path_stack(scene, spp=64):
+    return renders(scene, make_integrator("path", {"max_depth": MAX_DEPTH}), spp, SEEDS_REF)
+
+
+@pytest.mark.parametrize("name", ["caustic.xml", "stiff/light_in_glass.xml"])
+@pytest.mark.parametrize("plugin, params", [("lab_bdpt", {}), ("lab_vcm", {"mode": "bpt"}),
+                                            ("lab_vcm", {"radius": 0.02, "light_paths": 2})])
+def test_aimed_emission_agrees_with_mitsuba_path(name, plugin, params):
+    """(Not sds.xml: its light seen through the pane is sampled by path tracing alone and is
+    heavy-tailed in 16 seeds, with or without aim.)"""
+    scene = load_scene(scene_path(name), res=RES)
+    lab = renders(scene, make_integrator(plugin, {"max_depth": MAX_DEPTH, "aim": 0.5, **params}), 16, SEEDS_LAB)
+    assert_agrees(lab, path_stack(scene), f"{plugin} {params} aim=0.5 on {name}")
+
+
+def caustic_floor_means(scene, params, seeds, spp=64):
+    """Region ``caustic_floor``'s mean (caustic.regions.toml, res 64) of lab_bdpt, per seed."""
+    box = tomllib.load(open(scene_path("caustic.regions.toml"), "rb"))["regions"]["caustic_floor"]
+    xs, ys = slice(round(box[0] * 64), round(box[2] * 64)), slice(round(box[1] * 64), round(box[3] * 64))
+    integrator = make_integrator("lab_bdpt", {"max_depth": MAX_DEPTH, **params})
+    return np.array([np.array(mi.render(scene, integrator=integrator, spp=spp, seed=s))[ys, xs].mean()
+                     for s in seeds])
+
+
+def test_a_wrong_aimed_density_is_caught(monkeypatch):
+    """On the caustic's floor, lit by light subpaths through the glass: aimed and not, the same
+    mean (|z| <= 5; 8 seeds of 512 spp without, 16 of 64 with); the aimed part of the density 10% too large, in the
+    weights and the MIS, darkens it by ~9%: |z| > 10 (power)."""
+    scene = load_scene(scene_path("caustic.xml"), res=64)
+    plain = caustic_floor_means(scene, {}, range(1000, 1008), spp=512)
+
+    def z(values):
+        return (values.mean() - plain.mean()) / math.sqrt(values.var(ddof=1) / len(values) + plain.var(ddof=1) / 8)
+
+    right = z(caustic_floor_means(scene, {"aim": 0.5}, range(16)))
+    correct = AimedEmission._aimed_pdf
+    monkeypatch.setattr(AimedEmission, "_aimed_pdf", lambda self, y, d: 1.1 * correct(self, y, d))
+    wrong = z(caustic_floor_means(scene, {"aim": 0.5}, range(16)))
+    print(f"caustic floor, aimed against not: z {right:+.2f}; aimed density x 1.1: z {wrong:+.1f}")
+    assert abs(right) <= Z_BOUND and abs(wrong) > 2 * Z_BOUND
+
+
+def test_lab_photon_keeps_its_expectation():
+    """The same radii with and without aim: the same blur, so the same expectation."""
+    scene = load_scene(scene_path("caustic.xml"), res=RES)
+    settings = {"max_depth": MAX_DEPTH, "radius": 0.05, "passes": 4, "photons_per_pass": 20000}
+    plain = renders(scene, make_integrator("lab_photon", settings), 4, SEEDS_LAB)
+    aimed = renders(scene, make_integrator("lab_photon", {**settings, "aim": 0.5}), 4, SEEDS_REF)
+    assert_agrees(aimed, plain, "lab_photon aim=0.5 against aim=0 on caustic.xml")
+
+
+@pytest.mark.parametrize("plugin", ["lab_bdpt", "lab_vcm", "lab_photon"])
+def test_no_aim_or_no_target_renders_the_same_image(plugin):
+    for name, aim in (("caustic.xml", 0.0), ("cornell_box.xml", 0.5)):
+        scene = load_scene(scene_path(name), res=16)
+        base = {"max_depth": MAX_DEPTH}
+        images = [np.array(mi.render(scene, integrator=make_integrator(plugin, p), spp=4, seed=5))
+                  for p in (base, {**base, "aim": aim})]
+        # (splats add with float atomics: ~1e-6 from run to run)
+        np.testing.assert_allclose(images[0], images[1], rtol=2e-4, atol=1e-5, err_msg=f"{plugin} aim={aim} on {name}")
+
+
+@pytest.mark.parametrize("plugin", ["lab_bdpt", "lab_vcm", "lab_photon"])
+def test_refusals_are_one_line(plugin):
+    for params, match in (({"aim": 1.0}, "parameter 'aim' must be a number in \\[0, 1\\), got 1.0"),
+                          ({"aim": -0.1}, "parameter 'aim' must be"),
+                          ({"aim_at": " "}, "parameter 'aim_at' must be 'specular' or shape ids"),
+                          ({"aim_at": "a,,b"}, "parameter 'aim_at' must be")):
+        with pytest.raises(Exception, match=match):
+            make_integrator(plugin, params)
+    scene = load_scene(scene_path("sds.xml"), res=8)
+    with pytest.raises(Exception) as caught:
+        mi.render(scene, integrator=make_integrator(plugin, {"aim": 0.5, "aim_at": "floor"}), spp=1)
+    assert one_line(caught.value).startswith(f"{plugin}: parameter 'aim_at' names shape 'floor', which the "
+                                             f"scene does not have")
