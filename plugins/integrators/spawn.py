@@ -46,6 +46,14 @@ def offset_point(it: mi.Interaction3f, d: mi.Vector3f, floor: float) -> mi.Point
     return dr.fma(mag, dr.detach(it.n), it.p)
 
 
+def offset_from_emitted(ps: mi.PositionSample3f, d: mi.Vector3f, floor: float) -> mi.Point3f:
+    """``offset_point`` for a ray leaving an emitter's sampled point ``ps`` (an area light's
+    ``sample_position``) in direction ``d``."""
+    it = dr.zeros(mi.Interaction3f)
+    it.p, it.n = ps.p, ps.n
+    return offset_point(it, d, floor)
+
+
 def spawn_ray(it: mi.Interaction3f, d: mi.Vector3f, floor: float) -> mi.Ray3f:
     """A ray leaving ``it`` in direction ``d`` (unbounded)."""
     return mi.Ray3f(offset_point(it, d, floor), d, it.time, it.wavelengths)

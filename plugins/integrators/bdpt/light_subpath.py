@@ -205,9 +205,7 @@ class LightTracer:
         if dr.hint(self.floor < 1.0 or table.aim is not None, mode="scalar"):
             # An area emitter's ray starts at Mitsuba's absolute offset (from the point, to the side
             # of its own direction): use the lab's instead.
-            it0 = dr.zeros(mi.Interaction3f)
-            it0.p, it0.n = ps.p, ps.n
-            ray.o = dr.select(on_surface, spawn.offset_point(it0, ray.d, self.floor), ray.o)
+            ray.o = dr.select(on_surface, spawn.offset_from_emitted(ps, ray.d, self.floor), ray.o)
         # x_0 as emitter sampling from x_1 would see it (its density needs x_1: set in the loop)
         ds_0 = dr.zeros(mi.DirectionSample3f)
         ds_0.p, ds_0.n, ds_0.uv, ds_0.time, ds_0.emitter = ps.p, ps.n, ps.uv, time, emitter

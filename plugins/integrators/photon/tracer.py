@@ -100,9 +100,7 @@ def area_origin_fixes(scene: mi.Scene, floor: float) -> list:
     def fixed(emitter):
         def origin(time, sample2, ray):
             ps, _ = emitter.sample_position(time, sample2)
-            it = dr.zeros(mi.Interaction3f)
-            it.p, it.n = ps.p, ps.n
-            return spawn.offset_point(it, ray.d, floor)
+            return spawn.offset_from_emitted(ps, ray.d, floor)
         return origin
 
     def unchanged(time, sample2, ray):
@@ -120,9 +118,7 @@ def aimed_ray(aim, emitter, time, sample2, ray, weight, rng, floor: float):
     u_choice = rng.next_float32()
     u_cone = mi.Point2f(rng.next_float32(), rng.next_float32())
     d, factor = aim.sample(ps.p, ps.n, ray.d, u_choice, u_cone, area)
-    it = dr.zeros(mi.Interaction3f)
-    it.p, it.n = ps.p, ps.n
-    ray.o = dr.select(area, spawn.offset_point(it, d, floor), ray.o)
+    ray.o = dr.select(area, spawn.offset_from_emitted(ps, d, floor), ray.o)
     ray.d = d
     return ray, weight * factor
 
