@@ -143,6 +143,37 @@ def test_a_strategy_at_the_floor_does_not_hide_the_best():
     assert cells["ph"]["x_best"] == pytest.approx(1.0) and cells["mis"]["x_best"] == pytest.approx(8.0)
 
 
+def test_region_bias_variance_sees_a_blurred_region_and_not_the_rest(tmp_path):
+    """Synthetic renders: unbiased noise everywhere, and a 4 x 4 region scaled by 1.1 (a bias of
+    10%): the region's bias^2 is resolved and near 0.1^2; another region's is within noise; one
+    seed gives NaN."""
+    import numpy as np
+
+    from mitsuba_lab import images
+    from mitsuba_lab.experiment.analysis import region_bias_variance
+    from mitsuba_lab.experiment.reference import Reference
+
+    rng = np.random.default_rng(5)
+    image = np.full((16, 16, 3), 2.0)
+    ref = Reference("k", image, np.zeros_like(image), {})
+    paths = []
+    for k in range(16):
+        render = image * (1.0 + rng.normal(0.0, 0.05, image.shape))
+        render[4:8, 4:8] *= 1.1
+        paths.append(f"r{k}.exr")
+        images.write_exr(str(tmp_path / paths[-1]), render)
+    point = stats(16, 0, 0, budget=1.0)
+    point.images = paths
+    variance, bias2, se = region_bias_variance(point, str(tmp_path), ref, (4, 4, 8, 8))
+    weight = 2.0 ** 2 / (2.0 ** 2 + 1e-2)                # relMSE's units: 1 / (ref^2 + 0.01)
+    assert bias2 > 5 * se and bias2 == pytest.approx(0.1 ** 2 * weight, rel=0.2)
+    assert variance == pytest.approx(0.05 ** 2 * 1.1 ** 2 * weight, rel=0.2)
+    _, other, se = region_bias_variance(point, str(tmp_path), ref, (10, 10, 14, 14))
+    assert abs(other) < 3 * se
+    point.images = paths[:1]
+    assert all(math.isnan(v) for v in region_bias_variance(point, str(tmp_path), ref, (4, 4, 8, 8)))
+
+
 TINY = """
 [experiment]
 spp = [1, 4]
@@ -188,6 +219,7 @@ def test_tiny_photon_sweep_runs_passes_and_reports_bias_against_passes(tmp_path)
     summary = open(build_report(str(tmp_path / "out"))["md"]).read()
     assert "photon: bias^2 and variance against passes" in summary and "mis: bias^2" not in summary
     assert "Region `light` at each time budget" in summary and "Reference noise floor per region" in summary
+    assert "Region `light`: relative variance / bias^2" in summary
     assert os.path.exists(tmp_path / "out" / "report" / "cornell_passes.png")
 
 

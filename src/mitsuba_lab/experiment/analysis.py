@@ -17,6 +17,7 @@ Definitions used throughout the report:
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import os
@@ -147,6 +148,19 @@ def region_stack_stats(stats: PointStats, folder: str, reference, rect) -> dict:
     jackknife_se = float(np.sqrt((r - 1) / r * np.sum((leave_one_out - leave_one_out.mean()) ** 2)))
     return {"variance": metrics.mean_variance(stack), "variance_se": jackknife_se,
             "ref_mean_square": float(np.mean(ref ** 2))}
+
+
+def region_bias_variance(stats: PointStats, folder: str, reference, rect) -> tuple[float, float, float]:
+    """Inside a region, in relMSE's units: (variance across the seeds, bias^2, its standard
+    error), as ``relative_bias_variance`` on the region's pixels (NaN with fewer than two
+    seeds). Their sum plus the region's floor is the region's relMSE, so this tells which of
+    the two a longer render or a smaller merging radius would remove."""
+    if len(stats.images) < 2:
+        return math.nan, math.nan, math.nan
+    stack = np.stack([metrics.region(run_image(folder, p), rect) for p in stats.images])
+    cropped = dataclasses.replace(reference, image=metrics.region(reference.image, rect),
+                                  variance=metrics.region(reference.variance, rect))
+    return relative_bias_variance(stack, cropped)
 
 
 def curve(points: list[PointStats], key: str = "rel_mse_corrected"):

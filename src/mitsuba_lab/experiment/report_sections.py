@@ -17,7 +17,7 @@ from ..plugins.params import resolve as resolve_params
 from ..reporting import fmt, markdown_table
 from ..reporting.figures import series_styles
 from .analysis import (MIN_TRUSTED_TIME_S, PointStats, bias_by_passes, curve, equal_time_budgets, region_at_budgets,
-                       region_floor, region_stack_stats, timing_trusted, veach_bound)
+                       region_bias_variance, region_floor, region_stack_stats, timing_trusted, veach_bound)
 from .config import PASS_PARAMETER
 from .spectrum import fit_slope, slope_cell, slope_note
 
@@ -170,7 +170,27 @@ class SectionTables:
                    f"time) / the best strategy's at that budget, the equal-time relMSE ratio to the best, "
                    f"with its range at one standard error of both (a ratio whose range includes a target "
                    f"has not shown it either way).", "", *markdown_table(["budget", *names], body)]
+            md += self._region_bias_table(name, rect, ref, stats, label)
         return md
+
+    def _region_bias_table(self, name, rect, ref, stats, label) -> list[str]:
+        """Per budget, each strategy's relative variance and bias^2 inside one region: whether
+        its error there is noise (more time removes it) or bias (a consistent estimator's blur,
+        which its schedule removes more slowly)."""
+        cells = {}
+        for p in stats:
+            if p.budget_s is not None and len(p.images) >= 2:
+                cells.setdefault(p.budget_s, {})[label((p.strategy, p.sampler))] = \
+                    region_bias_variance(p, self.folder, ref, rect)
+        if not cells:
+            return []
+        names = sorted({n for row in cells.values() for n in row})
+        body = [[f"{budget:g} s", *(f"{fmt(c[0])} / {_bias_cell(c[1], c[2])}" if (c := row.get(n)) else "n/a"
+                                    for n in names)] for budget, row in sorted(cells.items())]
+        return ["", f"Region `{name}`: relative variance / bias^2 +- its standard error (relMSE's units; "
+                    f"with the floor they add up to the region's relMSE; bias^2 is an estimate, near zero "
+                    f"or below for an unbiased strategy, \"within noise\" within two standard errors of "
+                    f"zero).", "", *markdown_table(["budget", *names], body)]
 
     def passes_section(self, scene, groups, label) -> list[str]:
         """Bias^2 and variance against passes for the biased, consistent strategies (lab_photon's
