@@ -137,10 +137,15 @@ def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
         rays_per_sample=rays, regions=regions, images=[r["image"] for r in rows])
 
 
+def region_stack(stats: PointStats, folder: str, rect) -> np.ndarray:
+    """The point's stored images (one per seed) cropped to a region, stacked."""
+    return np.stack([metrics.region(run_image(folder, p), rect) for p in stats.images])
+
+
 def region_stack_stats(stats: PointStats, folder: str, reference, rect) -> dict:
     """Inside a region: variance (mean per-pixel, across seeds) with its jackknife standard
     error over the seeds, and the mean square of the reference."""
-    stack = np.stack([metrics.region(run_image(folder, p), rect) for p in stats.images])
+    stack = region_stack(stats, folder, rect)
     ref = metrics.region(reference.image, rect).astype(np.float64)
     r = stack.shape[0]
     leave_one_out = np.array([metrics.mean_variance(np.delete(stack, k, axis=0)) for k in range(r)]) \
@@ -157,7 +162,7 @@ def region_bias_variance(stats: PointStats, folder: str, reference, rect) -> tup
     the two a longer render or a smaller merging radius would remove."""
     if len(stats.images) < 2:
         return math.nan, math.nan, math.nan
-    stack = np.stack([metrics.region(run_image(folder, p), rect) for p in stats.images])
+    stack = region_stack(stats, folder, rect)
     cropped = dataclasses.replace(reference, image=metrics.region(reference.image, rect),
                                   variance=metrics.region(reference.variance, rect))
     return relative_bias_variance(stack, cropped)
