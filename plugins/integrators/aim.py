@@ -9,10 +9,16 @@ the specular objects; this is its simplest form. From the emitted point y, with 
 R_k) of one target shape subtends (the target chosen uniformly among K), otherwise
 cosine-weighted, as Mitsuba's ``sample_ray`` draws it:
 
-    p(d | y) = (1 - share) max(cos, 0) / pi + share / K sum_k [d in cone_k(y)] / (2 pi (1 - cos theta_k))
+    p(d | y) = (1 - s(y)) max(cos, 0) / pi + s(y) / K(y) sum_{k aimed at from y} [d in cone_k(y)] / (2 pi (1 - cos theta_k))
 
-with cos theta_k = sqrt(1 - R_k^2 / |c_k - y|^2) (the whole sphere of directions when y lies
-inside the bounding sphere). The emitted weight Le cos / (p_pos p(d | y)) stays exact for any
+with cos theta_k = sqrt(1 - R_k^2 / |c_k - y|^2). A target is aimed at from y only when its cone
+is narrower than 60 degrees (cos theta_k >= 1/2, under pi sr): over a wider cone the aimed
+density s / (K 2 pi (1 - cos theta_k)) is at most s / pi, no more than cosine emission already
+gives those directions (up to 1 / pi), while the aim takes that share from every other
+direction. So a light inside a target's bounding sphere (light_in_glass.xml: the whole sphere of
+directions) or close to a large one (sds.xml's pane fills 5 sr from the light) does not aim at
+it. K(y) counts the targets aimed at from y, and s(y) = share when K(y) > 0, else 0 (the light
+then emits as Mitsuba samples it). The emitted weight Le cos / (p_pos p(d | y)) stays exact for any
 share < 1, because the cosine part still covers every direction the light emits into; BDPT's
 and VCM's MIS weights use this p(d | y) wherever they need the emission density of an area
 light (``endpoints.EmitterTable.emission``). Other emitters (point, spot, at infinity) emit
@@ -77,6 +83,9 @@ class AimedEmission:
     """The mixture above for one scene; ``enabled`` is False when ``share`` is 0 or no shape is a
     target (the light then emits exactly as before, with the same random numbers)."""
 
+    #: a target is aimed at from y only when its cone's cos theta_k is at least this (module docstring)
+    COS_NARROWEST = 0.5
+
     def __init__(self, scene: mi.Scene, share: float, targets: str = "specular", plugin: str = "lab_vcm"):
         spheres = []
         if share > 0:
@@ -85,47 +94,57 @@ class AimedEmission:
         self.share = float(share)
         self.spheres = spheres
         self.enabled = bool(spheres)
-        if self.enabled:
-            self._centers = mi.Point3f([c[0] for c, _ in spheres], [c[1] for c, _ in spheres],
-                                       [c[2] for c, _ in spheres])
-            self._radii = mi.Float([r for _, r in spheres])
 
     @staticmethod
     def _cone(y, center, radius):
-        """(axis, cos theta_max) of the bounding sphere seen from y; cos = -1 (every direction)
-        from inside it."""
+        """(axis, cos theta_max, aimed at) of the bounding sphere seen from y: aimed at when y is
+        outside it and the cone is narrow enough (``COS_NARROWEST``)."""
         to_c = center - y
         dist = dr.norm(to_c)
         outside = dist > radius
-        cos_max = dr.select(outside, dr.safe_sqrt(1.0 - dr.square(radius / dr.maximum(dist, 1e-30))), -1.0)
-        axis = dr.select(dist > 0, to_c / dr.maximum(dist, 1e-30), mi.Vector3f(0, 0, 1))
-        return axis, cos_max
+        cos_max = dr.safe_sqrt(1.0 - dr.square(radius / dr.maximum(dist, 1e-30)))
+        axis = to_c / dr.maximum(dist, 1e-30)
+        return axis, cos_max, outside & (cos_max >= AimedEmission.COS_NARROWEST)
+
+    def _cones(self, y):
+        """Every target's (axis, cos theta_max, aimed at) from y, and K(y), how many are aimed at."""
+        cones = [self._cone(y, mi.Point3f(*center), radius) for center, radius in self.spheres]
+        count = mi.UInt32(0)
+        for _, _, aimed in cones:
+            count += dr.select(aimed, 1, 0)
+        return cones, count
 
     def _aimed_pdf(self, y, d):
-        """share / K sum_k [d in cone_k(y)] / (2 pi (1 - cos theta_k))."""
+        """s(y) / K(y) sum_{k aimed at from y} [d in cone_k(y)] / (2 pi (1 - cos theta_k))."""
+        cones, count = self._cones(y)
         total = mi.Float(0.0)
-        for center, radius in self.spheres:
-            axis, cos_max = self._cone(y, mi.Point3f(*center), radius)
-            inside = dr.dot(d, axis) >= cos_max
+        for axis, cos_max, aimed in cones:
+            inside = aimed & (dr.dot(d, axis) >= cos_max)
             total += dr.select(inside, dr.rcp(2.0 * math.pi * (1.0 - cos_max)), 0.0)
-        return total * (self.share / len(self.spheres))
+        return total * self.share / dr.maximum(mi.Float(count), 1.0)
 
     def pdf(self, cos_out, y, d):
         """p(d | y): the emission direction density of an area light's point y in direction d, at
         |cos| ``cos_out`` to its normal."""
-        return (1.0 - self.share) * cos_out * dr.inv_pi + self._aimed_pdf(y, d)
+        _, count = self._cones(y)
+        cosine_share = dr.select(count > 0, 1.0 - self.share, 1.0)
+        return cosine_share * cos_out * dr.inv_pi + self._aimed_pdf(y, d)
 
     def sample(self, y, n, d_cosine, u_choice, u_cone, active=True):
         """(direction, weight factor) replacing ``d_cosine`` (the cosine-weighted direction Mitsuba
-        drew at y, normal n): with probability ``share`` a direction aimed at a target; the factor
-        (cos / pi) / p(d | y) turns the cosine sampling's weight into the mixture's (0 where the
-        direction leaves below the surface, which the light does not emit into). Lanes not ``active``
-        (other emitters) keep their direction and a factor of 1."""
-        aim = active & (u_choice < self.share)
-        k = dr.minimum(mi.UInt32(u_choice / self.share * len(self.spheres)), len(self.spheres) - 1)
-        center = dr.gather(mi.Point3f, self._centers, k, aim)
-        radius = dr.gather(mi.Float, self._radii, k, aim)
-        axis, cos_max = self._cone(y, center, radius)
+        drew at y, normal n): with probability s(y) a direction aimed at one of the K(y) targets
+        aimed at from y; the factor (cos / pi) / p(d | y) turns the cosine sampling's weight into
+        the mixture's (0 where the direction leaves below the surface, which the light does not
+        emit into). Lanes not ``active`` (other emitters) keep their direction and a factor of 1."""
+        cones, count = self._cones(y)
+        aim = active & (count > 0) & (u_choice < self.share)
+        # the j-th of the targets aimed at from y, j uniform in [0, K(y))
+        j = dr.minimum(mi.UInt32(u_choice / self.share * mi.Float(count)), count - 1)
+        axis, cos_max, seen = mi.Vector3f(0, 0, 1), mi.Float(1.0), mi.UInt32(0)
+        for k_axis, k_cos, aimed in cones:
+            pick = aimed & (seen == j)
+            axis, cos_max = dr.select(pick, k_axis, axis), dr.select(pick, k_cos, cos_max)
+            seen += dr.select(aimed, 1, 0)
         local = mi.warp.square_to_uniform_cone(u_cone, cos_max)
         d = dr.select(aim, mi.Frame3f(axis).to_world(local), d_cosine)
         cos = dr.dot(n, d)
