@@ -12,6 +12,8 @@ timed after a warm-up render of the same size, in --rounds alternating rounds (m
   connections to the lane's light subpath);
 * merging: mode `vcm`'s ``camera_s`` minus mode `bpt`'s (the gathers from the grid and the
   third MIS quantity);
+* merged: the share of stored light vertices in the grids (``merging_vertices``; below 1 with
+  --merge-vertices caustic, which merges only those reached through a delta lobe);
 * ptracer: Mitsuba's `ptracer` rendering W x H x spp light paths, per light path, against lab's
   light pass per light subpath (same max_depth; the Russian roulettes differ).
 
@@ -20,7 +22,7 @@ left out by the warm-up and reported (kernels compiled during the timed renders,
 should be 0). The machine is shared, so single timings are noisy.
 
     .venv/bin/python benchmarks/bench_vcm.py [--rounds 3] [--res 64] [--spp 16] [--quick] [--merge-first]
-                                             [--light-paths 1]
+                                             [--light-paths 1] [--aim 0] [--merge-vertices all]
     .venv/bin/python benchmarks/bench_vcm.py --pass-sizes --spp 64   # lab_vcm's pass sizes against fixed ones
 """
 from __future__ import annotations
@@ -50,11 +52,13 @@ def timed_render(scene, integrator, spp, seed):
     return wall, compiled, stats
 
 
-def measure(name, res, spp, depth, radius, rounds, merge_first=False, light_paths=1.0, aim=0.0):
+def measure(name, res, spp, depth, radius, rounds, merge_first=False, light_paths=1.0, aim=0.0,
+            merge_vertices="all"):
     scene = load_scene(os.path.join(ROOT, "scenes", name), res=res)
     methods = {
         "vcm": make_integrator("lab_vcm", {"mode": "vcm", "max_depth": depth, "radius": radius,
-                                           "merge_first": merge_first, "light_paths": light_paths, "aim": aim}),
+                                           "merge_first": merge_first, "light_paths": light_paths, "aim": aim,
+                                           "merge_vertices": merge_vertices}),
         "bpt": make_integrator("lab_vcm", {"mode": "bpt", "max_depth": depth, "light_paths": light_paths,
                                            "aim": aim}),
         "ptracer": make_integrator("ptracer", {"max_depth": depth}),
@@ -81,6 +85,7 @@ def measure(name, res, spp, depth, radius, rounds, merge_first=False, light_path
         "path_ms": 1e3 * med(w for w, _, _ in runs["path"]) / spp,
         "light_ns_per_path": 1e9 * light / med(s["light_subpaths"] for _, _, s in vcm),
         "ptracer_ns_per_path": 1e9 * med(w for w, _, _ in runs["ptracer"]) / (pixels * spp),
+        "merged": vcm[0][2]["merging_vertices"] / max(vcm[0][2]["light_vertices_stored"], 1),
         "passes": vcm[0][2]["passes"],
         "compiled": sum(c for key in runs for _, c, _ in runs[key]),
     }
@@ -128,6 +133,9 @@ def main(argv=None) -> int:
     parser.add_argument("--aim", type=float, default=0.0,
                         help="lab_vcm's aim in modes vcm and bpt (share of emitted directions aimed at the "
                              "specular shapes), in [0, 1) (default: 0)")
+    parser.add_argument("--merge-vertices", choices=("all", "caustic"), default="all",
+                        help="lab_vcm's merge_vertices in mode vcm: all, or caustic (only light vertices reached "
+                             "through a delta lobe merge) (default: all)")
     parser.add_argument("--quick", action="store_true",
                         help="smoke run: 32x32, 4 spp, 1 round, cornell box only (not a measurement)")
     args = parser.parse_args(argv)
@@ -152,19 +160,21 @@ def main(argv=None) -> int:
             print(" | ".join([name, *(f"{ms:.2f} ({passes})" for ms, passes in m.values())]), flush=True)
         return 0
     print(f"{args.res}x{args.res}, {args.spp} iterations, max_depth {args.max_depth}, medians of {args.rounds} "
-          f"rounds, merge_first {str(args.merge_first).lower()}, light_paths {args.light_paths:g}, aim {args.aim:g}; "
+          f"rounds, merge_first {str(args.merge_first).lower()}, light_paths {args.light_paths:g}, aim {args.aim:g}, "
+          f"merge_vertices {args.merge_vertices}; "
           f"milliseconds per "
           f"iteration (one sample per pixel)")
     header = ("scene", "light", "grid", "camera+conn", "merging", "vcm total", "bpt total", "path",
-              "light ns/path", "ptracer ns/path", "ratio", "passes", "compiled")
+              "light ns/path", "ptracer ns/path", "ratio", "merged", "passes", "compiled")
     print(" | ".join(header))
     for name in args.scenes:
         m = measure(name, args.res, args.spp, args.max_depth, args.radius, args.rounds, args.merge_first,
-                    args.light_paths, args.aim)
+                    args.light_paths, args.aim, args.merge_vertices)
         print(" | ".join([m["scene"], *(f"{m[k]:.2f}" for k in ("light_ms", "grid_ms", "camera_ms", "merge_ms",
                                                                  "vcm_ms", "bpt_ms", "path_ms")),
                           f"{m['light_ns_per_path']:.0f}", f"{m['ptracer_ns_per_path']:.0f}",
-                          f"{m['light_ns_per_path'] / m['ptracer_ns_per_path']:.2f}x", str(m["passes"]),
+                          f"{m['light_ns_per_path'] / m['ptracer_ns_per_path']:.2f}x", f"{m['merged']:.3f}",
+                          str(m["passes"]),
                           str(m["compiled"])]), flush=True)
     return 0
 

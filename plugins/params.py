@@ -255,6 +255,9 @@ LAB_VCM = (
     Param("pilot", bool, False, "efficiency-aware choice for the whole image (modes vcm and bpt): a pilot (1/8 "
           "of the iterations in all) measures relative variance x time per iteration with every technique and with "
           "path tracing alone, and the render uses the lower (path tracing alone: mode pt, lab_mis's estimator)"),
+    Param("merge_vertices", str, "all", "which light vertices merge (mode vcm): all, or caustic, only those "
+          "reached through a delta lobe (Jensen's caustic photons); merging is then a technique only there, and "
+          "every other path's light comes from the other techniques", choices=("all", "caustic")),
     Param("connections", str, "all", "connections at a camera vertex (modes vcm and bpt): all, to every vertex of "
           "its light subpath (lab_bdpt), or one, to one of them picked uniformly and counted n times, the MIS "
           "weights counting a connection as 1 / (mean vertices per light subpath)", choices=("all", "one")),

@@ -8,7 +8,8 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-@pytest.mark.parametrize("extra", [[], ["--merge-first"], ["--light-paths", "0.25"], ["--aim", "0.5"]])
+@pytest.mark.parametrize("extra", [[], ["--merge-first"], ["--light-paths", "0.25"], ["--aim", "0.5"],
+                                   ["--merge-vertices", "caustic"]])
 def test_bench_vcm_quick(capsys, extra):
     spec = importlib.util.spec_from_file_location("bench_vcm", os.path.join(ROOT, "benchmarks", "bench_vcm.py"))
     bench = importlib.util.module_from_spec(spec)
@@ -17,10 +18,13 @@ def test_bench_vcm_quick(capsys, extra):
     lines = capsys.readouterr().out.strip().splitlines()
     assert f"merge_first {'true' if '--merge-first' in extra else 'false'}" in lines[-3]
     assert f"light_paths {'0.25' if '--light-paths' in extra else '1'}," in lines[-3]
-    assert f"aim {'0.5' if '--aim' in extra else '0'};" in lines[-3]
+    assert f"aim {'0.5' if '--aim' in extra else '0'}," in lines[-3]
+    caustic = "--merge-vertices" in extra
+    assert f"merge_vertices {'caustic' if caustic else 'all'};" in lines[-3]
     assert lines[-2].startswith("scene | light | grid | camera+conn | merging")
     row = lines[-1].split(" | ")
-    assert row[0] == "cornell_box.xml" and len(row) == 13
+    assert row[0] == "cornell_box.xml" and len(row) == 14
+    assert float(row[-3]) == (0.0 if caustic else 1.0)       # the box has no delta lobe to merge after
     assert row[-1] == "0"                                     # no kernel compiled while timed
 
 

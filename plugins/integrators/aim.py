@@ -95,8 +95,7 @@ class AimedEmission:
         self.spheres = spheres
         self.enabled = bool(spheres)
 
-    @staticmethod
-    def _cone(y, center, radius):
+    def _cone(self, y, center, radius):
         """(axis, cos theta_max, aimed at) of the bounding sphere seen from y: aimed at when y is
         outside it and the cone is narrow enough (``COS_NARROWEST``)."""
         to_c = center - y
@@ -104,7 +103,9 @@ class AimedEmission:
         outside = dist > radius
         cos_max = dr.safe_sqrt(1.0 - dr.square(radius / dr.maximum(dist, 1e-30)))
         axis = to_c / dr.maximum(dist, 1e-30)
-        return axis, cos_max, outside & (cos_max >= AimedEmission.COS_NARROWEST)
+        # (through the instance: switching variants reloads this module, and an object made
+        # before then keeps its own class's value)
+        return axis, cos_max, outside & (cos_max >= self.COS_NARROWEST)
 
     def _cones(self, y):
         """Every target's (axis, cos theta_max, aimed at) from y, and K(y), how many are aimed at."""

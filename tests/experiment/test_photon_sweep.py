@@ -10,7 +10,7 @@ import pytest
 from mitsuba_lab.experiment.analysis import PointStats, bias_by_passes, region_at_budgets
 from mitsuba_lab.experiment.config import ConfigError, PluginSpec, parse_config, sample_count_plugin
 from mitsuba_lab.experiment.plan import Point
-from mitsuba_lab.experiment.worker import calibrate
+from mitsuba_lab.experiment.worker import calibrate, settle
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CORNELL = os.path.join(ROOT, "scenes", "cornell_box.xml")
@@ -76,6 +76,38 @@ def test_calibration_grows_the_pilots_until_the_per_sample_cost_is_measurable():
     count, row = calibrate(point, render_at)
     assert row["pilots"] == [2048, 8192] and row["per_spp_s"] == pytest.approx(1e-5)
     assert count == pytest.approx(99_000, rel=1e-3)
+
+
+class Timed:
+    """What a render's statistics give the calibration: wall and compile seconds."""
+    def __init__(self, wall_s, compile_s=0.0):
+        self.wall_s, self.compile_s = wall_s, compile_s
+
+
+def test_a_count_whose_cost_changes_is_settled_at_the_budget():
+    """A render that gets 5x cheaper per sample from 500 samples on (as lab_vcm's pilot choosing
+    path tracing alone at large counts): the pilots fit 990 samples for 1 s (10 ms fixed), the
+    compile render there takes 0.208 s (compilation left out), so the count is scaled by
+    0.99 / 0.198 to 4950 (1.0 s) and kept;
+    a render linear in its count is not rendered again."""
+    calls = []
+
+    def render_at(count, seed):                 # (the first render at a count compiles for 0.5 s)
+        compile_s = 0.0 if count in calls else 0.5
+        calls.append(count)
+        return None, Timed(0.01 + (1e-3 if count < 500 else 2e-4) * count + compile_s, compile_s)
+
+    point = Point("s/p/i/t1s", "s", "p", "i", None, 1.0, (1, 2), 0)
+    count, row = calibrate(point, render_at)
+    assert count == 990
+    _, first = render_at(count, 0)
+    settled = settle(point, render_at, count, first, row)
+    assert settled == 4950 and row["spp"] == 4950 and calls[-1] == 4950
+    assert [r["spp"] for r in row["rescaled"]] == [4950]
+
+    calls.clear()
+    linear = {"spp": 990}
+    assert settle(point, render_at, 990, Timed(0.99), linear) == 990 and calls == [] and "rescaled" not in linear
 
 
 def stats(spp, bias2, bias2_se, variance=1e-3, budget=None, strategy="ph", regions=None, time_s=1.0):

@@ -264,36 +264,41 @@ def recursive_weights_with_merging(g, mis):
     k = g["d2"].shape[0]
     fw, rv, delta = g["to_cam"], g["to_light"], g["delta"]
     light, camera = merging_states(g, mis)
-    # (the integrator does not merge at a camera vertex nearer the sensor than merge_from)
-    merges = [np.where(delta[i] | (k - i < mis.merge_from), 0.0, mis.merge(light[i], camera[i], rv[i], fw[i]))
+    # (the integrator does not merge at a camera vertex nearer the sensor than merge_from, nor,
+    # with caustic_merges, with a light vertex whose ``merges`` is 0: the grid leaves it out)
+    merges = [np.where(delta[i] | (k - i < mis.merge_from) | (np.asarray(light[i].merges) == 0), 0.0,
+                       mis.merge(light[i], camera[i], rv[i], fw[i]))
               for i in range(1, k)]
     return np.concatenate([recursive_weights(g, mis), np.array(merges).reshape(-1, N)])
 
 
+@pytest.mark.parametrize("caustic", [False, True])
 @pytest.mark.parametrize("merge_from", [1, 2])
 @pytest.mark.parametrize("subset", MERGE_SUBSETS)
 @pytest.mark.parametrize("beta", [1.0, 2.0])
-def test_merging_weights_equal_brute_force_and_sum_to_one(subset, beta, merge_from):
+def test_merging_weights_equal_brute_force_and_sum_to_one(subset, beta, merge_from, caustic):
     """Vertex connection and merging (Georgiev et al. 2012): merging at x_i has density
     p_light(x_0..x_i) p_camera(x_i..x_k) pi r^2 N_light, and the recursion (a third running
     quantity, dVM) weights it, and every connection, against all the others; with
-    ``merge_from`` = 2 the camera's first vertex is no merging technique, in any sum."""
+    ``merge_from`` = 2 the camera's first vertex is no merging technique, in any sum; with
+    ``caustic_merges`` only a vertex after an interior delta vertex (light side) is one."""
     worst = 0.0
     for k in range(1, 8):
         g = random_paths(k, seed=900 * k + int(beta))
         area = float(np.exp(np.random.default_rng(k).uniform(np.log(1e-4), np.log(1e4))))
         mis = BdptWeights("power", beta, strategies=subset, light_paths=g["light_paths"], merge_area=area,
-                          merge_from=merge_from)
+                          merge_from=merge_from, caustic_merges=caustic)
         p_light, p_camera = area_densities(g)
         with np.errstate(all="ignore"):
             got = recursive_weights_with_merging(g, mis)
             ref = brute_force_weights(p_light, p_camera, g["delta"], beta, subset, g["nee"], g["light_paths"],
-                                      area, merge_from)
+                                      area, merge_from, caustic_merges=caustic)
         worst = max(worst, _max_rel(got, ref))
         reach = ref.sum(axis=0) > 0
         np.testing.assert_allclose(got.sum(axis=0)[reach], 1.0, rtol=RTOL)
         assert np.all(got.sum(axis=0)[~reach] == 0.0)
-    print(f"{'+'.join(subset)}, beta {beta}, merge_from {merge_from}: max relative error {worst:.2e}")
+    print(f"{'+'.join(subset)}, beta {beta}, merge_from {merge_from}, caustic {caustic}: max relative error "
+          f"{worst:.2e}")
     assert worst < RTOL
 
 
@@ -402,3 +407,30 @@ def test_a_connection_count_weights_connections_as_the_brute_force_does(subset, 
     assert wrong > 1e3 * RTOL
     with pytest.raises(ValueError, match="connect_count"):
         BdptWeights(connect_count=0.0)
+
+
+@pytest.mark.parametrize("mistake", ["every merge", "camera merges at once", "joined merges"])
+def test_a_caustic_merge_rule_applied_wrongly_is_caught(monkeypatch, mistake):
+    """Power of the ``caustic_merges`` check: weights against every merge (the rule forgotten in
+    the reference), a camera subpath that counts its vertex's merge before it knows the next
+    vertex is a delta lobe, or next-event estimation and connections that still count a merge at
+    their camera vertex (whose light-side neighbour is never a delta lobe), misweight paths."""
+    area, kinds = 3.0, MERGE_SUBSETS[0]
+    err = 0.0
+    for k in range(3, 7):
+        g = random_paths(k, seed=41 + k)
+        mis = BdptWeights("power", 2.0, strategies=kinds, light_paths=g["light_paths"], merge_area=area,
+                          merge_from=2, caustic_merges=True)
+        caustic = mistake != "every merge"
+        if mistake == "camera merges at once":
+            monkeypatch.setattr(mis, "scatter_camera", lambda state, fwd, rev, cos, delta=False, depth=None:
+                                mis._scatter(state, fwd, rev, cos, delta, "light", mis._merges(depth)))
+        if mistake == "joined merges":
+            mis.eta_joined = 1.0
+        p_light, p_camera = area_densities(g)
+        with np.errstate(all="ignore"):
+            ref = brute_force_weights(p_light, p_camera, g["delta"], 2.0, kinds, g["nee"], g["light_paths"],
+                                      area, 2, caustic_merges=caustic)
+            err = max(err, _max_rel(recursive_weights_with_merging(g, mis), ref))
+    print(f"{mistake}: max relative error {err:.2e}")
+    assert err > 1e3 * RTOL

@@ -73,6 +73,50 @@ def test_merging_agrees_with_mitsuba_path(name, mode, merge_first):
     assert_agrees(lab, path_stack(scene), f"lab_vcm mode={mode}, merge_first={merge_first} on {name}")
 
 
+CORNELL_RADIUS = 0.3
+
+
+@pytest.mark.parametrize("name", ["cornell_box.xml", "caustic.xml"])
+def test_caustic_merges_agree_with_mitsuba_path(name):
+    """merge_vertices = caustic: merging only light vertices reached through a delta lobe, and
+    counted as a technique only there. The Cornell box has no delta lobe, so nothing merges (the
+    image is unbiased at any radius: here 0.3, a sixth of the box, with ``merge_first``, where
+    merges in the weights would take much of the light); the caustic scene's glass gives merges
+    on the floor under it."""
+    scene = load_scene(scene_path(name), res=RES)
+    radius = CORNELL_RADIUS if name == "cornell_box.xml" else SMALL_RADIUS
+    integrator = vcm(radius=radius, merge_vertices="caustic", merge_first=True)
+    lab = renders(scene, integrator, 16, SEEDS_LAB)
+    stats = integrator.bdpt_stats()
+    print(f"{name}: {stats['merging_vertices']} of {stats['light_vertices_stored']} stored light vertices merge")
+    if name == "cornell_box.xml":
+        assert stats["merging_vertices"] == 0
+    else:
+        assert 0 < stats["merging_vertices"] < stats["light_vertices_stored"] / 2
+    assert_agrees(lab, path_stack(scene), f"lab_vcm merge_vertices=caustic on {name}")
+
+
+def test_caustic_merges_with_every_vertex_in_the_grid_are_caught(monkeypatch):
+    """Power: a grid that still holds every light vertex, while the weights count merging only
+    after a delta lobe, adds the merges of the Cornell box's diffuse light on top of the other
+    techniques' full share of it."""
+    from mitsuba_lab.plugins.integrators.vcm import merging
+
+    built = merging.VertexGrid.__init__
+
+    def every_vertex(self, vertices, *args, **kwargs):
+        caustic, vertices.caustic = vertices.caustic, False
+        built(self, vertices, *args, **kwargs)
+        vertices.caustic = caustic
+
+    monkeypatch.setattr(merging.VertexGrid, "__init__", every_vertex)
+    scene = load_scene(scene_path("cornell_box.xml"), res=RES)
+    lab = renders(scene, vcm(radius=CORNELL_RADIUS, merge_vertices="caustic", merge_first=True), 16, SEEDS_LAB)
+    result = z_scores(lab, path_stack(scene))
+    print(f"every vertex in the grid: max |z| {result.max_abs_z:.1f}, relative difference {result.rel_diff.round(3)}")
+    assert result.max_abs_z > Z_BOUND
+
+
 @pytest.mark.parametrize("name", ["cornell_box.xml", "caustic.xml"])
 def test_the_constant_kernel_agrees_with_mitsuba_path(name):
     """kernel = constant (SmallVCM's 1 / (pi r^2)) in bpm, merging at every camera vertex, where
@@ -265,8 +309,9 @@ def test_the_epanechnikov_kernel_blurs_less_than_the_constant_one():
 STIFF = sorted(f for f in os.listdir(os.path.join(ROOT, "scenes", "stiff")) if f.endswith(".xml"))
 
 
-@pytest.mark.parametrize("mode, light_paths", [("vcm", 1), ("ppm", 1), ("vcm", 4)])
-def test_spectral_variant_agrees_with_mitsuba_path(mode, light_paths):
+@pytest.mark.parametrize("mode, light_paths, merge_vertices", [("vcm", 1, "all"), ("ppm", 1, "all"), ("vcm", 4, "all"),
+                                                              ("vcm", 1, "caustic")])
+def test_spectral_variant_agrees_with_mitsuba_path(mode, light_paths, merge_vertices):
     """The spectral variant, as lab_photon: one set of wavelengths per pass (here one iteration), at
     which light subpaths are emitted, merged and connected (sRGB of a spectrum may be out of
     gamut: negative channels are allowed, negative luminance is not)."""
@@ -275,22 +320,25 @@ def test_spectral_variant_agrees_with_mitsuba_path(mode, light_paths):
     try:
         mitsuba_lab.use_variant(variant("ad_spectral"))
         scene = load_scene(scene_path("cornell_box.xml"), res=RES)
-        lab = renders(scene, vcm(mode=mode, radius=SMALL_RADIUS, light_paths=light_paths), 16, SEEDS_LAB)
+        lab = renders(scene, vcm(mode=mode, radius=SMALL_RADIUS, light_paths=light_paths,
+                                 merge_vertices=merge_vertices), 16, SEEDS_LAB)
         assert pixel_problem(lab, True) == ""
         result = z_scores(lab, path_stack(scene))
-        print(f"lab_vcm mode={mode}, light_paths={light_paths} in {mi.variant()}: max |z| {result.max_abs_z:.2f}, "
+        print(f"lab_vcm mode={mode}, light_paths={light_paths}, merge_vertices={merge_vertices} in {mi.variant()}: "
+              f"max |z| {result.max_abs_z:.2f}, "
               f"relative difference {result.rel_diff.round(4)}")
         assert result.max_abs_z <= Z_BOUND
     finally:
         mitsuba_lab.use_variant(HOME)
 
 
-@pytest.mark.parametrize("merge_first", [True, False])
+@pytest.mark.parametrize("merge_first, merge_vertices", [(True, "all"), (False, "all"), (False, "caustic")])
 @pytest.mark.parametrize("name", STIFF)
-def test_no_nan_inf_or_negative_on_stiff_scenes(name, merge_first):
+def test_no_nan_inf_or_negative_on_stiff_scenes(name, merge_first, merge_vertices):
     scene = load_scene(scene_path(f"stiff/{name}"), res=16)
     depth = -1 if name == "closed_box_albedo_099.xml" else MAX_DEPTH
-    image = render(scene, vcm(max_depth=depth, merge_first=merge_first), spp=8, seed=7)[None]
+    image = render(scene, vcm(max_depth=depth, merge_first=merge_first, merge_vertices=merge_vertices), spp=8,
+                   seed=7)[None]
     assert pixel_problem(image, False) == "", f"{name}: {pixel_problem(image, False)}"
 
 
@@ -301,6 +349,8 @@ def test_refusals_are_one_line():
                           ({"light_paths": 0.01}, "parameter 'light_paths' must be a number in \\[1/64, 64\\]"),
                           ({"merge_first": 0}, "parameter 'merge_first' expects a boolean"),
                           ({"mode": "ppm", "merge_first": False}, "ppm.*merge_first = false does not apply"),
+                          ({"mode": "bpm", "merge_vertices": "caustic"}, "merge_vertices = 'caustic'.*mode 'bpm'"),
+                          ({"merge_vertices": "delta"}, "parameter 'merge_vertices' must be one of all, caustic"),
                           ({"strategies": "all"}, "strategies")):
         with pytest.raises(Exception, match=match):
             make_integrator("lab_vcm", params)

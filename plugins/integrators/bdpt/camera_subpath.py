@@ -196,6 +196,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
     dvcm, dvc, first = mi.Float(start.dvcm), mi.Float(start.dvc), mi.Float(start.first)
     merging = cp.grid is not None
     dvm = mi.Float(start.dvm) if merging else 0.0
+    pending = mi.Float(0) if w.caustic else 0.0      # (caustic_merges: the last vertex's merge term)
     L = mi.Spectrum(0)
     beta = mi.Spectrum(1)
     eta = mi.Float(1)
@@ -219,7 +220,8 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         escaped = active & ~si.is_valid()
         # (the segment's length from its start: a camera ray that passed through emitters began
         # at the sensor, not where it last left an emitter; to the environment: 1, see endpoints)
-        mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dr.select(escaped, 1.0, dr.squared_norm(si.p - prev_p)),
+        mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm, 1.0, pending),
+                          dr.select(escaped, 1.0, dr.squared_norm(si.p - prev_p)),
                           dr.select(escaped, 1.0, dr.abs(dr.dot(si.n, ray.d))))
 
         # ---------------- s = 0: the camera subpath hits an emitter ----------------
@@ -285,6 +287,8 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
                                mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta), depth)
         dvcm, dvc, first = finite_or_zero(mis.dvcm), finite_or_zero(mis.dvc), mi.Float(mis.first)
         dvm = carried(merging, mis.dvm, dvm)
+        if dr.hint(w.caustic, mode="scalar"):
+            pending = finite_or_zero(mis.pending)
         valid_ray |= active & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
         prev_it = dr.zeros(mi.Interaction3f)
         prev_it.p, prev_it.n, prev_it.t, prev_it.time = si.p, si.n, si.t, si.time

@@ -41,6 +41,7 @@ class BdptStats:
     light_s: float = 0.0
     camera_s: float = 0.0
     grid_s: float = 0.0               # lab_vcm: building the light vertices' grids
+    merging_vertices: int = 0         # lab_vcm: light vertices in the grids (merge_vertices: all or caustic)
     radius_first: float = 0.0         # lab_vcm: the merging radius of the first and last pass
     radius_last: float = 0.0
     pilot_s: float = 0.0              # lab_vcm pilot: the pilot's time
@@ -257,6 +258,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     connect_share = 0.0
     #: Each camera vertex connects to one vertex of its light subpath (lab_vcm's ``connections``).
     connect_one = False
+    #: Merging only with light vertices reached through a delta lobe (lab_vcm's ``merge_vertices``).
+    caustic_merges = False
 
     def pass_spp_limit(self, film_pixels: int) -> int:
         """Most samples per pixel in one pass besides ``max_vertices`` (lab_vcm: a bound)."""
@@ -273,7 +276,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         v = self.values
         ratio = plan.light_subpaths / plan.camera_lanes
         weights = (self.weights_class or BdptWeights)(v["heuristic"], v["beta"], self.kinds, light_paths=ratio,
-                                                      merge_area=self.merge_area(plan), merge_from=self.merge_from)
+                                                      merge_area=self.merge_area(plan), merge_from=self.merge_from,
+                                                      caustic_merges=self.caustic_merges)
         # (opaque: a ratio that changes from pass to pass must not be compiled into the kernels)
         weights.light_paths = dr.opaque(mi.Float, ratio)
         return weights
@@ -300,7 +304,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         while True:
             start = time.perf_counter()
             block = splats.new_block(film)
-            vertices = LightVertices(capacity, tangents, tracer.weights.merging)
+            vertices = LightVertices(capacity, tangents, tracer.weights.merging, tracer.weights.caustic)
             reached, stores, last = tracer.trace(count, light_seed, block, sample_scale, vertices,
                                                  None if tracer.weights.merging else camera_lanes)
             dr.eval(block.tensor(), *vertices.arrays(), last, reached, stores)

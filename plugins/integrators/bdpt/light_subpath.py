@@ -241,6 +241,7 @@ class LightTracer:
         last = dr.full(mi.UInt32, NONE, count)
         dvcm, dvc, first = mi.Float(0), mi.Float(0), mi.Float(1)
         dvm = mi.Float(0) if w.merging else 0.0
+        merges = mi.Float(w.start_merges()) if w.caustic else 1.0   # (caustic_merges: after a delta lobe)
         depth = mi.UInt32(0)
         vertices_reached = mi.UInt32(0)
         active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_depth > 1)
@@ -261,7 +262,7 @@ class LightTracer:
                 dvm = carried(w.merging, start.dvm, dvm)
                 dist2 = dr.select(infinite, 1.0, dist2)    # x_0 is a direction: no distance
             depth += 1
-            mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dist2, cos_in)
+            mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm, merges), dist2, cos_in)
             bsdf = si.bsdf()
             wi_world = -ray.d
             smooth = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
@@ -307,6 +308,8 @@ class LightTracer:
             mis = w.scatter_light(mis, bs.pdf, pdf_rev, dr.abs(dr.dot(si.n, wo_world)), delta_lobe)
             dvcm, dvc, first = finite_or_zero(mis.dvcm), finite_or_zero(mis.dvc), mi.Float(mis.first)
             dvm = carried(w.merging, mis.dvm, dvm)
+            if dr.hint(w.caustic, mode="scalar"):
+                merges = mi.Float(mis.merges)
             ray = spawn.spawn_ray(si, wo_world, self.floor)
 
             beta_max = dr.max(mi.unpolarized_spectrum(beta))

@@ -15,7 +15,10 @@ tangent and dp/du, dp/dv, which otherwise cost more to compute and store than th
 mesh's tangents are derived per hit); and what the estimate needs: the throughput (emitted
 power over the subpath's density), the MIS quantities (``weights.SubpathMis``; ``first`` is
 depth == 1, not stored; ``dvm`` only with vertex merging, ``merging``, which also keeps the
-lane's iteration: lab_vcm merges within an iteration) and its depth.
+lane's iteration: lab_vcm merges within an iteration) and its depth. Under ``caustic_merges``
+(``caustic``) a vertex where merging is no technique stores dvm = -1 (``NO_MERGE``; merging
+never reads it, and a real dvm is >= 0), which tells connections its ``merges`` flag and the
+grid to leave it out.
 
 The fields are packed into fixed-width records of floats (integers by their bits), one flat
 array per record kind (``POINT``, ``RECORD``, ``TANGENTS``): Dr.Jit reads a power-of-two run of
@@ -33,6 +36,8 @@ from .weights import SubpathMis
 
 #: End of a lane's list.
 NONE = 0xFFFFFFFF
+#: The dvm of a light vertex that merging skips (``caustic_merges``).
+NO_MERGE = -1.0
 
 #: A vertex's *point* record (floats): position, geometric normal, then its depth and (with
 #: merging) its iteration as integer bits. What merging tests first, and a connection too.
@@ -91,9 +96,10 @@ class LightVertices:
     pointer and, with ``tangents``, a tangent record, each record in one flat array so that a
     vertex is read in a few packet loads (Dr.Jit gathers power-of-two runs of floats at once)."""
 
-    def __init__(self, capacity: int, tangents: bool = False, merging: bool = False):
+    def __init__(self, capacity: int, tangents: bool = False, merging: bool = False, caustic: bool = False):
         self.capacity = capacity
         self.merging = merging
+        self.caustic = caustic and merging
         self.tangents = tangents
         size = max(capacity, 1)
         self.points = dr.empty(mi.Float, POINT_WIDTH * size)   # (only slots below the store count are read)
@@ -110,6 +116,8 @@ class LightVertices:
         reached from, in world space: converting ``si.wi`` would need the tangent frame)."""
         write(self.points, [*si.p, *si.n, bits(depth), bits(iteration)], POINT_WIDTH, slot, active)
         dvm = mis.dvm if self.merging else 0.0
+        if self.caustic:
+            dvm = dr.select(mis.merges > 0, dvm, NO_MERGE)
         write(self.records, [*si.sh_frame.n, *si.uv, *wi_world, mi.Float(mis.dvcm), mi.Float(mis.dvc),
                              mi.Float(dvm), bits(prev), *channels_of(beta)], RECORD_WIDTH, slot, active)
         dr.scatter(self.bsdf, si.bsdf(), slot, active)
@@ -142,7 +150,9 @@ class LightVertices:
         si.wavelengths = wavelengths
         si.t = mi.Float(1.0)                     # a valid hit
         depth = unbits(point[POINT["depth"]])
-        mis = SubpathMis(record[RECORD["dvcm"]], record[RECORD["dvc"]], dr.select(depth == 1, 1.0, 0.0),
-                         record[RECORD["dvm"]] if self.merging else 0.0)
+        dvm = record[RECORD["dvm"]] if self.merging else 0.0
+        merges = dr.select(dvm >= 0, 1.0, 0.0) if self.caustic else 1.0
+        mis = SubpathMis(record[RECORD["dvcm"]], record[RECORD["dvc"]], dr.select(depth == 1, 1.0, 0.0), dvm,
+                         merges)
         return (si, dr.gather(mi.BSDFPtr, self.bsdf, slot, active), spectrum_at(record, RECORD["beta"]), mis,
                 depth, unbits(record[RECORD["prev"]]))

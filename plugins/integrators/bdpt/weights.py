@@ -48,6 +48,12 @@ p_light(x_0 .. x_i) p_camera(x_i .. x_k) eta. Each subpath then carries a third 
 ``dvm`` (SmallVCM's ``dVM``: the techniques with fewer vertices on its side, relative to
 merging at its current vertex), every connection's sums gain eta (merging at the vertices it
 joins), and ``merge`` gives the merging weight. Without ``merge`` nothing changes.
+``caustic_merges`` makes merging at x_i a technique only where x_{i-1}, the vertex before it on
+the light's side, is an interior delta-lobe vertex (the light vertex arrived through a specular
+bounce: Jensen's caustic photons). The rule is a property of the path, so the weights of the
+techniques left still sum to 1; a light subpath knows it at each vertex (``merges``, from its
+last lobe), a camera subpath only once it reaches x_{i-1}, so its merge term waits in
+``pending`` until then.
 ``merge_from`` = 2 leaves merging out at the camera's first vertex (one segment from the
 sensor), as a technique and from every other technique's sums: the camera-side calls
 (``scatter_camera``, ``nee``, ``connect``) take the camera vertex's ``depth``, and
@@ -81,6 +87,11 @@ class SubpathMis(NamedTuple):
     dvc: object
     first: object
     dvm: object = 0.0
+    #: light side, with ``caustic_merges``: 1.0 where merging at the current vertex is a technique
+    merges: object = 1.0
+    #: camera side, with ``caustic_merges``: the last vertex's merge term (in dvm's units), counted
+    #: once the next vertex turns out to be a delta lobe
+    pending: object = 0.0
 
 
 def _select(mask, a, b):
@@ -125,12 +136,13 @@ class BdptWeights:
     subpath, picked uniformly, so a technique with s >= 2, t >= 2 is sampled about once per
     L light vertices; the weights use 1 / L, L the mean stored vertices per light subpath).
     Any counts > 0 give weights that sum to 1, so the estimate is unbiased whatever the count;
-    the closer it is to the true sampling rate, the lower the variance.
+    the closer it is to the true sampling rate, the lower the variance. ``caustic_merges``:
+    merging only after a delta lobe on the light's side (the module docstring).
     """
 
     def __init__(self, heuristic: str = "power", beta: float = 2.0, strategies="all",
                  light_paths: float = 1.0, merge_area: float = 0.0, merge_from: int = 1,
-                 connect_count: float = 1.0):
+                 connect_count: float = 1.0, caustic_merges: bool = False):
         if heuristic not in ("balance", "power"):
             raise ValueError(f"lab_bdpt: heuristic must be 'balance' or 'power', got '{heuristic}'")
         if heuristic == "power" and not beta > 0:
@@ -160,6 +172,10 @@ class BdptWeights:
         self.eta = self._m(float(merge_area)) if self.merging else 0.0
         self.inv_eta = self._m(1.0 / float(merge_area)) if self.merging else 0.0
         self.merge_from = merge_from
+        self.caustic = bool(caustic_merges) and self.merging
+        # a camera vertex's own merge where its light-side neighbour is an emitter or a light
+        # vertex joined to it (NEE, connections): never a technique under caustic_merges
+        self.eta_joined = 0.0 if self.caustic else 1.0
         # a connection technique's sample count, to the power beta (its kind's enable factor)
         self.connect_weight = self.e["connect"] * self._m(float(connect_count))
 
@@ -239,7 +255,7 @@ class BdptWeights:
         """
         dvcm = self._m(pdf_nee / pdf_emit)
         dvc = _select(delta, 0.0 * dvcm, _gate(self.e["hit"], self._m(cos_light / pdf_emit)))
-        return SubpathMis(dvcm, dvc, 1.0, dvc * self.inv_eta)
+        return SubpathMis(dvcm, dvc, 1.0, dvc * self.inv_eta, self.start_merges())
 
     def start_camera(self, pdf_cam) -> SubpathMis:
         """State at the sensor after sampling a ray; ``pdf_cam``: the sensor's direction density
@@ -250,32 +266,49 @@ class BdptWeights:
         """State at a new vertex: ``dist2`` the squared segment length, ``cos_in`` |cos| at the new
         vertex (both 1 on a segment to or from an infinite emitter)."""
         inv_cos = self._m(1.0 / cos_in)
+        pending = state.pending * inv_cos if self.caustic else state.pending
         return SubpathMis(state.dvcm * self._m(dist2) * inv_cos, state.dvc * inv_cos, state.first,
-                          state.dvm * inv_cos)
+                          state.dvm * inv_cos, state.merges, pending)
 
-    def _scatter(self, state, pdf_fwd, pdf_rev, cos_out, delta, start_kind, merges=1.0):
+    def _scatter(self, state, pdf_fwd, pdf_rev, cos_out, delta, start_kind, merges=1.0, hold=False):
         """Shared by both sides; only the kind of the subpath's first ratio differs (``merges``:
-        0.0 where this vertex does not merge)."""
+        0.0 where this vertex does not merge; ``hold``: its merge term goes to ``pending``, and
+        the one pending from the last vertex counts if this vertex is a delta lobe)."""
         ratio, rev, inner = self._m(cos_out / pdf_fwd), self._m(pdf_rev), self._gated(state, start_kind)
-        folded = ratio * (state.dvc * rev + inner + self.eta * merges)   # eta: merging at this vertex
-        dvc = _select(delta, state.dvc * self._m(cos_out), folded)
+        now = 0.0 if hold else merges
+        folded = ratio * (state.dvc * rev + inner + self.eta * now)   # eta: merging at this vertex
+        through_vc, through_vm = state.dvc, state.dvm           # (a delta lobe passes these on)
+        if hold:
+            through_vc, through_vm = state.dvc + self.eta * state.pending, state.dvm + state.pending
+        cos_m = self._m(cos_out)
+        dvc = _select(delta, through_vc * cos_m, folded)
         dvcm = _select(delta, 0.0 * folded, self._m(1.0 / pdf_fwd))
         dvm = state.dvm
         if self.merging:
-            folded_vm = ratio * (state.dvm * rev + inner * self.inv_eta + merges)
-            dvm = _select(delta, state.dvm * self._m(cos_out), folded_vm)
-        return SubpathMis(dvcm, dvc, 0.0 * state.first, dvm)
+            folded_vm = ratio * (state.dvm * rev + inner * self.inv_eta + now)
+            dvm = _select(delta, through_vm * cos_m, folded_vm)
+        pending = _select(delta, 0.0 * folded, ratio * merges) if hold else 0.0
+        return SubpathMis(dvcm, dvc, 0.0 * state.first, dvm, 1.0, pending)
 
     def scatter_light(self, state, pdf_fwd, pdf_rev, cos_out, delta=False) -> SubpathMis:
         """State after sampling the next direction at a light-subpath vertex: ``pdf_fwd`` the
         sampled direction's solid-angle density (adjoint BSDF), ``pdf_rev`` the density of
         sampling the reverse (towards the previous vertex, coming from the new direction),
-        ``cos_out`` |cos| of the new direction at this vertex, ``delta`` a delta lobe sampled."""
-        return self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, "nee")
+        ``cos_out`` |cos| of the new direction at this vertex, ``delta`` a delta lobe sampled.
+        With ``caustic_merges`` the new state's ``merges`` (for the next vertex) is ``delta``."""
+        out = self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, "nee", state.merges)
+        if self.caustic:
+            out = out._replace(merges=_select(delta, 1.0, 0.0))
+        return out
+
+    def start_merges(self):
+        """``merges`` at a light subpath's first vertex after the emitter (0.0 under
+        ``caustic_merges``: the emitter is no delta lobe)."""
+        return 0.0 if self.caustic else 1.0
 
     def scatter_camera(self, state, pdf_fwd, pdf_rev, cos_out, delta=False, depth=None) -> SubpathMis:
         """``scatter_light`` for a camera-subpath vertex ``depth`` segments from the sensor."""
-        return self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, "light", self._merges(depth))
+        return self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, "light", self._merges(depth), self.caustic)
 
     # -- the weights of the four kinds -----------------------------------------------------
 
@@ -300,7 +333,8 @@ class BdptWeights:
         camera vertex's, in segments from the sensor."""
         p_cam0 = pdf_cam_fwd * cos_light / dist2
         w_light = _select(delta, 0.0 * p_cam0, _gate(self.e["hit"], self._m(p_cam0 / pdf_nee)))
-        inner = self.eta * self._merges(depth) + self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev)
+        inner = (self.eta * (self._merges(depth) * self.eta_joined) + self._gated(camera, "light")
+                 + camera.dvc * self._m(pdf_cam_rev))
         w_camera = self._m(pdf_emit * cos_cam / (dist2 * pdf_nee)) * inner
         return self.e["nee"] / (w_light + 1.0 + w_camera)
 
@@ -312,9 +346,10 @@ class BdptWeights:
         that one; ``pdf_cam_*`` likewise; ``cos_*``: |cos| at each end; ``dist2``; ``depth``:
         the camera vertex's, in segments from the sensor."""
         w_light = self._m(pdf_cam_fwd * cos_light / dist2) * (
-            self.eta + self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
+            self.eta * light.merges + self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
         w_camera = self._m(pdf_light_fwd * cos_cam / dist2) * (
-            self.eta * self._merges(depth) + self._gated(camera, "light") + camera.dvc * self._m(pdf_cam_rev))
+            self.eta * (self._merges(depth) * self.eta_joined) + self._gated(camera, "light")
+            + camera.dvc * self._m(pdf_cam_rev))
         if not self.e["connect"]:
             return 0.0 * w_light
         # (this technique's term is its count n_c^beta, as each term of the sums carries its own)
@@ -327,7 +362,8 @@ class BdptWeights:
         the light subpath given the sensor's. (The light vertex is the camera's first: merging
         there counts unless ``merge_from`` > 1.)"""
         w_light = self._m(pdf_cam * cos_light / (dist2 * self.light_paths)) * (
-            self.eta * self._merges(1) + self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
+            self.eta * (self._merges(1) * light.merges) + self._gated(light, "nee")
+            + light.dvc * self._m(pdf_light_rev))
         return self.e["light"] / (1.0 + w_light)
 
     def emitter_to_camera(self, pdf_cam, cos_light, dist2, pdf_pos, delta=False):
@@ -377,7 +413,7 @@ def feasible(delta):
 
 def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies="all",
                         p_nee=None, light_paths: float = 1.0, merge_area: float = 0.0,
-                        merge_from: int = 1, connect_count: float = 1.0):
+                        merge_from: int = 1, connect_count: float = 1.0, caustic_merges: bool = False):
     """The weights of every technique computed directly from the path's densities (numpy).
 
     ``p_light[i]``: area density of x_i generated from the light side (``p_light[0]`` the
@@ -389,7 +425,8 @@ def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies=
     Merging at x_i (i = 1 .. k - 1, not a delta vertex), when ``strategies`` has ``merge``: the
     light subpath builds x_0 .. x_i, the camera subpath x_k .. x_i, density
     p_light[0..i] p_camera[i..k] ``merge_area`` (pi r^2 N_light), where x_i is at least
-    ``merge_from`` segments from the sensor (k - i >= merge_from; else weight 0). Returns p^beta / sum over the
+    ``merge_from`` segments from the sensor (k - i >= merge_from; else weight 0) and, with
+    ``caustic_merges``, x_{i-1} is an interior delta vertex (i >= 2). Returns p^beta / sum over the
     enabled feasible techniques of p^beta, 0 for a disabled or infeasible one: rows s = 0 .. k,
     then (with merging) rows for merging at x_1 .. x_{k-1}. Computed in logarithms, so densities
     may span any range.
@@ -418,7 +455,10 @@ def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies=
         delta = np.asarray(delta, dtype=bool)
         for i in range(1, k):
             log_p = log_l[:i + 1].sum(axis=0) + log_c[i:].sum(axis=0) + np.log(merge_area)
-            logs.append(np.where(~delta[i] & (k - i >= merge_from), beta * log_p, -np.inf))
+            allowed = ~delta[i] & (k - i >= merge_from)
+            if caustic_merges:
+                allowed = allowed & delta[i - 1] & (i >= 2)
+            logs.append(np.where(allowed, beta * log_p, -np.inf))
     logs = np.array(logs)
     top = logs.max(axis=0)
     top = np.where(np.isfinite(top), top, 0.0)

@@ -71,67 +71,77 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     iterations the image is biased wherever merging has weight (``bpt``, ``lt`` and ``pt``
     do not merge and are unbiased).
 
-    ============= ====== ========================================================
-    mode          string ``vcm`` (every technique), ``bpt`` (connections only:
-                         lab_bdpt's estimator), ``bpm`` (emitter hits and merging
-                         at every camera vertex that merges, with MIS among them:
-                         bidirectional photon mapping), ``ppm`` (merging at the
-                         first camera vertex with a smooth lobe, delta lobes
-                         followed, emitters seen along them; no MIS: progressive
-                         photon mapping), ``lt`` (light tracing),
-                         ``pt`` (emitter hits and next-event estimation: lab_mis's
-                         estimator). (Default: ``vcm``)
-    radius        float  r_1, the first iteration's merging radius in scene
-                         units; 0 = the scene's bounding-box diagonal over the
-                         film's larger side, as lab_photon (Default: 0)
-    alpha         float  Radius schedule r_i = r_1 i^((alpha - 1) / 2), in (0, 1)
-                         (Default: 0.75)
-    light_paths   float  Light subpaths per camera subpath in each iteration, in
-                         [1/64, 64]: every one is stored, merged with and splats
-                         its light tracing; camera subpath i connects to light
-                         subpath i. More of them make merging's estimate less
-                         noisy for the same camera work; below 1 camera
-                         subpaths of an iteration share them (i mod N, N a
-                         multiple of a pass's iterations), and the light pass,
-                         grid and merges cost less (Default: 1)
-    kernel        string Merging's density kernel over the disc of radius r_i:
-                         ``epanechnikov`` (2 / pi) (1 - d^2 / r_i^2) / r_i^2, as
-                         lab_photon, or ``constant`` 1 / (pi r_i^2), as SmallVCM.
-                         Epanechnikov's blur costs 2/3 the bias for 4/3 the
-                         variance (README: lower error where merging carries
-                         the light); MIS counts merging with the disc's area
-                         either way (Default: ``epanechnikov``)
-    merge_first   bool   Merge at the camera's first vertex too (modes vcm and
-                         bpm), as Georgiev et al.'s VCM does. false: no
-                         merging there, as a technique or in any other
-                         technique's MIS sum, so the light arriving at what
-                         the camera sees directly comes from light tracing,
-                         NEE and connections. The merges of one iteration
-                         share its light vertices, and at the first vertex
-                         they add variance that light tracing does not
-                         (README: equal or lower error on every scene of
-                         experiments/vcm.toml without them). ppm always
-                         merges there (Default: false)
-    connections   string ``all``: a camera vertex connects to every stored
-                         vertex of its light subpath (lab_bdpt); ``one``: to
-                         one of the n it may use, picked uniformly and counted
-                         n times (unbiased), with the MIS weights counting
-                         each connection technique 1 / L times per camera
-                         vertex (L: stored vertices per light subpath, from
-                         the passes so far). Modes vcm and bpt
-                         (Default: ``all``)
-    pilot         bool   Efficiency-aware choice for the whole image (modes
-                         vcm and bpt): a pilot (4 renders each with every
-                         technique and with path tracing alone, 1/32 of
-                         ``spp`` iterations each) measures the image's
-                         relative variance and time per iteration of both,
-                         and the render is lab_mis's (path tracing alone,
-                         mode pt's estimator; the pilot's path tracing
-                         averaged in) where that is lower, else every
-                         technique's (``selection``; Default: false)
+    ============== ====== ========================================================
+    mode           string ``vcm`` (every technique), ``bpt`` (connections only:
+                          lab_bdpt's estimator), ``bpm`` (emitter hits and merging
+                          at every camera vertex that merges, with MIS among them:
+                          bidirectional photon mapping), ``ppm`` (merging at the
+                          first camera vertex with a smooth lobe, delta lobes
+                          followed, emitters seen along them; no MIS: progressive
+                          photon mapping), ``lt`` (light tracing),
+                          ``pt`` (emitter hits and next-event estimation: lab_mis's
+                          estimator). (Default: ``vcm``)
+    radius         float  r_1, the first iteration's merging radius in scene
+                          units; 0 = the scene's bounding-box diagonal over the
+                          film's larger side, as lab_photon (Default: 0)
+    alpha          float  Radius schedule r_i = r_1 i^((alpha - 1) / 2), in (0, 1)
+                          (Default: 0.75)
+    light_paths    float  Light subpaths per camera subpath in each iteration, in
+                          [1/64, 64]: every one is stored, merged with and splats
+                          its light tracing; camera subpath i connects to light
+                          subpath i. More of them make merging's estimate less
+                          noisy for the same camera work; below 1 camera
+                          subpaths of an iteration share them (i mod N, N a
+                          multiple of a pass's iterations), and the light pass,
+                          grid and merges cost less (Default: 1)
+    kernel         string Merging's density kernel over the disc of radius r_i:
+                          ``epanechnikov`` (2 / pi) (1 - d^2 / r_i^2) / r_i^2, as
+                          lab_photon, or ``constant`` 1 / (pi r_i^2), as SmallVCM.
+                          Epanechnikov's blur costs 2/3 the bias for 4/3 the
+                          variance (README: lower error where merging carries
+                          the light); MIS counts merging with the disc's area
+                          either way (Default: ``epanechnikov``)
+    merge_first    bool   Merge at the camera's first vertex too (modes vcm and
+                          bpm), as Georgiev et al.'s VCM does. false: no
+                          merging there, as a technique or in any other
+                          technique's MIS sum, so the light arriving at what
+                          the camera sees directly comes from light tracing,
+                          NEE and connections. The merges of one iteration
+                          share its light vertices, and at the first vertex
+                          they add variance that light tracing does not
+                          (README: equal or lower error on every scene of
+                          experiments/vcm.toml without them). ppm always
+                          merges there (Default: false)
+    merge_vertices string ``all``: every stored light vertex merges;
+                          ``caustic``: only those reached through a delta lobe
+                          (a light subpath's vertex right after a specular
+                          bounce, Jensen's caustic photons). Merging at x_i is
+                          then a technique only where x_{i-1} is a delta-lobe
+                          vertex, in every MIS sum too, so the image stays
+                          consistent; paths without one get their light from
+                          the connections, NEE, emitter hits and light tracing,
+                          and the grid holds and merges fewer vertices (README:
+                          "Caustic merges"). Mode vcm (Default: ``all``)
+    connections    string ``all``: a camera vertex connects to every stored
+                          vertex of its light subpath (lab_bdpt); ``one``: to
+                          one of the n it may use, picked uniformly and counted
+                          n times (unbiased), with the MIS weights counting
+                          each connection technique 1 / L times per camera
+                          vertex (L: stored vertices per light subpath, from
+                          the passes so far). Modes vcm and bpt
+                          (Default: ``all``)
+    pilot          bool   Efficiency-aware choice for the whole image (modes
+                          vcm and bpt): a pilot (4 renders each with every
+                          technique and with path tracing alone, 1/32 of
+                          ``spp`` iterations each) measures the image's
+                          relative variance and time per iteration of both,
+                          and the render is lab_mis's (path tracing alone,
+                          mode pt's estimator; the pilot's path tracing
+                          averaged in) where that is lower, else every
+                          technique's (``selection``; Default: false)
     max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices, aim, aim_at: as
-                         lab_bdpt (``aim``: the light subpaths that merge too).
-    ============= ====== ========================================================
+                          lab_bdpt (``aim``: the light subpaths that merge too).
+    ============== ====== ========================================================
 
     A light vertex merges with a camera vertex when within r_i, facing the same way (normals
     within ~37 degrees, as lab_photon) and when the merged path is no longer than
@@ -171,6 +181,11 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         if self.values["pilot"] and self.values["mode"] not in ("vcm", "bpt"):
             raise ValueError(f"lab_vcm: pilot chooses between every technique and path tracing alone, which only "
                              f"modes 'vcm' and 'bpt' have, not mode '{self.values['mode']}'")
+        self.caustic_merges = self.values["merge_vertices"] == "caustic"
+        if self.caustic_merges and self.values["mode"] != "vcm":
+            raise ValueError(f"lab_vcm: merge_vertices = 'caustic' leaves the light of paths without a delta lobe "
+                             f"before the merge to the other techniques, which only mode 'vcm' has all of, not "
+                             f"mode '{self.values['mode']}'")
         if self.values["connections"] == "one" and "connect" not in self.kinds:
             raise ValueError(f"lab_vcm: connections = 'one' picks the light vertex a camera vertex connects to; "
                              f"mode '{self.values['mode']}' makes no connections")
@@ -313,6 +328,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         dr.eval(grid.buckets, grid.order, grid.points, grid.records)
         dr.sync_thread()
         stats.grid_s += time.perf_counter() - start
+        stats.merging_vertices += grid.count
         if plan.index == 0:
             stats.radius_first = radii[0]
         stats.radius_last = radii[-1]

@@ -33,8 +33,8 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators.bdpt.light_subpath import finite_or_zero, reverse_pdf
-from mitsuba_lab.plugins.integrators.bdpt.vertices import (POINT, POINT_WIDTH, RECORD, RECORD_WIDTH, read,
-                                                           spectrum_at, unbits, vector)
+from mitsuba_lab.plugins.integrators.bdpt.vertices import (NO_MERGE, POINT, POINT_WIDTH, RECORD, RECORD_WIDTH,
+                                                           read, spectrum_at, unbits, vector)
 from mitsuba_lab.plugins.integrators.bdpt.weights import SubpathMis
 from mitsuba_lab.plugins.integrators.kernels import kernel
 from mitsuba_lab.plugins.integrators.photon.gather import NORMAL_COS
@@ -90,11 +90,18 @@ class VertexGrid:
         self.radius2 = table([r * r for r in self.radii])
         self.normalisation = table([1.0 / (r * r * n) for r, n in zip(self.radii, light_subpaths)])
         self.mask = dr.opaque(mi.UInt32, size - 1)
+        index = dr.arange(mi.UInt32, count)       # (the stored slots that merge)
+        if vertices.caustic and count > 0:
+            # (caustic_merges: only the vertices reached through a delta lobe merge)
+            dvm = dr.gather(mi.Float, vertices.records, index * RECORD_WIDTH + RECORD["dvm"])
+            index = dr.compress(dvm != NO_MERGE)
+            count = self.count = dr.width(index)
+            size = table_size_for(2 * count)
+            self.mask = dr.opaque(mi.UInt32, size - 1)
         if count == 0:                 # (every bucket empty: no merge reads a vertex)
             self.buckets, self.order = dr.zeros(mi.UInt32, 2 * size), mi.UInt32(0)
             self.points, self.records = dr.zeros(mi.Float, POINT_WIDTH), dr.zeros(mi.Float, RECORD_WIDTH)
             return
-        index = dr.arange(mi.UInt32, count)
         point = read(vertices.points, POINT_WIDTH, index)
         iteration = unbits(point[POINT["iteration"]])
         points = vector(point, POINT["p"], mi.Point3f)
@@ -108,8 +115,9 @@ class VertexGrid:
         # what a merge reads, in bucket order: a bucket's vertices lie together in memory
         self.points = dr.zeros(mi.Float, POINT_WIDTH * count)
         self.records = dr.zeros(mi.Float, RECORD_WIDTH * count)
-        dr.scatter(self.points, read(vertices.points, POINT_WIDTH, self.order), index)
-        dr.scatter(self.records, read(vertices.records, RECORD_WIDTH, self.order), index)
+        position = dr.arange(mi.UInt32, count)
+        dr.scatter(self.points, read(vertices.points, POINT_WIDTH, self.order), position)
+        dr.scatter(self.records, read(vertices.records, RECORD_WIDTH, self.order), position)
         dr.eval(self.order, self.buckets, self.points, self.records)
 
     @dr.syntax
