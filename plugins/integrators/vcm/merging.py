@@ -82,6 +82,12 @@ class VertexGrid:
         if not all(r > 0 for r in radii):
             raise ValueError(f"lab_vcm: merging radii must be > 0, got {list(radii)}")
         self.vertices = vertices
+        index = dr.arange(mi.UInt32, count)       # (the stored slots that merge)
+        if vertices.caustic and count > 0:
+            # (caustic_merges: only the vertices reached through a delta lobe merge)
+            dvm = dr.gather(mi.Float, vertices.records, index * RECORD_WIDTH + RECORD["dvm"])
+            index = dr.compress(dvm != NO_MERGE)
+            count = dr.width(index)
         self.count = count
         self.radii = [float(r) for r in radii]
         self.kernel = kernel
@@ -90,14 +96,6 @@ class VertexGrid:
         self.radius2 = table([r * r for r in self.radii])
         self.normalisation = table([1.0 / (r * r * n) for r, n in zip(self.radii, light_subpaths)])
         self.mask = dr.opaque(mi.UInt32, size - 1)
-        index = dr.arange(mi.UInt32, count)       # (the stored slots that merge)
-        if vertices.caustic and count > 0:
-            # (caustic_merges: only the vertices reached through a delta lobe merge)
-            dvm = dr.gather(mi.Float, vertices.records, index * RECORD_WIDTH + RECORD["dvm"])
-            index = dr.compress(dvm != NO_MERGE)
-            count = self.count = dr.width(index)
-            size = table_size_for(2 * count)
-            self.mask = dr.opaque(mi.UInt32, size - 1)
         if count == 0:                 # (every bucket empty: no merge reads a vertex)
             self.buckets, self.order = dr.zeros(mi.UInt32, 2 * size), mi.UInt32(0)
             self.points, self.records = dr.zeros(mi.Float, POINT_WIDTH), dr.zeros(mi.Float, RECORD_WIDTH)

@@ -35,10 +35,10 @@ PILOT_BUDGET_FRACTION = 0.05
 PILOT_MAX_GROWTH = 6
 #: After calibrating, the untimed compile render at the fitted count is checked too: when its time
 #: less compilation is off the budget by more than SETTLE_RATIO either way, the count is scaled by
-#: (budget - fixed) / (that time - fixed) and rendered again, at most SETTLE_TRIES times. An integrator whose cost per
-#: sample depends on the count (lab_vcm's ``pilot`` chooses path tracing alone at some counts and
-#: every technique at others) is not linear in it, and a fit from small pilots rendered its 16 s
-#: point of the Cornell box in 3.3 s.
+#: (budget - fixed) / (that time - fixed) and rendered again, at most SETTLE_TRIES times. An
+#: integrator whose cost per sample depends on the count (lab_vcm's ``pilot`` chooses path tracing
+#: alone at some counts and every technique at others) is not linear in it, and a fit from small
+#: pilots rendered its 16 s point of the Cornell box in 3.3 s.
 SETTLE_RATIO = 1.25
 SETTLE_TRIES = 3
 #: A progressive run whose passes compiled a kernel after the warm-up is rendered again, at most
@@ -230,11 +230,11 @@ def settle(point: Point, render_at, spp: int, stats, calibration: dict) -> int:
     and rescaled while its time less compilation is off by more than SETTLE_RATIO (SETTLE_TRIES
     at most); ``calibration`` records the count kept and the rescalings."""
     for _ in range(SETTLE_TRIES):
-        seconds = max(stats.wall_s - getattr(stats, "compile_s", 0.0), 1e-6)
+        seconds = max(stats.wall_s - stats.compile_s, 1e-6)
         if point.budget_s / SETTLE_RATIO <= seconds <= point.budget_s * SETTLE_RATIO:
             break
         # (the fit's fixed cost stays; the rest scales with the count)
-        fixed = calibration.get("fixed_s", 0.0)
+        fixed = calibration["fixed_s"]
         scale = point.budget_s / seconds if seconds <= fixed else (point.budget_s - fixed) / (seconds - fixed)
         spp = max(1, int(round(spp * max(scale, 0.0))))
         calibration.setdefault("rescaled", []).append({"seconds": seconds, "spp": spp})
