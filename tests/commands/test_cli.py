@@ -2,6 +2,7 @@
 import io
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -48,12 +49,16 @@ def test_render_writes_exr_with_metadata_and_png(tmp_path):
 
 def test_render_reports_what_lab_vcms_pilot_chose(tmp_path):
     """The summary names a bidirectional integrator's statistics, lab_vcm's pilot choice among
-    them (path tracing alone on the Cornell box with one light subpath per 16 pixels)."""
+    them: whether path tracing alone, the light subpaths chosen (0 for path tracing) and each
+    choice's score as a table (which choice a 16x16 image gets is timing noise: not checked)."""
     code, out, err = run(["render", CORNELL, "-D", "res=16", "--spp", "256", "--integrator", "lab_vcm",
-                          "--param", "pilot=true", "--param", "light_paths=0.0625", "-o", str(tmp_path / "v.exr")])
+                          "--param", "pilot=true", "--param", "light_paths=0.0625", "--param", "light_paths_max=0.125",
+                          "-o", str(tmp_path / "v.exr")])
     assert code == 0, err
     line = next(line for line in out.splitlines() if line.startswith("statistics: "))
-    assert "pilot_s" in line and "chose_path_tracing True" in line
+    assert "pilot_s" in line and "pilot_scores (0.0625: " in line and ", 0.125: " in line and "path tracing: " in line
+    chose = re.search(r"chose_path_tracing (\w+), light_paths_chosen ([0-9.]+)", line)
+    assert chose and (chose[1] == "True") == (float(chose[2]) == 0.0) and float(chose[2]) in (0.0, 0.0625, 0.125)
 
 
 def test_param_values_are_parsed():

@@ -18,6 +18,9 @@ from mitsuba_lab.plugins.integrators.vcm import selection
 from mitsuba_lab.scene import load_scene, make_integrator
 from test_vcm import MAX_DEPTH, RES, SEEDS_LAB, Z_BOUND, assert_agrees, path_stack, render, scene_path, vcm
 
+#: experiments/vcm.toml's vcm_auto: one setting for every scene, the pilot choosing.
+AUTO = {"radius": 0.022, "light_paths": 1, "light_paths_max": 16, "aim": 0.9, "pilot": True}
+
 
 @pytest.mark.parametrize("name", ["cornell_box.xml", "caustic.xml"])
 def test_one_connection_per_camera_vertex_agrees_with_mitsuba_path(name, monkeypatch):
@@ -51,7 +54,7 @@ def test_path_tracing_chosen_is_lab_mis_with_the_pilots_iterations(monkeypatch):
 
     scene = load_scene(scene_path("cornell_box.xml"), res=RES)
     pilot_image = np.full((RES, RES, 3), 0.5)
-    monkeypatch.setattr(LabVCMIntegrator, "_pilot", lambda self, *a: (True, pilot_image, 12))
+    monkeypatch.setattr(LabVCMIntegrator, "_pilot", lambda self, *a: (None, pilot_image, 12, {None: 0.0}))
     integrator = vcm(pilot=True)
     image = render(scene, integrator, spp=4)
     mis = render(scene, make_integrator("lab_mis", {"max_depth": MAX_DEPTH}), spp=4)
@@ -60,37 +63,143 @@ def test_path_tracing_chosen_is_lab_mis_with_the_pilots_iterations(monkeypatch):
     assert stats["chose_path_tracing"] and stats["light_subpaths"] == 0
 
 
-@pytest.mark.parametrize("name, light_paths, path_tracing", [("veach_mis.xml", 0.0625, True),
-                                                             ("caustic.xml", 4, False)])
-def test_the_pilot_chooses_path_tracing_where_it_is_more_efficient(name, light_paths, path_tracing):
-    """At 32x32 and 1024 iterations (pilots of 8), on 3 seeds: path tracing on Veach's plates
-    (no technique but emitter hits and NEE lowers its variance there), every technique on the
-    caustic scene (light tracing carries its caustic)."""
-    scene = load_scene(scene_path(name), res=32)
-    integrator = vcm(radius=0.03, light_paths=light_paths, pilot=True)
+@pytest.mark.parametrize("name, spp, path_tracing", [("veach_mis.xml", 2048, True), ("caustic.xml", 512, False)])
+def test_the_pilot_chooses_path_tracing_where_it_is_more_efficient(name, spp, path_tracing):
+    """experiments/vcm.toml's `vcm_auto` at 64x64 (at 32x32 an iteration takes about as long as
+    the timer's noise), on 3 seeds: path tracing on Veach's plates at 2048 iterations (no
+    technique but emitter hits and NEE lowers its variance there), every technique on the caustic
+    scene at 512 (light tracing and merging carry its caustic)."""
+    scene = load_scene(scene_path(name), res=64)
+    integrator = vcm(**AUTO)
     for seed in range(3):
-        render(scene, integrator, spp=1024, seed=seed)
-        assert integrator.bdpt_stats()["chose_path_tracing"] == path_tracing, (name, seed)
+        render(scene, integrator, spp=spp, seed=seed)
+        stats = integrator.bdpt_stats()
+        assert stats["chose_path_tracing"] == path_tracing, (name, seed, stats["pilot_scores"])
+
+
+def test_auto_is_the_experiments_vcm_auto():
+    import os
+    import tomllib
+
+    with open(os.path.join(os.path.dirname(scene_path("x")), "..", "experiments", "vcm.toml"), "rb") as f:
+        strategy = tomllib.load(f)["strategies"]["vcm_auto"]
+    assert {k: v for k, v in strategy.items() if k not in ("type", "mode", "merge_first")} == AUTO
+    assert strategy["mode"] == "vcm" and not strategy["merge_first"]
 
 
 def test_light_a_pilot_misses_counts_as_error():
     """Where path tracing's pilot never found the light every technique's did (a caustic), its
     renders agree with each other exactly, yet it loses even at a tenth of the time; the same
-    light found by a path tracer 10x cheaper with twice the variance wins."""
+    light found by a path tracer 10x cheaper with about the same variance wins."""
     rng = np.random.default_rng(1)
     every = 1.0 + 0.1 * rng.standard_normal((4, 5, 5, 3))
-    var_every, var_camera = selection.relative_variances(every, np.zeros((4, 5, 5, 3)), 8)
-    assert np.all(var_camera > 10 * var_every)
-    assert not selection.path_tracing_wins(var_every, var_camera, 1.0, 0.1)
-    camera = 1.0 + 0.14 * rng.standard_normal((4, 5, 5, 3))
-    var_every, var_camera = selection.relative_variances(every, camera, 8)
-    assert selection.path_tracing_wins(var_every, var_camera, 1.0, 0.1)
+    costs = selection.PilotCosts(camera=1.0, light=0.0, per_pass=0.0, pass_iterations=1.0, path_tracing=0.1)
+    missed = selection.pilot_variances(every, None, np.zeros((4, 5, 5, 3)), 8)
+    assert missed.path_tracing > 10 * missed.every
+    assert selection.choose(missed, costs, [1.0])[0] == 1.0
+    found = selection.pilot_variances(every, None, 1.0 + 0.1 * rng.standard_normal((4, 5, 5, 3)), 8)
+    assert selection.choose(found, costs, [1.0])[0] is None
+    # a score below every technique's, but not by PATH_TRACING_MARGIN, keeps every technique
+    close = selection.PilotVariances(every=1.0, camera_side=1.0,
+                                     path_tracing=(1 + selection.PATH_TRACING_MARGIN) / 2 / 0.1)
+    assert selection.choose(close, costs, [1.0])[0] == 1.0
     assert selection.pilot_iterations(10) == 4 and selection.pilot_iterations(6400) == 50
+
+
+def test_the_pilot_tells_the_camera_share_of_the_variance():
+    """A render sharing the camera seed of another but not its light seed: the camera seed's share
+    of the variance (what more light subpaths cannot lower) is the mean product of their
+    differences from two independent renders. On 200 x 200 pixels with light, camera and own
+    standard deviations 0.2, 0.1, 0.1 (relative variance of one iteration at 4 iterations: 0.24,
+    camera side 0.04): both within 5 standard errors of the sample (0.0048 and 0.0032 here,
+    from the products' spread); the light seed shared
+    instead gives the light's share (power); a longer path-tracing render counts by its
+    iterations, less the variance of every technique's mean, over PATH_TRACING_SIZE, if that is
+    higher than the other renders' estimate."""
+    rng = np.random.default_rng(3)
+    shape = (200, 200, 1)
+    cameras = 0.1 * rng.standard_normal((4,) + shape)
+    every = 1.0 + 0.2 * rng.standard_normal((4,) + shape) + cameras + 0.1 * rng.standard_normal((4,) + shape)
+    shared = 1.0 + 0.2 * rng.standard_normal((1,) + shape) + cameras[:1] + 0.1 * rng.standard_normal((1,) + shape)
+    path = np.ones((4,) + shape)
+    v = selection.pilot_variances(every, shared, path, 4)
+    scale = 4 / 1.01           # iterations / (mean^2 + 0.01)
+    print(f"every {v.every:.4f} (expected {0.06 * scale:.4f}), camera side {v.camera_side:.4f} "
+          f"(expected {0.01 * scale:.4f})")
+    assert abs(v.every - 0.06 * scale) < 5 * 0.0048
+    assert abs(v.camera_side - 0.01 * scale) < 5 * 0.0032
+    lights = every[:1] - cameras[:1] + 0.1 * rng.standard_normal((1,) + shape)   # the light seed shared
+    assert selection.pilot_variances(every, lights, path, 4).camera_side > 0.04 * scale
+    assert abs(v.every_at(4.0) - (v.camera_side + (v.every - v.camera_side) / 4)) < 1e-12
+    longer = 1.0 + 0.5 * rng.standard_normal(shape)          # variance 0.25 of a 16-iteration mean
+    with_longer = selection.pilot_variances(every, shared, path, 4, longer, 16)
+    # (1 / mean^2 over a mean of variance 0.06 / 4 is 1 + 3 x 0.015 on average)
+    quarter = 16 * 0.25 / 1.01 * (1 + 3 * 0.015) / selection.PATH_TRACING_SIZE
+    print(f"path tracing with the longer render {with_longer.path_tracing:.3f} (expected {quarter:.3f}; "
+          f"standard error 0.7%)")
+    assert abs(with_longer.path_tracing - quarter) < 5 * 0.007 * quarter
+    short = selection.pilot_variances(every, shared, path + 0.2, 4).path_tracing     # the shared seeds' alone
+    assert selection.pilot_variances(every, shared, path + 0.2, 4, path[0], 16).path_tracing == short > 0.1
+
+
+def test_the_pilot_chooses_light_subpaths_by_variance_times_time():
+    """Light-side variance falls as 1 / ratio, the light pass grows as ratio and the camera pass
+    as its square root: with the light side carrying the variance and the light pass cheap, more
+    light subpaths win; with the camera side carrying it, light_paths stays; a pass's fixed cost
+    counts as it is shared by fewer iterations."""
+    costs = selection.PilotCosts(camera=1.0, light=0.1, per_pass=0.0, pass_iterations=64.0, path_tracing=1.0)
+    ratios = selection.light_path_ratios(1.0, 16.0)
+    assert ratios == [1.0, 2.0, 4.0, 8.0, 16.0]
+    light_heavy = selection.PilotVariances(every=10.0, camera_side=0.5, path_tracing=100.0)
+    choice, scores = selection.choose(light_heavy, costs, ratios)
+    assert choice == min((r for r in ratios), key=lambda r: (0.5 + 9.5 / r) * (r ** 0.5 + 0.1 * r)) and choice > 1
+    assert scores[None] == 100.0
+    camera_heavy = selection.PilotVariances(every=10.0, camera_side=9.5, path_tracing=100.0)
+    assert selection.choose(camera_heavy, costs, ratios)[0] == 1.0
+    passes = selection.PilotCosts(camera=1.0, light=0.1, per_pass=1000.0, pass_iterations=64.0, path_tracing=1.0)
+    assert passes.every_at(16.0) == 4.0 + 1.6 + 1000.0 / 4
+    assert selection.choose(selection.PilotVariances(10.0, 0.5, 1e6), passes, ratios)[0] == 1.0
+    assert selection.light_path_ratios(0.25, 0.0) == [1.0] and selection.light_path_ratios(1.0, 3.0) == [1.0, 2.0]
+    assert selection.light_path_ratios(16.0, 64.0) == [1.0, 2.0, 4.0]
+    sizes = selection.PilotCosts.from_sizes((0.03, 0.05), (0.06, 0.11), 4, 80.0, (0.004, 0.016), 4, 16)
+    assert np.allclose([sizes.light, sizes.camera, sizes.per_pass, sizes.path_tracing], [0.01, 0.02, 0.05, 0.001])
+
+
+def test_the_chosen_light_subpaths_render_lab_vcm_at_them(monkeypatch):
+    """A pilot that chooses 4x light_paths: the render is lab_vcm's at 4 light subpaths per camera
+    subpath (the same seed, the same image), its statistics say so."""
+    from mitsuba_lab.plugins.integrators.vcm.integrator import LabVCMIntegrator
+
+    scene = load_scene(scene_path("caustic.xml"), res=RES)
+    monkeypatch.setattr(LabVCMIntegrator, "_pilot", lambda self, *a: (4.0, None, 0, {4.0: 1.0, None: 2.0}))
+    integrator = vcm(radius=0.03, pilot=True, light_paths_max=16)
+    image = render(scene, integrator, spp=4, seed=7)
+    direct = render(scene, vcm(radius=0.03, light_paths=4), spp=4, seed=7)
+    np.testing.assert_allclose(image, direct, rtol=1e-6, atol=1e-7)      # (float atomics in the splats)
+    stats = integrator.bdpt_stats()
+    assert stats["light_paths_chosen"] == 4.0 and not stats["chose_path_tracing"]
+    assert stats["light_subpaths"] == 4 * 4 * RES * RES
+
+
+def test_the_pilot_chooses_more_light_subpaths_where_light_tracing_carries_the_image():
+    """`vcm_auto` at 64x64 on 3 seeds: on light_in_glass (its room lit only through the glass, so
+    light tracing and merging carry it) at 128 iterations, more than one light subpath per camera
+    subpath; on the Cornell box at 512, none (path tracing alone)."""
+    for name, spp, more in (("stiff/light_in_glass.xml", 128, True), ("cornell_box.xml", 512, False)):
+        scene = load_scene(scene_path(name), res=64)
+        integrator = vcm(**AUTO)
+        for seed in range(3):
+            render(scene, integrator, spp=spp, seed=seed)
+            chosen = integrator.bdpt_stats()["light_paths_chosen"]
+            assert (chosen > 1) == more, (name, seed, integrator.bdpt_stats()["pilot_scores"], integrator.pilot_variances, integrator.pilot_costs)
 
 
 def test_pilot_and_connections_refusals_are_one_line():
     for params, match in (({"mode": "ppm", "pilot": True}, "pilot .* not mode 'ppm'"),
                           ({"connections": "two"}, "parameter 'connections' must be one of all, one"),
-                          ({"mode": "bpm", "connections": "one"}, "mode 'bpm' makes no connections")):
+                          ({"mode": "bpm", "connections": "one"}, "mode 'bpm' makes no connections"),
+                          ({"light_paths_max": 4}, "light_paths_max .* needs pilot = true"),
+                          ({"pilot": True, "light_paths": 4, "light_paths_max": 2}, "below light_paths = 4"),
+                          ({"pilot": True, "light_paths_max": 100}, "light_paths_max")):
         with pytest.raises(Exception, match=match):
             make_integrator("lab_vcm", params)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import drjit as dr
 import mitsuba as mi
@@ -46,6 +46,8 @@ class BdptStats:
     radius_last: float = 0.0
     pilot_s: float = 0.0              # lab_vcm pilot: the pilot's time
     chose_path_tracing: bool = False  # lab_vcm pilot: the pilot chose path tracing alone
+    light_paths_chosen: float = 0.0   # lab_vcm pilot: the light subpaths per camera subpath chosen (0: none)
+    pilot_scores: dict = field(default_factory=dict)   # lab_vcm pilot: relative variance x s per iteration
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -215,7 +217,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             u = u_passes[index] if u_passes else None
             if u is not None:
                 tracer.pass_spectrum = spectral.sensor_spectrum(sensor, u)
-            light = self._light_pass(tracer, film, count, crop_px / count, pass_seed(seed, index), stats,
+            light_seed = pass_seed(seed if self.light_seed is None else self.light_seed, index)
+            light = self._light_pass(tracer, film, count, crop_px / count, light_seed, stats,
                                      traits.tangent_bsdf, plan.camera_lanes)
             if light is None:                          # did not fit: fewer light subpaths
                 continue
@@ -260,6 +263,9 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     connect_one = False
     #: Merging only with light vertices reached through a delta lobe (lab_vcm's ``merge_vertices``).
     caustic_merges = False
+    #: The light subpaths' own seed; None: the render's (lab_vcm's pilot crosses light and camera
+    #: seeds to tell their shares of the variance apart).
+    light_seed = None
 
     def pass_spp_limit(self, film_pixels: int) -> int:
         """Most samples per pixel in one pass besides ``max_vertices`` (lab_vcm: a bound)."""

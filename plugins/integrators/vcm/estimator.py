@@ -15,7 +15,7 @@ class VertexMerging(Bidirectional):
     """lab_vcm's estimator: the techniques of its ``mode`` (``params.VCM_MODES``) under one MIS."""
     plugin_name = "lab_vcm"
     PARAMETERS = declarations.LAB_VCM
-    OWN_PARAMETERS = ("mode", "radius", "alpha", "light_paths", "kernel", "merge_first", "merge_vertices", "connections", "pilot", "heuristic", "beta",
+    OWN_PARAMETERS = ("mode", "radius", "alpha", "light_paths", "kernel", "merge_first", "merge_vertices", "connections", "pilot", "light_paths_max", "heuristic", "beta",
                       "max_vertices")
 
     def kinds(self) -> tuple[str, ...]:

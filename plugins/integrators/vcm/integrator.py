@@ -15,7 +15,7 @@ from mitsuba_lab.plugins.integrators.support import render_arguments
 
 from .estimator import VertexMerging, merges_first
 from .merging import VertexGrid, table
-from .selection import PILOT_RENDERS, path_tracing_wins, pilot_iterations, relative_variances
+from .selection import PATH_TRACING_SIZE, PILOT_RENDERS, PilotCosts, choose, light_path_ratios, pilot_iterations, pilot_variances
 
 
 def vcm_radius(r1: float, iteration: int, alpha: float) -> float:
@@ -71,77 +71,84 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     iterations the image is biased wherever merging has weight (``bpt``, ``lt`` and ``pt``
     do not merge and are unbiased).
 
-    ============== ====== ========================================================
-    mode           string ``vcm`` (every technique), ``bpt`` (connections only:
-                          lab_bdpt's estimator), ``bpm`` (emitter hits and merging
-                          at every camera vertex that merges, with MIS among them:
-                          bidirectional photon mapping), ``ppm`` (merging at the
-                          first camera vertex with a smooth lobe, delta lobes
-                          followed, emitters seen along them; no MIS: progressive
-                          photon mapping), ``lt`` (light tracing),
-                          ``pt`` (emitter hits and next-event estimation: lab_mis's
-                          estimator). (Default: ``vcm``)
-    radius         float  r_1, the first iteration's merging radius in scene
-                          units; 0 = the scene's bounding-box diagonal over the
-                          film's larger side, as lab_photon (Default: 0)
-    alpha          float  Radius schedule r_i = r_1 i^((alpha - 1) / 2), in (0, 1)
-                          (Default: 0.75)
-    light_paths    float  Light subpaths per camera subpath in each iteration, in
-                          [1/64, 64]: every one is stored, merged with and splats
-                          its light tracing; camera subpath i connects to light
-                          subpath i. More of them make merging's estimate less
-                          noisy for the same camera work; below 1 camera
-                          subpaths of an iteration share them (i mod N, N a
-                          multiple of a pass's iterations), and the light pass,
-                          grid and merges cost less (Default: 1)
-    kernel         string Merging's density kernel over the disc of radius r_i:
-                          ``epanechnikov`` (2 / pi) (1 - d^2 / r_i^2) / r_i^2, as
-                          lab_photon, or ``constant`` 1 / (pi r_i^2), as SmallVCM.
-                          Epanechnikov's blur costs 2/3 the bias for 4/3 the
-                          variance (README: lower error where merging carries
-                          the light); MIS counts merging with the disc's area
-                          either way (Default: ``epanechnikov``)
-    merge_first    bool   Merge at the camera's first vertex too (modes vcm and
-                          bpm), as Georgiev et al.'s VCM does. false: no
-                          merging there, as a technique or in any other
-                          technique's MIS sum, so the light arriving at what
-                          the camera sees directly comes from light tracing,
-                          NEE and connections. The merges of one iteration
-                          share its light vertices, and at the first vertex
-                          they add variance that light tracing does not
-                          (README: equal or lower error on every scene of
-                          experiments/vcm.toml without them). ppm always
-                          merges there (Default: false)
-    merge_vertices string ``all``: every stored light vertex merges;
-                          ``caustic``: only those reached through a delta lobe
-                          (a light subpath's vertex right after a specular
-                          bounce, Jensen's caustic photons). Merging at x_i is
-                          then a technique only where x_{i-1} is a delta-lobe
-                          vertex, in every MIS sum too, so the image stays
-                          consistent; paths without one get their light from
-                          the connections, NEE, emitter hits and light tracing,
-                          and the grid holds and merges fewer vertices (README:
-                          "Caustic merges"). Mode vcm (Default: ``all``)
-    connections    string ``all``: a camera vertex connects to every stored
-                          vertex of its light subpath (lab_bdpt); ``one``: to
-                          one of the n it may use, picked uniformly and counted
-                          n times (unbiased), with the MIS weights counting
-                          each connection technique 1 / L times per camera
-                          vertex (L: stored vertices per light subpath, from
-                          the passes so far). Modes vcm and bpt
-                          (Default: ``all``)
-    pilot          bool   Efficiency-aware choice for the whole image (modes
-                          vcm and bpt): a pilot (4 renders each with every
-                          technique and with path tracing alone, 1/32 of
-                          ``spp`` iterations each) measures the image's
-                          relative variance and time per iteration of both,
-                          and the render is lab_mis's (path tracing alone,
-                          mode pt's estimator; the pilot's path tracing
-                          averaged in) where that is lower, else every
-                          technique's (``selection``; Default: false)
+    =============== ====== ========================================================
+    mode            string ``vcm`` (every technique), ``bpt`` (connections only:
+                           lab_bdpt's estimator), ``bpm`` (emitter hits and merging
+                           at every camera vertex that merges, with MIS among them:
+                           bidirectional photon mapping), ``ppm`` (merging at the
+                           first camera vertex with a smooth lobe, delta lobes
+                           followed, emitters seen along them; no MIS: progressive
+                           photon mapping), ``lt`` (light tracing),
+                           ``pt`` (emitter hits and next-event estimation: lab_mis's
+                           estimator). (Default: ``vcm``)
+    radius          float  r_1, the first iteration's merging radius in scene
+                           units; 0 = the scene's bounding-box diagonal over the
+                           film's larger side, as lab_photon (Default: 0)
+    alpha           float  Radius schedule r_i = r_1 i^((alpha - 1) / 2), in (0, 1)
+                           (Default: 0.75)
+    light_paths     float  Light subpaths per camera subpath in each iteration, in
+                           [1/64, 64]: every one is stored, merged with and splats
+                           its light tracing; camera subpath i connects to light
+                           subpath i. More of them make merging's estimate less
+                           noisy for the same camera work; below 1 camera
+                           subpaths of an iteration share them (i mod N, N a
+                           multiple of a pass's iterations), and the light pass,
+                           grid and merges cost less (Default: 1)
+    kernel          string Merging's density kernel over the disc of radius r_i:
+                           ``epanechnikov`` (2 / pi) (1 - d^2 / r_i^2) / r_i^2, as
+                           lab_photon, or ``constant`` 1 / (pi r_i^2), as SmallVCM.
+                           Epanechnikov's blur costs 2/3 the bias for 4/3 the
+                           variance (README: lower error where merging carries
+                           the light); MIS counts merging with the disc's area
+                           either way (Default: ``epanechnikov``)
+    merge_first     bool   Merge at the camera's first vertex too (modes vcm and
+                           bpm), as Georgiev et al.'s VCM does. false: no
+                           merging there, as a technique or in any other
+                           technique's MIS sum, so the light arriving at what
+                           the camera sees directly comes from light tracing,
+                           NEE and connections. The merges of one iteration
+                           share its light vertices, and at the first vertex
+                           they add variance that light tracing does not
+                           (README: equal or lower error on every scene of
+                           experiments/vcm.toml without them). ppm always
+                           merges there (Default: false)
+    merge_vertices  string ``all``: every stored light vertex merges;
+                           ``caustic``: only those reached through a delta lobe
+                           (a light subpath's vertex right after a specular
+                           bounce, Jensen's caustic photons). Merging at x_i is
+                           then a technique only where x_{i-1} is a delta-lobe
+                           vertex, in every MIS sum too, so the image stays
+                           consistent; paths without one get their light from
+                           the connections, NEE, emitter hits and light tracing,
+                           and the grid holds and merges fewer vertices (README:
+                           "Caustic merges"). Mode vcm (Default: ``all``)
+    connections     string ``all``: a camera vertex connects to every stored
+                           vertex of its light subpath (lab_bdpt); ``one``: to
+                           one of the n it may use, picked uniformly and counted
+                           n times (unbiased), with the MIS weights counting
+                           each connection technique 1 / L times per camera
+                           vertex (L: stored vertices per light subpath, from
+                           the passes so far). Modes vcm and bpt
+                           (Default: ``all``)
+    pilot           bool   Efficiency-aware choice for the whole image (modes
+                           vcm and bpt): a pilot (4 renders each with every
+                           technique and with path tracing alone, spp / 128
+                           iterations each, at least 4; one 4x longer of path
+                           tracing; with light_paths_max, one more of every
+                           technique) measures each choice's relative
+                           variance and time per iteration, and the render
+                           is the lowest's: lab_mis's (path tracing alone,
+                           mode pt's estimator; the pilot's path tracing
+                           averaged in; it must win by 0.8x) or every
+                           technique's (``selection``; Default: false)
+    light_paths_max float  With pilot: the most light subpaths per camera
+                           subpath it may choose, light_paths times a power
+                           of two up to it (more pay where light tracing and
+                           merging carry the image, as through glass); 0 =
+                           light_paths only (Default: 0)
     max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices, aim, aim_at: as
-                          lab_bdpt (``aim``: the light subpaths that merge too).
-    ============== ====== ========================================================
+                           lab_bdpt (``aim``: the light subpaths that merge too).
+    =============== ====== ========================================================
 
     A light vertex merges with a camera vertex when within r_i, facing the same way (normals
     within ~37 degrees, as lab_photon) and when the merged path is no longer than
@@ -152,7 +159,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     vertices). Supports what lab_bdpt supports (RGB, mono and spectral variants; spectral:
     one iteration per pass). Statistics of the
     last render (``bdpt_stats()``): light, grid and camera time, the radii; with ``pilot`` the
-    pilot's time and whether it chose path tracing alone.
+    pilot's time, whether it chose path tracing alone, the light subpaths it chose and each
+    choice's score (relative variance x seconds per iteration).
 
     .. code-block:: python
 
@@ -178,6 +186,12 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         # (no first merge: merging from the camera's second vertex on; ``BdptWeights.merge_from``)
         self.merge_from = 1 if merges_first(self.values) or not self.merging else 2
         self._radius = 0.0
+        if self.values["light_paths_max"] and not self.values["pilot"]:
+            raise ValueError("lab_vcm: light_paths_max is the most light subpaths the pilot may choose: it needs "
+                             "pilot = true")
+        if self.values["light_paths_max"] and self.values["light_paths_max"] < self.values["light_paths"]:
+            raise ValueError(f"lab_vcm: light_paths_max = {self.values['light_paths_max']:g} is below light_paths = "
+                             f"{self.values['light_paths']:g}: the pilot chooses from light_paths up to it")
         if self.values["pilot"] and self.values["mode"] not in ("vcm", "bpt"):
             raise ValueError(f"lab_vcm: pilot chooses between every technique and path tracing alone, which only "
                              f"modes 'vcm' and 'bpt' have, not mode '{self.values['mode']}'")
@@ -204,19 +218,24 @@ class LabVCMIntegrator(LabBDPTIntegrator):
 
     # -- pilot: every technique or path tracing alone, whichever a pilot finds more efficient --------
 
-    #: The pilot renders' seeds: the render's seed with this mixed in, then one per render.
+    #: The pilot renders' seeds: the render's seed with this mixed in, then one per render; the
+    #: light seed of the renders that share camera seeds mixes in one more.
     PILOT_SALT = 0x2545F491
+    PILOT_LIGHT_SALT = 0x68E31DA4
 
-    def _companions(self):
-        """(lab_vcm with every technique of this one, lab_mis with its path length, roulette,
-        hidden emitters and heuristic: path tracing alone, the estimator of lab_vcm's mode pt),
-        for the pilot and the render."""
-        params = dict(self.values, pilot=False)
+    def _companion(self, ratio: float = 1.0):
+        """lab_vcm with every technique of this one, without the pilot, at ``ratio`` x its
+        light_paths."""
+        params = dict(self.values, pilot=False, light_paths_max=0.0, light_paths=self.values["light_paths"] * ratio)
         if self.merging:
             params["radius"] = self._radius
+        return mi.load_dict({"type": "lab_vcm", **params})
+
+    def _path_tracer(self):
+        """lab_mis with this one's path length, roulette, hidden emitters and heuristic: path
+        tracing alone, the estimator of lab_vcm's mode pt."""
         shared = ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta")
-        return (mi.load_dict({"type": "lab_vcm", **params}),
-                mi.load_dict({"type": "lab_mis", **{k: self.values[k] for k in shared}}))
+        return mi.load_dict({"type": "lab_mis", **{k: self.values[k] for k in shared}})
 
     @staticmethod
     def _timed(integrator, scene, sensor, seed: int, spp: int, develop=True, evaluate=True):
@@ -227,38 +246,61 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         dr.sync_thread()
         return image, time.perf_counter() - start
 
+    @staticmethod
+    def _pass_times(integrator) -> tuple[float, float]:
+        """(light pass + grid, camera pass) seconds of the integrator's last render."""
+        stats = integrator.bdpt_stats()
+        return stats["light_s"] + stats["grid_s"], stats["camera_s"]
+
     def _pilot(self, scene, sensor, seed: int, spp: int, every, camera):
-        """(whether path tracing alone renders this image more efficiently; path tracing's pilot
-        image, the mean of its iterations; their number), from pilot renders of both
-        (``selection``)."""
+        """(the choice: a multiple of light_paths, or None for path tracing alone; path tracing's
+        pilot image, the mean of its iterations; their number; each choice's relative variance x
+        seconds per iteration), from pilot renders of both (``selection``)."""
         iterations = pilot_iterations(spp)
+        ratios = light_path_ratios(self.values["light_paths"], self.values["light_paths_max"])
         channels = 1 if mi.is_monochromatic else 3
-        images = {"every": [], "camera": []}
-        times = {"every": [], "camera": []}
+        base = seed ^ self.PILOT_SALT
+        images = {"every": [], "shared": [], "camera": []}
+        large, camera_times = [], []
         for r in range(PILOT_RENDERS):
             for name, integrator in (("every", every), ("camera", camera)):
-                image, seconds = self._timed(integrator, scene, sensor, pass_seed(seed ^ self.PILOT_SALT, r + 1),
-                                             iterations)
+                image, seconds = self._timed(integrator, scene, sensor, pass_seed(base, r + 1), iterations)
                 images[name].append(np.array(image)[..., :channels])
-                if name == "every":     # (its passes' own times: a render's setup weighs less on the choice)
-                    stats = integrator.bdpt_stats()
-                    seconds = stats["light_s"] + stats["grid_s"] + stats["camera_s"]
-                times[name].append(seconds / iterations)
-        every_images, camera_images = np.array(images["every"]), np.array(images["camera"])
-        var_every, var_camera = relative_variances(every_images, camera_images, iterations)
-        # (the fastest render of each: the first may include compiling the kernels)
-        wins = path_tracing_wins(var_every, var_camera, min(times["every"]), min(times["camera"]))
-        return wins, camera_images.mean(axis=0), PILOT_RENDERS * iterations
+                if name == "every":
+                    large.append(self._pass_times(every))
+                else:
+                    camera_times.append(seconds)
+        if len(ratios) > 1:       # render 0's camera seed, a light seed of its own
+            every.light_seed = pass_seed(base ^ self.PILOT_LIGHT_SALT, 1)
+            image, _ = self._timed(every, scene, sensor, pass_seed(base, 1), iterations)
+            images["shared"].append(np.array(image)[..., :channels])
+            every.light_seed = None
+        # marginal costs of an iteration: every technique's from one iteration more than none,
+        # path tracing's (cheaper, its times noisier) from PATH_TRACING_SIZE x the iterations
+        self._timed(every, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), 1)
+        longer = PATH_TRACING_SIZE * iterations
+        image, camera_long = self._timed(camera, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), longer)
+        film = sensor.film()
+        costs = PilotCosts.from_sizes(self._pass_times(every), tuple(np.median(np.array(large), axis=0)),
+                                      iterations, every.pass_iterations(int(film.size()[0]) * int(film.size()[1])),
+                                      (float(np.median(camera_times)), camera_long), iterations, longer)
+        camera_images = np.array(images["camera"])
+        variances = pilot_variances(np.array(images["every"]), np.array(images["shared"]) if images["shared"] else None,
+                                    camera_images, iterations, np.array(image)[..., :channels], longer)
+        choice, scores = choose(variances, costs, ratios)
+        # (path tracing's images, the longer one included, are this render's estimator if chosen)
+        camera_spp = PILOT_RENDERS * iterations + longer
+        pilot_image = (camera_images.sum(axis=0) * iterations + np.array(image)[..., :channels] * longer) / camera_spp
+        self.pilot_variances, self.pilot_costs = variances, costs
+        return choice, pilot_image, camera_spp, scores
 
     def _render_chosen(self, scene, sensor, seed, spp, develop, evaluate):
         sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
         start = time.perf_counter()
-        every, camera = self._companions()
-        path_tracing, pilot_image, pilot_spp = self._pilot(scene, sensor, seed, spp, every, camera)
+        camera = self._path_tracer()
+        choice, pilot_image, pilot_spp, scores = self._pilot(scene, sensor, seed, spp, self._companion(), camera)
         pilot_s = time.perf_counter() - start
-        if not path_tracing:
-            image = super().render(scene, sensor, seed, spp, develop, evaluate)
-        else:
+        if choice is None:
             image, seconds = self._timed(camera, scene, sensor, seed, spp, develop, evaluate)
             self.stats = BdptStats(passes=1, camera_s=seconds)
             # the pilot's path tracing is this render's estimator: its iterations count too
@@ -266,8 +308,23 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             channels = pilot_image.shape[-1]
             out[..., :channels] = (spp * out[..., :channels] + pilot_spp * pilot_image) / (spp + pilot_spp)
             image = mi.TensorXf(out)
-        self.stats.pilot_s, self.stats.chose_path_tracing = pilot_s, path_tracing
+        elif choice == 1.0:
+            image = super().render(scene, sensor, seed, spp, develop, evaluate)
+        else:
+            chosen = self._companion(choice)
+            image = chosen.render(scene, sensor, seed, spp, develop, evaluate)
+            self.stats = chosen.stats
+        self.stats.pilot_s, self.stats.chose_path_tracing = pilot_s, choice is None
+        self.stats.light_paths_chosen = 0.0 if choice is None else self.values["light_paths"] * choice
+        self.stats.pilot_scores = {("path tracing" if r is None else self.values["light_paths"] * r): float(v)
+                                   for r, v in scores.items()}
         return image
+
+    def pass_iterations(self, film_pixels: int) -> int:
+        """Iterations a pass of this integrator holds at ``film_pixels`` (after a render, whose
+        stored vertices per light subpath it uses), as ``render`` sizes them."""
+        fit = max(1, int(self.values["max_vertices"] / (1.25 * self.vertices_per_path)))
+        return max(1, min(int(fit // (film_pixels * self.values["light_paths"])), self.pass_spp_limit(film_pixels)))
 
     def _radii(self, plan) -> list[float]:
         """The merging radius of each iteration of a pass (iterations done + 1 .. done + spp)."""

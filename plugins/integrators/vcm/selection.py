@@ -1,58 +1,162 @@
-"""Choosing between every technique and path tracing alone from a pilot (lab_vcm ``pilot``).
+"""Choosing how lab_vcm renders an image from a pilot (lab_vcm ``pilot``): path tracing alone, or
+every technique, and then with how many light subpaths per camera subpath (``light_paths_max``).
 
 Bidirectional techniques pay for themselves only where path tracing struggles: on a diffuse box
 or glossy plates their connections and merges cost more than the variance they remove, while
-on a caustic light tracing and merging carry the light. Efficiency-aware MIS (Grittmann, Yazici,
-Georgiev & Slusallek 2022) picks techniques from their measured variance and cost; this is its
-coarsest form, one choice for the whole image:
+on a caustic light tracing and merging carry the light, and where light tracing carries most of
+the image (light seen through glass) more light subpaths per camera subpath pay too.
+Efficiency-aware MIS (Grittmann, Yazici, Georgiev & Slusallek 2022) picks techniques from their
+measured variance and cost; this is its coarsest form, one choice for the whole image:
 
-* a pilot renders the scene ``PILOT_RENDERS`` times with every technique and as many times with
-  path tracing alone (lab_mis, the estimator of lab_vcm's mode pt in a lighter kernel;
-  ``pilot_iterations`` iterations each, independent seeds);
-* per pixel, the relative variance of one iteration (in relMSE's units, 1 / (mean^2 + 0.01))
-  with every technique is its spread over the pilot's renders; path tracing's is its renders'
-  mean squared deviation from the every-technique mean, so light that a short pilot of path
-  tracing misses (a caustic, a light behind glass) counts as error, not as a small variance
-  (a pilot's own spread underestimates a heavy tail: README);
-* path tracing alone is chosen when the image's mean relative variance x time per iteration
-  (the light pass and grid included for every technique) is lower for it.
+* the pilot renders the scene ``PILOT_RENDERS`` times with every technique at ``light_paths`` and
+  as many times with path tracing alone (lab_mis, the estimator of lab_vcm's mode pt in a
+  lighter kernel), ``pilot_iterations`` iterations each, render i of both with the same seed;
+  with ``light_paths_max``, one more with every technique that shares the camera seed of its
+  first but not its light seed; and one of path tracing with ``PATH_TRACING_SIZE`` times
+  the iterations and a seed of its own;
+* per pixel, in relMSE's units (1 / (mean^2 + 0.01)), one iteration's relative variance with
+  every technique is its renders' spread, and its camera-side part (what more light subpaths
+  cannot lower; the rest falls as 1 / light subpaths) the covariance of the two renders sharing
+  a camera seed. Path tracing's is its renders' mean squared deviation from every technique's
+  mean (or, if higher, the longer render's, less that mean's variance, over
+  ``PATH_TRACING_SIZE``: a short pilot of path tracing often misses the rare paths that dominate
+  its error, but the longer render's pixel samples are not every technique's), so light that path tracing's pilot
+  misses (a caustic, a light behind glass) counts as error, not as a small variance, while in
+  the renders with shared seeds light both sample alike counts for neither (a pilot's own spread
+  underestimates a heavy tail: README);
+* cost per iteration, from the pilot's times at two sizes (``PilotCosts``; one render of every
+  technique with one iteration, one of path tracing with ``PATH_TRACING_SIZE`` times as many): the light pass and
+  grid grow with the light subpaths, the camera pass (which merges) as their square root
+  (``bench_vcm.py``: 3.9x and 4.0x from 1 to 16 light subpaths on light_in_glass and the
+  Cornell box), and a pass's fixed cost is shared by fewer iterations;
+* the render is the choice with the lowest image-mean relative variance x time per iteration
+  (path tracing's must be lower by ``PATH_TRACING_MARGIN``).
 
-Either choice renders one of lab_vcm's estimators unchanged, so the render is unbiased or
-consistent as that estimator is. Path tracing's pilot renders are the same estimator as the
-render when it is chosen, so their iterations are averaged in; every technique's pilot, whose
-merging radius restarts at r_1, is not used in the image.
+Whichever is chosen renders one of lab_vcm's estimators unchanged, unbiased or consistent as that
+one is. Path tracing's pilot renders are the same estimator as the render when it is chosen, so
+their iterations are averaged in; every technique's, whose merging radius restarts at r_1, are
+not used in the image.
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
-#: Renders of each kind in the pilot (their spread gives the variance).
+#: Pilot renders of each kind (their spread gives the variance).
 PILOT_RENDERS = 4
 #: The pilot's iterations per render: the render's samples per pixel over PILOT_FRACTION, at least
 #: PILOT_MIN_ITERATIONS (one iteration's spread is too heavy-tailed to choose on: sds at 100
 #: iterations chose path tracing for 2 seeds of 3 with pilots of 1, none of 5 with pilots of 4).
 PILOT_FRACTION = 128
 PILOT_MIN_ITERATIONS = 4
+#: Path tracing's cost per iteration: from its pilot renders and one of this many times their
+#: iterations (a few of its iterations take about as long as the timer's noise).
+PATH_TRACING_SIZE = 4
+#: Path tracing is chosen when its relative variance x time is below this share of every
+#: technique's: its pilot's error is heavy-tailed (low when the pilot misses the rare paths that
+#: dominate it), and choosing it where it is poor costs far more than the converse (README "A
+#: pilot's choice": the measured choices).
+PATH_TRACING_MARGIN = 0.8
+#: Most light subpaths per camera subpath lab_vcm traces (``params.LAB_VCM``'s light_paths).
+MOST_LIGHT_PATHS = 64.0
 
 
 def pilot_iterations(spp: int) -> int:
-    """Iterations of each pilot render for a render of ``spp`` samples per pixel: each pilot
-    traces PILOT_RENDERS / PILOT_FRACTION (1/32) of the render's iterations, or 16 in all."""
+    """Iterations of each of every technique's pilot renders for a render of ``spp`` samples per
+    pixel: spp / PILOT_FRACTION, at least PILOT_MIN_ITERATIONS."""
     return max(PILOT_MIN_ITERATIONS, spp // PILOT_FRACTION)
 
 
-def relative_variances(every: np.ndarray, camera: np.ndarray, iterations: int):
-    """(every technique's, path tracing's) relative variance of one iteration per pixel, summed
-    over the colour channels, from pilot renders ``every`` and ``camera`` (shape (renders, h, w,
-    channels), each the mean of ``iterations`` iterations)."""
+def light_path_ratios(light_paths: float, light_paths_max: float) -> list[float]:
+    """The light subpath counts the pilot may choose, as multiples of ``light_paths``: powers of
+    two up to ``light_paths_max`` (0: light_paths alone)."""
+    ratios = [1.0]
+    while light_paths * ratios[-1] * 2 <= min(light_paths_max, MOST_LIGHT_PATHS) * (1 + 1e-9):
+        ratios.append(ratios[-1] * 2)
+    return ratios
+
+
+@dataclass(frozen=True)
+class PilotVariances:
+    """Image means of one iteration's relative variance (relMSE's units)."""
+    every: float          # every technique at light_paths
+    camera_side: float    # the part of ``every`` that the camera subpaths alone give
+    path_tracing: float   # path tracing's error (its variance and the light it misses)
+
+    def every_at(self, ratio: float) -> float:
+        """Every technique's with ``ratio`` x light_paths light subpaths per camera subpath."""
+        return self.camera_side + (self.every - self.camera_side) / ratio
+
+
+def pilot_variances(every: np.ndarray, shared: np.ndarray | None, camera: np.ndarray, iterations: int,
+                    longer: np.ndarray | None = None, longer_iterations: int = 0) -> PilotVariances:
+    """``every``: every technique's renders (renders, h, w, channels), independent, each the mean
+    of ``iterations`` iterations; ``shared``: one more (shape (1, h, w, channels)) with the camera
+    seed of ``every[0]`` and a light seed of its own (None: no camera share, all of the variance
+    counts as the camera side's); ``camera``: path tracing's renders, with ``every``'s seeds (the same
+    pixel samples: light both see alike, such as a small emitter within a pixel, counts for
+    neither); ``longer``: one more of path tracing's, of ``longer_iterations``, with a seed of its
+    own (its deviation less the variance of every technique's mean). Path tracing's error is the
+    renders' with shared seeds or, if higher, the longer one's over PATH_TRACING_SIZE. Per-pixel estimates summed over channels, then
+    averaged over the image (a pixel's may be negative; the mean is what the choice needs)."""
     mean = every.mean(axis=0)
-    scale = iterations / (mean * mean + 0.01)
-    var_every = (every.var(axis=0, ddof=1) * scale).sum(axis=-1)
-    var_camera = (((camera - mean) ** 2).mean(axis=0) * scale).sum(axis=-1)
-    return var_every, var_camera
+    scale = 1.0 / (mean * mean + 0.01)
+
+    def image(per_pixel, n) -> float:
+        return float(np.mean((per_pixel * scale).sum(axis=-1))) * n
+
+    spread = every.var(axis=0, ddof=1)
+    total = image(spread, iterations)
+    # every[0] - every[1] and shared[0] - every[2] share only every[0]'s camera seed: the mean of
+    # their product is the variance that seed alone gives
+    camera_side = total if shared is None else image((every[0] - every[1]) * (shared[0] - every[2]), iterations)
+    path_tracing = image(((camera - mean) ** 2).mean(axis=0), iterations)
+    if longer is not None:
+        # its own pixel samples: it also finds what every technique's renders had no sample for
+        # (a light within a pixel), so it counts at 1 / PATH_TRACING_SIZE, enough to catch the
+        # rare paths that dominate path tracing's error where a short pilot misses them
+        deviation = image((longer - mean) ** 2 - spread / len(every), longer_iterations)
+        path_tracing = max(path_tracing, deviation / PATH_TRACING_SIZE)
+    return PilotVariances(max(total, 0.0), min(max(camera_side, 0.0), max(total, 0.0)), max(path_tracing, 0.0))
 
 
-def path_tracing_wins(var_every, var_camera, time_every: float, time_camera: float) -> bool:
-    """Whether path tracing alone gives the image a lower mean relative variance x time per
-    iteration than every technique (``time_every``: the light pass, grid and camera pass)."""
-    return float(np.mean(var_camera)) * time_camera < float(np.mean(var_every)) * time_every
+@dataclass(frozen=True)
+class PilotCosts:
+    """Seconds per iteration: every technique's camera pass (with its merges) and light pass +
+    grid at light_paths, a pass's fixed cost and its iterations there, path tracing's."""
+    camera: float
+    light: float
+    per_pass: float
+    pass_iterations: float
+    path_tracing: float
+
+    @staticmethod
+    def from_sizes(small: tuple[float, float], large: tuple[float, float], iterations: int,
+                   pass_iterations: float, path_tracing: tuple[float, float], path_small: int, path_large: int):
+        """From every technique's pass times (light + grid, camera) in renders of one and of
+        ``iterations`` iterations and path tracing's render times at ``path_small`` and
+        ``path_large`` iterations: an iteration's cost is the difference over the extra
+        iterations, a pass's own cost the rest."""
+        n = max(iterations - 1, 1)
+        light = max(large[0] - small[0], 0.0) / n
+        camera = max(large[1] - small[1], 0.0) / n
+        per_pass = max(small[0] + small[1] - light - camera, 0.0)
+        path = max(path_tracing[1] - path_tracing[0], 0.0) / max(path_large - path_small, 1)
+        return PilotCosts(camera, light, per_pass, pass_iterations, path)
+
+    def every_at(self, ratio: float) -> float:
+        """Every technique's with ``ratio`` x light_paths (passes hold 1 / ratio the iterations)."""
+        return (self.camera * math.sqrt(ratio) + self.light * ratio
+                + self.per_pass / max(1.0, self.pass_iterations / ratio))
+
+
+def choose(variances: PilotVariances, costs: PilotCosts, ratios: list[float]):
+    """(the chosen multiple of light_paths, or None for path tracing alone; the relative
+    variance x time per iteration of each choice, path tracing's under None). Path tracing must
+    win by PATH_TRACING_MARGIN."""
+    scores = {r: variances.every_at(r) * costs.every_at(r) for r in ratios}
+    best = min(scores, key=lambda r: scores[r])
+    scores[None] = variances.path_tracing * costs.path_tracing
+    return (None if scores[None] < PATH_TRACING_MARGIN * scores[best] else best), scores

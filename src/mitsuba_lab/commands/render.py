@@ -202,8 +202,15 @@ def cannot_run(scene, kind: str) -> str:
 
 def describe_stats(stats: dict) -> str:
     """An integrator's statistics of its last render on one line (``photon_stats()``,
-    ``bdpt_stats()``): floats to 4 digits."""
-    return ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in stats.items())
+    ``bdpt_stats()``): floats to 4 digits, a table of them as (key: value, ...)."""
+    def value(v) -> str:
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        if isinstance(v, dict):
+            return "(" + ", ".join(f"{k}: {value(x)}" for k, x in v.items()) + ")"
+        return f"{v}"
+
+    return ", ".join(f"{k} {value(v)}" for k, v in stats.items())
 
 
 def describe_settings(settings: dict) -> str:
