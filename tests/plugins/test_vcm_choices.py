@@ -163,6 +163,8 @@ def test_the_pilot_chooses_light_subpaths_by_variance_times_time():
     assert selection.light_path_ratios(16.0, 64.0) == [1.0, 2.0, 4.0]
     sizes = selection.PilotCosts.from_sizes((0.03, 0.05), (0.06, 0.11), 4, 80.0, (0.004, 0.016), 4, 16)
     assert np.allclose([sizes.light, sizes.camera, sizes.per_pass, sizes.path_tracing], [0.01, 0.02, 0.05, 0.001])
+    hiccup = selection.PilotCosts.from_sizes((1.0, 0.2), (0.06, 0.11), 4, 80.0, (0.004, 0.016), 4, 16)
+    assert np.allclose([hiccup.light, hiccup.camera, hiccup.per_pass, hiccup.path_tracing], [0.015, 0.0275, 0, 0.001])
 
 
 def test_the_chosen_light_subpaths_render_lab_vcm_at_them(monkeypatch):

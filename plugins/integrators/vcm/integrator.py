@@ -276,8 +276,11 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             images["shared"].append(np.array(image)[..., :channels])
             every.light_seed = None
         # marginal costs of an iteration: every technique's from one iteration more than none,
-        # path tracing's (cheaper, its times noisier) from PATH_TRACING_SIZE x the iterations
-        self._timed(every, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), 1)
+        # path tracing's (cheaper, its times noisier) from PATH_TRACING_SIZE x the iterations; the
+        # one-iteration render twice, the second timed (on a fresh clone a first one took 1.1 s,
+        # not ~20 ms, and every iteration looked costless)
+        for _ in range(2):
+            self._timed(every, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), 1)
         longer = PATH_TRACING_SIZE * iterations
         image, camera_long = self._timed(camera, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), longer)
         film = sensor.film()

@@ -140,6 +140,9 @@ class PilotCosts:
         ``path_large`` iterations: an iteration's cost is the difference over the extra
         iterations, a pass's own cost the rest."""
         n = max(iterations - 1, 1)
+        if sum(large) <= sum(small):        # (a clock hiccup: each render's own cost unknown)
+            return PilotCosts(large[1] / iterations, large[0] / iterations, 0.0, pass_iterations,
+                              path_tracing[1] / path_large)
         light = max(large[0] - small[0], 0.0) / n
         camera = max(large[1] - small[1], 0.0) / n
         per_pass = max(small[0] + small[1] - light - camera, 0.0)
