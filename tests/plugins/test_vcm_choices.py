@@ -183,17 +183,28 @@ def test_the_chosen_light_subpaths_render_lab_vcm_at_them(monkeypatch):
     assert stats["light_subpaths"] == 4 * 4 * RES * RES
 
 
-def test_the_pilot_chooses_more_light_subpaths_where_light_tracing_carries_the_image():
-    """`vcm_auto` at 64x64 on 3 seeds: on light_in_glass (its room lit only through the glass, so
-    light tracing and merging carry it) at 128 iterations, more than one light subpath per camera
-    subpath; on the Cornell box at 512, none (path tracing alone)."""
-    for name, spp, more in (("stiff/light_in_glass.xml", 128, True), ("cornell_box.xml", 512, False)):
+def test_the_pilot_finds_where_more_light_subpaths_lower_the_variance():
+    """`vcm_auto`'s pilot at 64x64 on 3 seeds: on light_in_glass (its room lit only through the
+    glass, so light tracing and merging carry it) the camera subpaths' share of the variance is
+    below a fifth (measured 0.02 to 0.07): more light subpaths lower the rest; on the caustic
+    scene above a half (0.86 to 0.97). The count it then picks also depends on the pass times of
+    the process it runs in (a pass's own cost, ~15 ms in a fresh process, measured 107 ms late in
+    the test suite), so it is not asserted here (``choose`` is, above); on the Cornell box,
+    rendering 512 iterations, it chooses path tracing alone."""
+    for name, low in (("stiff/light_in_glass.xml", True), ("caustic.xml", False)):
         scene = load_scene(scene_path(name), res=64)
         integrator = vcm(**AUTO)
+        integrator._radius = AUTO["radius"]           # (what render() sets before its pilot)
         for seed in range(3):
-            render(scene, integrator, spp=spp, seed=seed)
-            chosen = integrator.bdpt_stats()["light_paths_chosen"]
-            assert (chosen > 1) == more, (name, seed, integrator.bdpt_stats()["pilot_scores"], integrator.pilot_variances, integrator.pilot_costs)
+            integrator._pilot(scene, scene.sensors()[0], seed, 512, integrator._companion(), integrator._path_tracer())
+            v = integrator.pilot_variances
+            share = v.camera_side / v.every
+            assert (share < 0.2) if low else (share > 0.5), (name, seed, v)
+    scene = load_scene(scene_path("cornell_box.xml"), res=64)
+    for seed in range(3):
+        render(scene, integrator, spp=512, seed=seed)
+        stats = integrator.bdpt_stats()
+        assert stats["light_paths_chosen"] == 0 and stats["chose_path_tracing"], ("cornell_box", seed, stats["pilot_scores"])
 
 
 def test_pilot_and_connections_refusals_are_one_line():
