@@ -207,8 +207,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         u_passes = spectral.pass_samples(seed, spp) if mi.is_spectral else None   # a pass is one spp there
         while done < spp:
             # light subpaths that fit in max_vertices: film pixels x spp_pass, or fewer, shared
-            fit = max(1, int(v["max_vertices"] / (1.25 * self.vertices_per_path)))
-            spp_pass = max(1, min(spp - done, int(fit // (film_px * light_paths)), self.pass_spp_limit(film_px),
+            fit = self.light_subpaths_that_fit()
+            spp_pass = max(1, min(spp - done, self.pass_iterations(film_px),
                                   1 if mi.is_spectral else spp))        # spectral: one set of wavelengths per pass
             count = self.pass_light_subpaths(max(1, min(round(film_px * spp_pass * light_paths), fit)), spp_pass,
                                              crop_px * spp_pass)
@@ -266,6 +266,16 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     #: The light subpaths' own seed; None: the render's (lab_vcm's pilot crosses light and camera
     #: seeds to tell their shares of the variance apart).
     light_seed = None
+
+    def light_subpaths_that_fit(self) -> int:
+        """Light subpaths whose vertices fit in ``max_vertices`` (from the passes so far)."""
+        return max(1, int(self.values["max_vertices"] / (1.25 * self.vertices_per_path)))
+
+    def pass_iterations(self, film_pixels: int) -> int:
+        """Samples per pixel a pass holds at ``film_pixels`` (before the render's remaining count):
+        what fits in ``max_vertices`` at ``light_paths``, and ``pass_spp_limit``."""
+        per_iteration = film_pixels * self.values.get("light_paths", 1.0)
+        return max(1, min(int(self.light_subpaths_that_fit() // per_iteration), self.pass_spp_limit(film_pixels)))
 
     def pass_spp_limit(self, film_pixels: int) -> int:
         """Most samples per pixel in one pass besides ``max_vertices`` (lab_vcm: a bound)."""

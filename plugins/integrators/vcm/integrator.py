@@ -323,12 +323,6 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                                    for r, v in scores.items()}
         return image
 
-    def pass_iterations(self, film_pixels: int) -> int:
-        """Iterations a pass of this integrator holds at ``film_pixels`` (after a render, whose
-        stored vertices per light subpath it uses), as ``render`` sizes them."""
-        fit = max(1, int(self.values["max_vertices"] / (1.25 * self.vertices_per_path)))
-        return max(1, min(int(fit // (film_pixels * self.values["light_paths"])), self.pass_spp_limit(film_pixels)))
-
     def _radii(self, plan) -> list[float]:
         """The merging radius of each iteration of a pass (iterations done + 1 .. done + spp)."""
         return [vcm_radius(self._radius, plan.done + k + 1, self.values["alpha"]) for k in range(plan.spp)]
