@@ -110,13 +110,20 @@ def test_a_count_whose_cost_changes_is_settled_at_the_budget():
     assert settle(point, render_at, 990, Timed(0.99), linear) == 990 and calls == [] and "rescaled" not in linear
 
 
-def stats(spp, bias2, bias2_se, variance=1e-3, budget=None, strategy="ph", regions=None, time_s=1.0):
-    """A point whose relative (relMSE-unit) bias^2 and variance are the given ones."""
+def stats(spp, bias2, bias2_se, variance=1e-3, budget=None, strategy="ph", regions=None, time_s=1.0, times=None):
+    """A point whose relative (relMSE-unit) bias^2 and variance are the given ones (two seeds, each
+    of ``time_s`` unless ``times`` says)."""
     return PointStats(point=f"s/{strategy}/i/{spp}", scene="s", strategy=strategy, sampler="i", spp=spp,
                       budget_s=budget, seeds=8, time_s=time_s, kernel_s=time_s, mse=0.0, mse_std=0.0,
                       rel_mse=bias2 + variance, rel_mse_std=0.0, mse_corrected=0.0, rel_mse_corrected=0.0,
                       variance=0.0, bias2=0.0, bias2_se=0.0, efficiency=math.nan, near_floor=False,
-                      rel_variance=variance, rel_bias2=bias2, rel_bias2_se=bias2_se, regions=regions or {})
+                      rel_variance=variance, rel_bias2=bias2, rel_bias2_se=bias2_se, regions=regions or {},
+                      times=times or [time_s, time_s])
+
+
+def seeds(mean, se):
+    """Two seeds' values with this mean and standard error (their half difference)."""
+    return [mean - se, mean + se]
 
 
 def test_bias_by_passes_sorts_flags_and_fits_the_resolved_bias():
@@ -131,7 +138,7 @@ def test_bias_by_passes_sorts_flags_and_fits_the_resolved_bias():
 
 
 def test_region_at_budgets_gives_the_equal_time_ratio_to_the_best():
-    region = lambda rel: {"caustic": {"rel_mse": rel, "mse": 0.0}}
+    region = lambda rel: {"caustic": {"rel_mse": rel, "mse": 0.0, "rel_mse_seeds": [rel, rel]}}
     points = [stats(100, 0, 0, budget=2.0, strategy="mis", regions=region(0.051), time_s=2.0),
               stats(10, 0, 0, budget=2.0, strategy="ph", regions=region(0.006), time_s=2.5),
               stats(4, 0, 0, strategy="ph", regions=region(0.5))]                  # no budget: not listed
@@ -148,7 +155,7 @@ def test_region_at_budgets_gives_the_ratio_one_standard_error_either_way():
     sqrt(0.1^2 + 0.2^2) = 0.224, so the ratio 8 reads 8 exp(-0.224) = 6.40 to 10.0; a single
     seed (no standard error) gives no range."""
     def region(rel, se):
-        return {"caustic": {"rel_mse": rel, "mse": 0.0, "rel_mse_se": se}}
+        return {"caustic": {"rel_mse": rel, "mse": 0.0, "rel_mse_se": se, "rel_mse_seeds": seeds(rel, se)}}
     points = [stats(100, 0, 0, budget=2.0, strategy="mis", regions=region(0.041, 0.004), time_s=2.0),
               stats(10, 0, 0, budget=2.0, strategy="ph", regions=region(0.006, 0.001), time_s=2.0)]
     cells = region_at_budgets(points, lambda p: p.strategy, "caustic", rel_floor=0.001)[2.0]
@@ -157,16 +164,35 @@ def test_region_at_budgets_gives_the_ratio_one_standard_error_either_way():
     spread = math.exp(math.hypot(0.1, 0.2))
     assert (low, high) == pytest.approx((8.0 / spread, 8.0 * spread))
     assert cells["ph"]["x_best_range"] == (1.0, 1.0)
-    points[0].regions["caustic"]["rel_mse_se"] = math.nan
+    points[0].regions["caustic"]["rel_mse_seeds"] = [0.041]
+    points[0].times = [2.0]
     cells = region_at_budgets(points, lambda p: p.strategy, "caustic", rel_floor=0.001)[2.0]
     assert all(math.isnan(v) for v in cells["mis"]["x_best_range"])
+
+
+def test_region_at_budgets_charges_each_seed_its_own_time():
+    """A strategy that chose per seed (lab_vcm's pilot): seed 1 took 1 s for a corrected relMSE of
+    0.04, seed 2 took 4 s for 0.01, so each seed's relMSE x time is 0.04: the cost is 0.04, as
+    for a strategy that took 2 s for 0.02 on both. Mean relMSE x median time would say
+    0.025 x 2.5 = 0.0625 (1.56x worse); the cell says how far apart the times are."""
+    def region(rels):
+        return {"caustic": {"rel_mse": sum(rels) / 2, "mse": 0.0, "rel_mse_se": 0.0, "rel_mse_seeds": rels}}
+    points = [stats(100, 0, 0, budget=2.0, strategy="auto", regions=region([0.041, 0.011]), time_s=2.5,
+                    times=[1.0, 4.0]),
+              stats(100, 0, 0, budget=2.0, strategy="fixed", regions=region([0.021, 0.021]), time_s=2.0)]
+    cells = region_at_budgets(points, lambda p: p.strategy, "caustic", rel_floor=0.001)[2.0]
+    assert cells["auto"]["cost"] == pytest.approx(0.04) and cells["fixed"]["cost"] == pytest.approx(0.04)
+    assert cells["auto"]["x_best"] == pytest.approx(1.0) and cells["auto"]["time_spread"] == pytest.approx(4.0)
+    from mitsuba_lab.experiment.report_sections import budget_cell
+    assert "times 4x apart" in budget_cell(cells["auto"]) and "apart" not in budget_cell(cells["fixed"])
 
 
 
 def test_a_strategy_at_the_floor_does_not_hide_the_best():
     """A strategy whose relMSE is at the region's floor has no cost (NaN); listed first, it must
     not become the best that the others are divided by."""
-    region = lambda rel: {"caustic": {"rel_mse": rel, "mse": 0.0, "rel_mse_se": rel / 10}}
+    region = lambda rel: {"caustic": {"rel_mse": rel, "mse": 0.0, "rel_mse_se": rel / 10,
+                                      "rel_mse_seeds": seeds(rel, rel / 10)}}
     points = [stats(100, 0, 0, budget=2.0, strategy="floor", regions=region(0.001), time_s=2.0),
               stats(100, 0, 0, budget=2.0, strategy="mis", regions=region(0.041), time_s=2.0),
               stats(10, 0, 0, budget=2.0, strategy="ph", regions=region(0.006), time_s=2.0)]

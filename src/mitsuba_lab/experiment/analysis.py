@@ -9,8 +9,11 @@ Definitions used throughout the report:
   seeds (the part of one render's error that more samples remove);
 * bias^2 = mean_p (mean_r img - ref)^2 - s^2/R - ref variance, with a
   standard error (``metrics.bias_squared``);
-* efficiency = 1 / (mse_corrected x median wall time) (Veach 1997; higher is
-  better); NaN when the corrected MSE is not positive (below the floor).
+* efficiency = 1 / cost, cost = the mean over seeds of (MSE - floor) x that seed's wall time
+  (Veach 1997; higher is better; ``seed_cost``); NaN when the cost is not positive (at the
+  floor). Per seed, because a strategy that chooses per render (lab_vcm's pilot) takes a
+  different time on each seed: mean MSE x median time would charge the slow seeds' small errors
+  at the fast seeds' times.
 * rel_variance, rel_bias2: the same two on images weighted by 1 / sqrt(ref^2 + 0.01),
   i.e. in relMSE's units (relMSE = rel_bias2 + rel_variance + relative floor), where a bright
   light's pixels do not swamp the rest of the image.
@@ -70,7 +73,8 @@ class PointStats:
     flip: float = math.nan
     ciede2000: float = math.nan
     rays_per_sample: dict = field(default_factory=dict)
-    regions: dict = field(default_factory=dict)       # name -> {rel_mse, mse, mse_corrected, efficiency}
+    regions: dict = field(default_factory=dict)       # name -> {mse, rel_mse, rel_mse_se, mse_seeds, rel_mse_seeds}
+    times: list = field(default_factory=list)         # each seed's wall time (the rows' order)
     images: list = field(default_factory=list)        # stored image paths (relative to the sweep folder)
 
 
@@ -92,8 +96,22 @@ def _std(values):
     return float(np.std(values, ddof=1)) if len(values) > 1 else math.nan
 
 
-def _efficiency(mse_corrected: float, time_s: float) -> float:
-    return metrics.efficiency(mse_corrected, time_s) if mse_corrected > 0 else math.nan
+def seed_cost(errors, times, floor: float = 0.0) -> tuple[float, float]:
+    """(cost, its standard error): the mean over seeds of (error - floor) x that seed's render
+    time, an error x time product that is the same at every time for an estimator whose error
+    falls as 1 / time, so it compares renders that missed their budget by a little, or (a pilot
+    that chooses per render) by a lot. NaN cost when not positive (at the floor); NaN error with
+    one seed."""
+    products = (np.asarray(errors, dtype=np.float64) - floor) * np.asarray(times, dtype=np.float64)
+    cost = float(products.mean()) if products.size else math.nan
+    error = float(products.std(ddof=1) / math.sqrt(products.size)) if products.size > 1 else math.nan
+    return (cost if cost > 0 else math.nan), error
+
+
+def efficiency_of(errors, times, floor: float = 0.0) -> float:
+    """1 / ``seed_cost`` (NaN at the floor)."""
+    cost = seed_cost(errors, times, floor)[0]
+    return metrics.efficiency(cost, 1.0) if cost > 0 else math.nan
 
 
 def relative_bias_variance(stack: np.ndarray, reference) -> tuple[float, float, float]:
@@ -111,7 +129,8 @@ def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
     stack = np.stack([run_image(folder, r["image"]) for r in rows])
     mse = [r["mse"] for r in rows]
     rel = [r["rel_mse"] for r in rows]
-    time_s = statistics.median(r["wall_s"] for r in rows)
+    times = [r["wall_s"] for r in rows]
+    time_s = statistics.median(times)
     floor, rel_floor = reference.mse_floor, reference.rel_mse_floor()
     bias2, bias2_se = metrics.bias_squared(stack, reference.image, reference.variance)
     samples = first["spp"] * stack.shape[1] * stack.shape[2]
@@ -121,7 +140,8 @@ def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
         region_mse = _mean([r["regions"][name]["mse"] for r in rows])
         region_rel = [r["regions"][name]["rel_mse"] for r in rows]
         regions[name] = {"mse": region_mse, "rel_mse": _mean(region_rel),
-                         "rel_mse_se": _std(region_rel) / math.sqrt(len(region_rel))}
+                         "rel_mse_se": _std(region_rel) / math.sqrt(len(region_rel)),
+                         "mse_seeds": [r["regions"][name]["mse"] for r in rows], "rel_mse_seeds": region_rel}
     corrected = _mean(mse) - floor
     rel_variance, rel_bias2, rel_bias2_se = relative_bias_variance(stack, reference)
     return PointStats(
@@ -130,11 +150,11 @@ def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
         kernel_s=statistics.median(r["kernel_s"] for r in rows), mse=_mean(mse), mse_std=_std(mse),
         rel_mse=_mean(rel), rel_mse_std=_std(rel), mse_corrected=corrected,
         rel_mse_corrected=_mean(rel) - rel_floor, variance=metrics.mean_variance(stack), bias2=bias2,
-        bias2_se=bias2_se, efficiency=_efficiency(corrected, time_s),
+        bias2_se=bias2_se, efficiency=efficiency_of(mse, times, floor),
         near_floor=_mean(mse) < FLOOR_WARNING_FACTOR * floor, rel_variance=rel_variance,
         rel_bias2=rel_bias2, rel_bias2_se=rel_bias2_se,
         flip=_mean([r.get("flip") for r in rows]), ciede2000=_mean([r.get("ciede2000") for r in rows]),
-        rays_per_sample=rays, regions=regions, images=[r["image"] for r in rows])
+        rays_per_sample=rays, regions=regions, times=times, images=[r["image"] for r in rows])
 
 
 def region_stack(stats: PointStats, folder: str, rect) -> np.ndarray:
@@ -223,26 +243,29 @@ def region_floor(reference, rect) -> dict:
 
 def region_at_budgets(points: list[PointStats], label, region: str, rel_floor: float) -> dict:
     """Per time budget, each strategy's region relMSE (raw and minus the region's floor), its
-    standard error over the seeds, median time, and its cost ratio to the best: (corrected
-    relMSE x time) / the smallest such product at that budget. The product, not the relMSE
-    alone, because calibrated renders miss their budget by a little; for an estimator whose
-    error falls as 1/time it is the equal-time ratio.
+    standard error over the seeds, median time, and its cost ratio to the best: its cost (the
+    mean over seeds of corrected relMSE x that seed's time, ``seed_cost``) over the smallest at
+    that budget. The product, not the relMSE alone, because calibrated renders miss their budget
+    by a little, and a pilot that chooses per render (lab_vcm's) by a lot; for an estimator whose
+    error falls as 1/time it is the equal-time ratio. ``time_spread`` is the slowest seed's time
+    over the fastest's.
 
-    ``x_best_range`` is that ratio one standard error either way: both strategies' relative
-    standard errors combined on the log of the ratio (independent seeds; (1, 1) for the best
-    itself, NaN without the errors). A few seeds of a heavy-tailed region swing the ratio far,
-    so a target read from one sweep needs it.
+    ``x_best_range`` is that ratio one standard error either way: both costs' relative standard
+    errors combined on the log of the ratio (independent seeds; (1, 1) for the best itself, NaN
+    without the errors). A few seeds of a heavy-tailed region swing the ratio far, so a target
+    read from one sweep needs it.
 
-    Returns {budget: {label: {rel_mse, rel_mse_corrected, rel_mse_se, time_s, cost, x_best,
-    x_best_range}}}."""
+    Returns {budget: {label: {rel_mse, rel_mse_corrected, rel_mse_se, time_s, time_spread, cost,
+    cost_se, x_best, x_best_range}}}."""
     table = {}
     for p in points:
         if p.budget_s is None or region not in p.regions:
             continue
         raw = p.regions[region]["rel_mse"]
+        cost, cost_se = seed_cost(p.regions[region]["rel_mse_seeds"], p.times, rel_floor)
         cell = {"rel_mse": raw, "rel_mse_corrected": raw - rel_floor, "time_s": p.time_s,
-                "rel_mse_se": p.regions[region].get("rel_mse_se", math.nan)}
-        cell["cost"] = cell["rel_mse_corrected"] * p.time_s if cell["rel_mse_corrected"] > 0 else math.nan
+                "time_spread": max(p.times) / min(p.times) if min(p.times) > 0 else math.nan,
+                "rel_mse_se": p.regions[region].get("rel_mse_se", math.nan), "cost": cost, "cost_se": cost_se}
         table.setdefault(p.budget_s, {})[label(p)] = cell
     for cells in table.values():
         measured = [c for c in cells.values() if not math.isnan(c["cost"])]     # (NaN: at the floor)
@@ -259,8 +282,7 @@ def ratio_range(cell: dict, best: dict) -> tuple[float, float]:
         return 1.0, 1.0
     if math.isnan(cell["cost"]):                 # (at or below the floor: no ratio)
         return math.nan, math.nan
-    log_se = math.hypot(cell["rel_mse_se"] / cell["rel_mse_corrected"],
-                        best["rel_mse_se"] / best["rel_mse_corrected"])
+    log_se = math.hypot(cell["cost_se"] / cell["cost"], best["cost_se"] / best["cost"])
     if math.isnan(log_se):
         return math.nan, math.nan
     ratio = cell["cost"] / best["cost"]

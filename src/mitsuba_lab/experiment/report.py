@@ -100,8 +100,8 @@ class Report(SectionTables):
         lines_md = [f"# Sweep report: {self.meta.get('name')}", "", f"Config: `{self.meta.get('config')}`",
                     "", f"Machine and versions: {info}", "",
                     "Metrics: relMSE = mean (x - ref)^2 / (ref^2 + 0.01); `corrected` values subtract the "
-                    "reference's noise floor; efficiency = 1 / (corrected MSE x median wall time of one "
-                    "render); variance = mean per-pixel variance across seeds; bias^2 = squared error of "
+                    "reference's noise floor; efficiency = 1 / (mean over seeds of corrected MSE x that "
+                    "seed's wall time); variance = mean per-pixel variance across seeds; bias^2 = squared error of "
                     "the seed mean minus its variance and the reference floor (+- one standard error)."]
         left = self.meta.get("left_out", []) + [
             {**a, "reason": f"same estimator as {a['same_as']}: {a['reason']}"} for a in self.meta.get("aliases", [])]

@@ -16,10 +16,16 @@ from .. import metrics
 from ..plugins.params import resolve as resolve_params
 from ..reporting import fmt, markdown_table
 from ..reporting.figures import series_styles
-from .analysis import (MIN_TRUSTED_TIME_S, PointStats, bias_by_passes, curve, equal_time_budgets, region_at_budgets,
+from .analysis import (MIN_TRUSTED_TIME_S, PointStats, bias_by_passes, curve, efficiency_of, equal_time_budgets,
+                       region_at_budgets,
                        region_bias_variance, region_floor, region_stack_stats, timing_trusted, veach_bound)
 from .config import PASS_PARAMETER
 from .spectrum import fit_slope, slope_cell, slope_note
+
+
+#: A point whose slowest seed took more than this many times its fastest's says so in its cell
+#: (a pilot that chose differently per seed: its relMSE then mixes renders of different lengths).
+TIME_SPREAD_NOTED = 1.5
 
 
 def budget_cell(c: dict) -> str:
@@ -29,7 +35,8 @@ def budget_cell(c: dict) -> str:
     ratio = f"{fmt(c['x_best'], 3)}x" if lo == hi or math.isnan(lo) else \
         f"{fmt(c['x_best'], 3)}x, {fmt(lo, 3)} to {fmt(hi, 3)}"
     se = "" if math.isnan(c["rel_mse_se"]) else f" +- {fmt(c['rel_mse_se'], 2)}"
-    return f"{fmt(c['rel_mse_corrected'])}{se} ({fmt(c['time_s'], 2)} s, {ratio})"
+    spread = f", times {fmt(c['time_spread'], 2)}x apart" if c["time_spread"] > TIME_SPREAD_NOTED else ""
+    return f"{fmt(c['rel_mse_corrected'])}{se} ({fmt(c['time_s'], 2)} s{spread}, {ratio})"
 
 
 class SectionTables:
@@ -132,10 +139,9 @@ class SectionTables:
             cells = []
             for n in names:
                 r = top.regions[n]
-                corrected = r["mse"] - floors[n]
-                eff = 1.0 / (corrected * top.time_s) if corrected > 0 else math.nan
+                eff = efficiency_of(r["mse_seeds"], top.times, floors[n])
                 best.setdefault(n, []).append((eff, label(key)))
-                rel_eff = 1.0 / (r["rel_mse"] * top.time_s) if r["rel_mse"] > 0 else math.inf
+                rel_eff = efficiency_of(r["rel_mse_seeds"], top.times)
                 cells += [fmt(r["rel_mse"]), fmt(eff), fmt(rel_eff)]
             body.append([label(key), *cells])
         md = ["", "### Regions of interest (largest sample count): relMSE and efficiency "
@@ -166,10 +172,11 @@ class SectionTables:
                     for budget, cells in table.items()]
             md += ["", f"### Region `{name}` at each time budget", "",
                    f"Cells: relMSE minus the region's reference floor ({fmt(floor['rel_mse'])}) +- one "
-                   f"standard error over the seeds, median time of one render, and (corrected relMSE x "
-                   f"time) / the best strategy's at that budget, the equal-time relMSE ratio to the best, "
-                   f"with its range at one standard error of both (a ratio whose range includes a target "
-                   f"has not shown it either way).", "", *markdown_table(["budget", *names], body)]
+                   f"standard error over the seeds, median time of one render (and the slowest seed's "
+                   f"over the fastest's where above {TIME_SPREAD_NOTED:g}x), and the cost, the mean over "
+                   f"seeds of corrected relMSE x that seed's time, over the best strategy's at that budget: "
+                   f"the equal-time relMSE ratio to the best, with its range at one standard error of both "
+                   f"(a ratio whose range includes a target has not shown it either way).", "", *markdown_table(["budget", *names], body)]
             md += self._region_bias_table(name, rect, ref, stats, label)
         return md
 
