@@ -25,6 +25,10 @@ class LabError(Exception):
     """Bad input or an unusable environment: the message names what is wrong."""
 
 
+class UnknownPlugin(LabError):
+    """A plugin type that this process has not registered (``scene.make_plugin``)."""
+
+
 _SOURCE_TAG = re.compile(r"\[[\w./-]+\.(?:cpp|h|py):\d+\]\s*")
 #: Dr.Jit's wrapper messages all end in "(see above)." or "(see above)!"
 _WRAPPER_TEXT = re.compile(r"\(see above\)[.!]?\s*$")

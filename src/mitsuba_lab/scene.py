@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import mitsuba as mi
 
-from .errors import LabError, one_line
+from .errors import LabError, UnknownPlugin, one_line
 from .plugins.params import lab_plugins, plugin_kind
 
 #: The lab's path tracers (one path loop, ``plugins/integrators/path.py``).
@@ -51,8 +51,8 @@ def make_plugin(kind: str, type_name: str, params: dict | None = None):
             lab, mitsuba = _KNOWN[kind]
             close = difflib.get_close_matches(type_name, lab + mitsuba, n=1)
             hint = f" (did you mean '{close[0]}'?)" if close else ""
-            raise LabError(f"unknown {kind} '{type_name}'{hint}; lab {kind}s: {', '.join(lab)}; "
-                           f"Mitsuba's: {', '.join(mitsuba)}") from err
+            raise UnknownPlugin(f"unknown {kind} '{type_name}'{hint}; lab {kind}s: {', '.join(lab)}; "
+                                f"Mitsuba's: {', '.join(mitsuba)}") from err
         reason = plugin_error_reason(text, params or {})
         if reason.startswith(f"{type_name}: "):       # a lab plugin's own message names it already
             raise LabError(reason) from err

@@ -64,7 +64,7 @@ def results_table(folder: str, as_frame: bool | None = None, paths: dict[str, st
 
 
 def sweep(config, output=None, *, progress: bool = True, cluster: str | None = None,
-          as_frame: bool | None = None):
+          as_frame: bool | None = None, in_process: bool = False):
     """Run a strategy sweep, as ``mitsuba-lab sweep CONFIG -o OUTPUT`` does, and return its results.
 
     Parameters
@@ -85,6 +85,11 @@ def sweep(config, output=None, *, progress: bool = True, cluster: str | None = N
     as_frame : bool, optional
         True: a pandas DataFrame; False: a list of dicts (``ResultRows``); None (default):
         a DataFrame when pandas is installed.
+    in_process : bool
+        False (default): the points render in a worker process of the sweep's own, so that
+        their times do not depend on what this process holds (every scene and plugin alive in
+        a process slows each of its renders: ``executors``). True: in this process, as
+        ``mitsuba-lab sweep`` does (needed for plugins registered only here).
 
     Returns
     -------
@@ -108,6 +113,6 @@ def sweep(config, output=None, *, progress: bool = True, cluster: str | None = N
     folder = os.fspath(output) if output is not None else config.output
     bar = ProgressBar() if progress else NoProgress()
     start = time.perf_counter()
-    paths = run_sweep(config, plan, folder, bar, cluster)
+    paths = run_sweep(config, plan, folder, bar, cluster, in_process=in_process)
     bar.message(done_line(config, time.perf_counter() - start, paths))
     return results_table(folder, as_frame, paths)

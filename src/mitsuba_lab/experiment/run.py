@@ -3,8 +3,8 @@
 Each point gets one untimed warm-up render (Dr.Jit compiles on first use; the
 sample count is part of the compiled kernel), then R timed renders with
 distinct seeds, each synchronised before the clock stops (``worker.execute``).
-Points run in this process or on a Dask cluster (``executors``); either way
-only this process writes the store. Rows already in the store are skipped, so
+Points run in this process, in a render process of the sweep's own or on a Dask
+cluster (``executors``); either way only this process writes the store. Rows already in the store are skipped, so
 a killed sweep resumes where it was. A progressive point (``experiment.progressive``)
 renders one accumulating run per seed instead (``progressive``), stored as one row
 with its checkpoints.

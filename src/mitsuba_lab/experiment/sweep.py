@@ -146,9 +146,11 @@ def progress_printer(bar):
     return progress
 
 
-def run_sweep(config, plan, folder: str, bar, cluster: str | None = None) -> dict[str, str]:
-    """Run a prepared sweep into ``folder`` (resuming what it holds): references, points, the
-    strategy grid, then the report. Returns the report's paths (csv, html, md)."""
+def run_sweep(config, plan, folder: str, bar, cluster: str | None = None, in_process: bool = True) -> dict[str, str]:
+    """Run a prepared sweep into ``folder`` (resuming what it holds): references, points (on
+    ``cluster``, else in this process or, ``in_process`` False, in a worker process of the
+    sweep's own: ``executors``), the strategy grid, then the report. Returns the report's
+    paths (csv, html, md)."""
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise LabError(f"output path is not a folder: {folder}")
     from .report import build_report
@@ -163,6 +165,10 @@ def run_sweep(config, plan, folder: str, bar, cluster: str | None = None) -> dic
 
         executor = DaskExecutor(address)
         bar.message(f"running points on the Dask cluster at {address}")
+    elif not in_process:
+        from .executors import ProcessExecutor
+
+        executor = ProcessExecutor()
     try:
         SweepRunner(config, plan, store, progress, executor).run()
         render_strategy_grid(config, store, progress)      # here: its renders are few, and cheap
