@@ -1,5 +1,7 @@
+import gc
 import os
 
+import mitsuba as mi
 import pytest
 
 import mitsuba_lab  # noqa: F401  (selects the variant, registers the lab plugins)
@@ -12,3 +14,23 @@ SCENES = os.path.join(ROOT, "scenes")
 def _run_from_project_root(monkeypatch):
     """Tests name scenes relative to the project root, wherever pytest was started."""
     monkeypatch.chdir(ROOT)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _drop_the_module_scenes(request):
+    """Scenes a test module keeps in a dict of its own (a cache shared by its tests) are dropped
+    when the module ends: Dr.Jit traces a virtual call for every BSDF, emitter and shape alive
+    in the process, so scenes held for the whole session made every later render slower (README,
+    Platform notes: lab_vcm's pilot measured 107 ms per pass late in a full run, ~15 ms fresh)."""
+    yield
+    for value in list(vars(request.module).values()):
+        if isinstance(value, dict) and any(holds_mitsuba(v) for v in list(value.values())):
+            value.clear()
+    gc.collect()
+
+
+def holds_mitsuba(value) -> bool:
+    """A Mitsuba object, or a tuple or list holding one."""
+    if isinstance(value, (tuple, list)):
+        return any(holds_mitsuba(v) for v in value)
+    return isinstance(value, mi.Object)

@@ -8,7 +8,9 @@ kind alive in the process, so every scene and plugin a notebook has loaded
 adds Python tracing time to each render, more to an integrator with more
 virtual calls (20 small scenes alive: lab_mis's 1-spp render on a 64x64 scene
 4.6 -> 22 ms, lab_vcm's 16.5 -> 77 ms). ``ProcessExecutor`` renders where only
-the sweep's own scene is loaded. On a cluster each worker should run one task at a time (``--nthreads 1``):
+the sweep's own scene is loaded.
+
+On a cluster each worker should run one task at a time (``--nthreads 1``):
 Dr.Jit already uses every core of its machine, and two renders sharing cores
 would time each other. A worker that dies loses only the tasks it was running;
 the scheduler gives them to another worker, and since workers return results
@@ -41,6 +43,8 @@ class ProcessExecutor:
         import sys
         from multiprocessing.connection import Connection
 
+        if not tasks:                          # (a resumed sweep with nothing left to render)
+            return
         ours, theirs = socket.socketpair()
         process = subprocess.Popen([sys.executable, "-m", "mitsuba_lab.experiment.render_process",
                                     str(theirs.fileno())], pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL)
