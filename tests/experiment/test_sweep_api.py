@@ -278,3 +278,13 @@ def test_an_error_in_the_render_process_arrives_as_its_one_line(tmp_path):
     with pytest.raises(RenderProcessError, match="aim_at.*no_such_shape") as caught:
         mitsuba_lab.sweep(config, output=tmp_path / "out", progress=False, as_frame=False)
     assert "Traceback" in caught.value.traceback and "\n" not in str(caught.value)
+
+
+def test_what_the_render_process_prints_reaches_this_process(tmp_path, capsys):
+    """lab_sobol warns that 3 samples per pixel is not a power of two; that warning, printed in
+    the render process, is passed on to this process's stderr (a notebook shows it)."""
+    config = isolation_config(tmp_path)
+    config["experiment"]["spp"] = [3]
+    config["samplers"] = {"sobol": {"type": "lab_sobol"}}
+    mitsuba_lab.sweep(config, output=tmp_path / "out", progress=False, as_frame=False)
+    assert "lab_sobol: sample_count=3 is not a power of two" in capsys.readouterr().err

@@ -34,21 +34,27 @@ class ProcessExecutor:
     """Runs tasks one after another in one worker process of the sweep's own (``python -m
     mitsuba_lab.experiment.render_process``: it holds nothing of this process, nor imports the
     caller's script), started with the first task and ended with the sweep: its renders are
-    timed with only their own scene loaded, whatever this process holds. Plugins registered in
-    this process alone (``mi.register_integrator``) do not exist there."""
+    timed with only their own scene loaded, whatever this process holds. What it prints
+    (Mitsuba's log, a plugin's warnings) is passed on to this process's ``sys.stderr``, so a
+    notebook shows it. Plugins registered in this process alone (``mi.register_integrator``)
+    do not exist there."""
 
     def map(self, tasks: list[PointTask]):
         import socket
         import subprocess
         import sys
+        import threading
         from multiprocessing.connection import Connection
 
         if not tasks:                          # (a resumed sweep with nothing left to render)
             return
         ours, theirs = socket.socketpair()
         process = subprocess.Popen([sys.executable, "-m", "mitsuba_lab.experiment.render_process",
-                                    str(theirs.fileno())], pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL)
+                                    str(theirs.fileno())], pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
+                                   stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, errors="replace")
         theirs.close()
+        relay = threading.Thread(target=pass_on, args=(process.stdout,), daemon=True)
+        relay.start()
         connection = Connection(ours.detach())
         try:
             for task in tasks:
@@ -67,6 +73,16 @@ class ProcessExecutor:
         finally:
             connection.close()                 # (a worker between tasks reads the end and returns)
             process.wait()
+            relay.join()
+
+
+def pass_on(stream) -> None:
+    """Write each line of ``stream`` (the render process's output) to ``sys.stderr`` as it comes."""
+    import sys
+
+    for line in stream:
+        sys.stderr.write(line)
+        sys.stderr.flush()
 
 
 class DaskExecutor:
