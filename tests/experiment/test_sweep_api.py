@@ -202,31 +202,14 @@ def test_import_stays_cheap_and_sweep_is_exported():
     assert proc.stdout.strip() == "[] mitsuba_lab.experiment.api True", proc.stderr
 
 
-ISOLATION = """
-[experiment]
-spp = [1]
-repetitions = 3
-max_depth = 4
-metrics = []
-progressive = false
-
-[reference]
-integrator = {{ type = "path" }}
-spp = 16
-chunks = 2
-cache = "{cache}"
-
-[scenes.cornell]
-path = "{scene}"
-resolution = 32
-
-[strategies]
-mis = {{ type = "{integrator}" }}
-"""
-
-
 def isolation_config(tmp_path, integrator="lab_mis"):
-    return tomllib.loads(ISOLATION.format(cache=tmp_path / "cache", scene=SCENE, integrator=integrator))
+    """The tiny sweep at 1 spp, 3 seeds, one render per point, 32x32, one strategy."""
+    config = tomllib.loads(TOML.format(cache=tmp_path / "cache", scene=SCENE))
+    config["experiment"].update(spp=[1], repetitions=3, progressive=False)
+    del config["experiment"]["name"], config["scenes"]["cornell"]["regions"]
+    config["scenes"]["cornell"]["resolution"] = 32
+    config["strategies"] = {"mis": {"type": integrator}}
+    return config
 
 
 def test_the_sweep_times_its_renders_in_a_process_of_its_own(tmp_path):

@@ -110,8 +110,7 @@ def seed_cost(errors, times, floor: float = 0.0) -> tuple[float, float]:
 
 def efficiency_of(errors, times, floor: float = 0.0) -> float:
     """1 / ``seed_cost`` (NaN at the floor)."""
-    cost = seed_cost(errors, times, floor)[0]
-    return metrics.efficiency(cost, 1.0) if cost > 0 else math.nan
+    return 1.0 / seed_cost(errors, times, floor)[0]          # (NaN at the floor)
 
 
 def relative_bias_variance(stack: np.ndarray, reference) -> tuple[float, float, float]:
