@@ -34,6 +34,7 @@ class RenderStats:
     width: int
     height: int
     rays: dict[str, int] = field(default_factory=dict)  # by kind, when the integrator counts them
+    integrator: dict = field(default_factory=dict)      # the integrator's own statistics (integrator_stats)
 
     @property
     def samples_per_second(self) -> float:
@@ -70,6 +71,32 @@ def timed_kernels(fn):
     return out, wall, history
 
 
+#: The methods by which lab integrators report statistics of their last render.
+STATS_METHODS = ("bdpt_stats", "photon_stats")
+
+
+def _plain(value):
+    """``value`` as JSON holds it: dict keys as text, numbers, text and booleans as they are,
+    anything else as its text."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (bool, int, float, str)) or value is None:
+        return value
+    return str(value)
+
+
+def integrator_stats(integrator) -> dict:
+    """The statistics an integrator keeps of its last render (lab_bdpt's and lab_vcm's
+    ``bdpt_stats()``, lab_photon's ``photon_stats()``: passes, times, radii, what a pilot
+    chose), as plain values; {} for an integrator without them (Mitsuba's own)."""
+    for name in STATS_METHODS:
+        if hasattr(integrator, name):
+            return _plain(getattr(integrator, name)())
+    return {}
+
+
 def render(scene: mi.Scene, integrator: mi.Integrator | None = None, spp: int = 0, seed: int = 0,
            sensor: int = 0) -> tuple[np.ndarray, RenderStats]:
     """Render and wait for the result. Returns (H x W x C float32 image, stats).
@@ -90,5 +117,6 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, spp: int = 
     pixels = np.array(image, dtype=np.float32)
     stats = RenderStats(wall_s=wall, compile_s=compile_s, kernel_s=kernel_s, kernels=kernels,
                         cache_misses=misses, spp=spp_used, seed=seed,
-                        width=pixels.shape[1], height=pixels.shape[0], rays=rays)
+                        width=pixels.shape[1], height=pixels.shape[0], rays=rays,
+                        integrator=integrator_stats(integrator))
     return pixels, stats

@@ -272,6 +272,10 @@ def test_tiny_photon_sweep_runs_passes_and_reports_bias_against_passes(tmp_path)
     assert len(runs) == 3 * 2 and all(r["finite"] and r["negative"] == 0 for r in runs)
     for r in runs:                               # N camera samples per pixel = N passes of 1 spp
         assert r["params"]["passes"] == r["spp"] and r["rays"]["camera"] == 16 * 16 * r["spp"]
+        # lab_photon's own statistics of that render (photon_stats()), stored with the row
+        assert r["integrator_stats"]["passes"] == r["spp"] and r["integrator_stats"]["photons_traced"] > 0
+    mis = [r for r in store.of_kind("run") if r["strategy"] == "mis"]
+    assert mis and all(r.get("integrator_stats") == {} for r in mis)       # Mitsuba-side plugin: none
     fitted = {c["point"]: c["spp"] for c in store.of_kind("calibration")}
     assert {r["spp"] for r in runs if r["budget_s"]} == {fitted["cornell/photon/independent/t0.4s"]}
     summary = open(build_report(str(tmp_path / "out"))["md"]).read()

@@ -171,10 +171,9 @@ def run(args, out) -> int:
     write_outputs(output, image, stats, settings, args.scene, versions(), png=not args.no_png)
     print(format_stats(kind, stats), file=out)
     print(f"settings: {describe_settings(settings)}", file=out)
-    if hasattr(integrator, "photon_stats"):
-        print(f"photons: {describe_stats(integrator.photon_stats())}", file=out)
-    if hasattr(integrator, "bdpt_stats"):
-        print(f"statistics: {describe_stats(integrator.bdpt_stats())}", file=out)
+    if stats.integrator:                                  # the plugin's own statistics (render.integrator_stats)
+        label = "photons" if hasattr(integrator, "photon_stats") else "statistics"
+        print(f"{label}: {describe_stats(stats.integrator)}", file=out)
     print(f"wrote {output}" + ("" if args.no_png else f" and {png_path(output)}"), file=out)
     return 0
 

@@ -76,6 +76,7 @@ class PointStats:
     regions: dict = field(default_factory=dict)       # name -> {mse, rel_mse, rel_mse_se, mse_seeds, rel_mse_seeds}
     times: list = field(default_factory=list)         # each seed's wall time (the rows' order)
     images: list = field(default_factory=list)        # stored image paths (relative to the sweep folder)
+    pilots: list = field(default_factory=list)        # each seed's pilot_choice (None: no pilot)
 
 
 @functools.lru_cache(maxsize=512)
@@ -106,6 +107,17 @@ def seed_cost(errors, times, floor: float = 0.0) -> tuple[float, float]:
     cost = float(products.mean()) if products.size else math.nan
     error = float(products.std(ddof=1) / math.sqrt(products.size)) if products.size > 1 else math.nan
     return (cost if cost > 0 else math.nan), error
+
+
+def pilot_choice(stats: dict) -> tuple[str, float] | None:
+    """(what a render's pilot chose, its seconds) from the integrator's statistics of that
+    render (a run row's ``integrator_stats``): lab_vcm with ``pilot`` chooses path tracing alone
+    ("path tracing") or every technique with a number of light subpaths per camera subpath
+    (that number); None for a render without a pilot."""
+    if not stats.get("pilot_s"):
+        return None
+    chosen = "path tracing" if stats.get("chose_path_tracing") else f"{stats.get('light_paths_chosen', 0.0):g}"
+    return chosen, float(stats["pilot_s"])
 
 
 def efficiency_of(errors, times, floor: float = 0.0) -> float:
@@ -153,7 +165,8 @@ def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
         near_floor=_mean(mse) < FLOOR_WARNING_FACTOR * floor, rel_variance=rel_variance,
         rel_bias2=rel_bias2, rel_bias2_se=rel_bias2_se,
         flip=_mean([r.get("flip") for r in rows]), ciede2000=_mean([r.get("ciede2000") for r in rows]),
-        rays_per_sample=rays, regions=regions, times=times, images=[r["image"] for r in rows])
+        rays_per_sample=rays, regions=regions, times=times, images=[r["image"] for r in rows],
+        pilots=[pilot_choice(r.get("integrator_stats") or {}) for r in rows])
 
 
 def region_stack(stats: PointStats, folder: str, rect) -> np.ndarray:

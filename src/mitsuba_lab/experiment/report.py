@@ -142,6 +142,7 @@ class Report(SectionTables):
             md += ["", f"![radially averaged power spectrum of the error]({os.path.basename(spectra)})"]
         md += self.region_tables(scene, groups, label)
         md += self.region_budget_tables(scene, stats, label)
+        md += self.pilot_table(groups, label)
         md += self.veach_table(scene, groups)
         strip = self.image_strip(scene, groups, label)
         if strip:

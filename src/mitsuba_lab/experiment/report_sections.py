@@ -180,6 +180,29 @@ class SectionTables:
             md += self._region_bias_table(name, rect, ref, stats, label)
         return md
 
+    def pilot_table(self, groups, label) -> list[str]:
+        """Each point whose renders ran a pilot (lab_vcm's ``pilot``): what it chose seed by
+        seed, beside each seed's render time, so a point whose times spread (a region cell's
+        "times apart") shows why."""
+        body = []
+        for key, points in groups.items():
+            for p in sorted(points, key=lambda p: (p.budget_s or 0.0, p.spp)):
+                if not any(p.pilots):
+                    continue
+                chosen = ", ".join("-" if c is None else c[0] for c in p.pilots)
+                seconds = [c[1] for c in p.pilots if c is not None]
+                at = f"{p.budget_s:g} s" if p.budget_s else f"{p.spp} spp"
+                body.append([label(key), at, str(p.spp), chosen, ", ".join(fmt(t, 3) for t in p.times),
+                             fmt(sorted(seconds)[len(seconds) // 2], 3)])
+        if not body:
+            return []
+        return ["", "### What the pilots chose", "",
+                "Per seed, in the rows' order: path tracing alone, or every technique with that many light "
+                "subpaths per camera subpath; each seed's render time (the pilot's included) and the "
+                "pilot's median seconds.", "",
+                *markdown_table(["strategy", "budget", "spp", "chosen per seed", "render s per seed",
+                                 "pilot s (median)"], body)]
+
     def _region_bias_table(self, name, rect, ref, stats, label) -> list[str]:
         """Per budget, each strategy's relative variance and bias^2 inside one region: whether
         its error there is noise (more time removes it) or bias (a consistent estimator's blur,

@@ -161,7 +161,7 @@ def execute(task: PointTask) -> PointResult:
     for seed in task.seeds:
         image, stats = render_at(result.spp, seed)
         row = {**run_row(task, seed, result.spp), "wall_s": stats.wall_s, "kernel_s": stats.kernel_s,
-               "compile_s": stats.compile_s, "rays": stats.rays,
+               "compile_s": stats.compile_s, "rays": stats.rays, "integrator_stats": stats.integrator,
                **measure(image, task.reference_image, task.regions, task.metrics)}
         result.runs.append((row, image))
     return result
