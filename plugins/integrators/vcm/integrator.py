@@ -98,8 +98,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            ``epanechnikov`` (2 / pi) (1 - d^2 / r_i^2) / r_i^2, as
                            lab_photon, or ``constant`` 1 / (pi r_i^2), as SmallVCM.
                            Epanechnikov's blur costs 2/3 the bias for 4/3 the
-                           variance (README: lower error where merging carries
-                           the light); MIS counts merging with the disc's area
+                           variance (experiments/vcm_notes.md: lower error where
+                           merging carries the light); MIS counts merging with the disc's area
                            either way (Default: ``epanechnikov``)
     merge_first     bool   Merge at the camera's first vertex too (modes vcm and
                            bpm), as Georgiev et al.'s VCM does. false: no
@@ -109,8 +109,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            NEE and connections. The merges of one iteration
                            share its light vertices, and at the first vertex
                            they add variance that light tracing does not
-                           (README: equal or lower error on every scene of
-                           experiments/vcm.toml without them). ppm always
+                           (experiments/vcm_notes.md: equal or lower error on
+                           every scene of vcm.toml without them). ppm always
                            merges there (Default: false)
     merge_vertices  string ``all``: every stored light vertex merges;
                            ``caustic``: only those reached through a delta lobe
@@ -120,8 +120,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            vertex, in every MIS sum too, so the image stays
                            consistent; paths without one get their light from
                            the connections, NEE, emitter hits and light tracing,
-                           and the grid holds and merges fewer vertices (README:
-                           "Caustic merges"). Mode vcm (Default: ``all``)
+                           and the grid holds and merges fewer vertices
+                           (experiments/vcm_notes.md, "Caustic merges"). Mode vcm (Default: ``all``)
     connections     string ``all``: a camera vertex connects to every stored
                            vertex of its light subpath (lab_bdpt); ``one``: to
                            one of the n it may use, picked uniformly and counted

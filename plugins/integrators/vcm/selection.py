@@ -23,7 +23,7 @@ measured variance and cost; this is its coarsest form, one choice for the whole 
   its error, but the longer render's pixel samples are not every technique's), so light that path tracing's pilot
   misses (a caustic, a light behind glass) counts as error, not as a small variance, while in
   the renders with shared seeds light both sample alike counts for neither (a pilot's own spread
-  underestimates a heavy tail: README);
+  underestimates a heavy tail: experiments/vcm_notes.md);
 * cost per iteration, from the pilot's times at two sizes (``PilotCosts``; one render of every
   technique with one iteration, one of path tracing with ``PATH_TRACING_SIZE`` times as many): the light pass and
   grid grow with the light subpaths, the camera pass (which merges) as their square root
@@ -56,8 +56,8 @@ PILOT_MIN_ITERATIONS = 4
 PATH_TRACING_SIZE = 4
 #: Path tracing is chosen when its relative variance x time is below this share of every
 #: technique's: its pilot's error is heavy-tailed (low when the pilot misses the rare paths that
-#: dominate it), and choosing it where it is poor costs far more than the converse (README "A
-#: pilot's choice": the measured choices).
+#: dominate it), and choosing it where it is poor costs far more than the converse
+#: (experiments/vcm_notes.md, "A pilot's choice": the measured choices).
 PATH_TRACING_MARGIN = 0.8
 #: Most light subpaths per camera subpath lab_vcm traces (``params.LAB_VCM``'s light_paths).
 MOST_LIGHT_PATHS = 64.0
