@@ -55,7 +55,7 @@ def test_a_sweep_keeps_each_renders_statistics_and_reports_the_pilots_choices(tm
     import mitsuba_lab
 
     out = tmp_path / "out"
-    mitsuba_lab.sweep(tiny_config(tmp_path / "cache"), output=str(out), progress=False, as_frame=False)
+    table_rows = mitsuba_lab.sweep(tiny_config(tmp_path / "cache"), output=str(out), progress=False, as_frame=False)
     runs = {"auto": [], "bdpt": []}
     for line in open(out / "results.jsonl"):
         row = json.loads(line)
@@ -71,4 +71,9 @@ def test_a_sweep_keeps_each_renders_statistics_and_reports_the_pilots_choices(tm
     line = next(line for line in table.splitlines() if line.startswith("| auto"))
     chosen = [c.strip() for c in line.split("|")[4].split(",")]
     assert chosen == [pilot_choice(r["integrator_stats"])[0] for r in runs["auto"]]
+    # results.csv (the rows mitsuba_lab.sweep returns): the count chosen, 0 for path tracing alone,
+    # empty without a pilot
+    expected = [0.0 if c == "path tracing" else float(c) for c in chosen]
+    assert [r["pilot_light_paths"] for r in table_rows if r["strategy"] == "auto"] == expected
+    assert [r["pilot_light_paths"] for r in table_rows if r["strategy"] == "bdpt"] == [None, None]
     assert "| bdpt" not in table.split("\n## ")[0]

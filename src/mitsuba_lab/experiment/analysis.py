@@ -120,6 +120,12 @@ def pilot_choice(stats: dict) -> tuple[str, float] | None:
     return chosen, float(stats["pilot_s"])
 
 
+def pilot_light_paths(stats: dict) -> float | None:
+    """The light subpaths per camera subpath a render's pilot chose, 0 for path tracing alone;
+    None for a render without a pilot (results.csv's ``pilot_light_paths``)."""
+    return None if pilot_choice(stats) is None else float(stats.get("light_paths_chosen", 0.0))
+
+
 def efficiency_of(errors, times, floor: float = 0.0) -> float:
     """1 / ``seed_cost`` (NaN at the floor)."""
     return 1.0 / seed_cost(errors, times, floor)[0]          # (NaN at the floor)

@@ -20,7 +20,8 @@ from .. import images
 from ..reporting import block_marker, dict_rows, fmt, markdown_table, write_csv, write_markdown_page
 from ..reporting.figures import loglog_axes, pyplot, save_figure, series_styles
 from . import viewer
-from .analysis import FLOOR_WARNING_FACTOR, PointStats, curve, equal_time_budgets, point_stats, run_image
+from .analysis import (FLOOR_WARNING_FACTOR, PointStats, curve, equal_time_budgets, pilot_light_paths, point_stats,
+                       run_image)
 from .reference import Reference
 from .report_sections import SectionTables
 from .spectrum import plot_error_spectra, slope_table
@@ -88,9 +89,10 @@ class Report(SectionTables):
         runs = self.store.current_runs()
         region_names = sorted({n for r in runs for n in r.get("regions", {})})
         columns = list(CSV_COLUMNS) + [f"rays_{k}" for k in RAY_KINDS] + \
-            [f"region_{n}_{m}" for n in region_names for m in ("mse", "rel_mse")]
+            [f"region_{n}_{m}" for n in region_names for m in ("mse", "rel_mse")] + ["pilot_light_paths"]
         rows = [values + [row.get("rays", {}).get(k) for k in RAY_KINDS] +
-                [row.get("regions", {}).get(n, {}).get(m) for n in region_names for m in ("mse", "rel_mse")]
+                [row.get("regions", {}).get(n, {}).get(m) for n in region_names for m in ("mse", "rel_mse")] +
+                [pilot_light_paths(row.get("integrator_stats") or {})]
                 for row, values in zip(runs, dict_rows(runs, CSV_COLUMNS))]
         write_csv(os.path.join(self.folder, "results.csv"), columns, rows)
 
