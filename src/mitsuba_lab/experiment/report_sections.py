@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import statistics
 from collections import defaultdict
 
 from .. import metrics
@@ -193,7 +194,7 @@ class SectionTables:
                 seconds = [c[1] for c in p.pilots if c is not None]
                 at = f"{p.budget_s:g} s" if p.budget_s else f"{p.spp} spp"
                 body.append([label(key), at, str(p.spp), chosen, ", ".join(fmt(t, 3) for t in p.times),
-                             fmt(sorted(seconds)[len(seconds) // 2], 3)])
+                             fmt(statistics.median(seconds), 3)])
         if not body:
             return []
         return ["", "### What the pilots chose", "",
