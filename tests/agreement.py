@@ -90,3 +90,65 @@ def assert_agrees(lab: np.ndarray, ref: np.ndarray, what: str, bound: float = Z_
     assert result.max_abs_z <= bound, (f"{what}: max |z| {result.max_abs_z:.2f}, image z {result.image_z}, "
                                        f"relative difference {result.rel_diff}")
     return result
+
+
+# ---------------------------------------------------------------------------- block test
+#: The block test's defaults: renders a side, block size in pixels, family-wise alpha.
+BLOCK_SEEDS = 64
+BLOCK_SIZE = 6
+BLOCK_ALPHA = 0.01
+
+
+@dataclass
+class BlockTest:
+    """Welch z of every block mean over the seeds (colour channels averaged), against a Sidak
+    bound: each of the n blocks is tested two-sided at 1 - (1 - alpha)^(1/n), so under agreement
+    the chance that any block passes the bound is alpha."""
+    z: np.ndarray            # (blocks_y, blocks_x)
+    ratio: np.ndarray        # block means, lab over reference (nan where the reference is 0)
+    bound: float
+
+    @property
+    def failing(self) -> list[tuple[int, int]]:
+        return [tuple(int(i) for i in b) for b in np.argwhere(np.abs(self.z) > self.bound)]
+
+    @property
+    def max_abs_z(self) -> float:
+        return float(np.abs(self.z).max())
+
+    def summary(self) -> str:
+        worst = [f"({y},{x}) ratio {self.ratio[y, x]:.4f} z {self.z[y, x]:+.1f}" for y, x in self.failing[:6]]
+        return (f"max |z| {self.max_abs_z:.2f}, bound {self.bound:.2f}, {len(self.failing)} of {self.z.size} "
+                f"blocks past it" + (": " + "; ".join(worst) if worst else ""))
+
+
+def sidak_bound(blocks: int, alpha: float = BLOCK_ALPHA) -> float:
+    """|z| bound of one of ``blocks`` two-sided tests whose family-wise error rate is ``alpha``."""
+    from statistics import NormalDist
+
+    per_block = 1.0 - (1.0 - alpha) ** (1.0 / blocks)
+    return NormalDist().inv_cdf(1.0 - per_block / 2.0)
+
+
+def block_test(lab: np.ndarray, ref: np.ndarray, block: int = BLOCK_SIZE, alpha: float = BLOCK_ALPHA) -> BlockTest:
+    """The block test of two stacks of renders (seeds, height, width, channels); blocks whose
+    reference and lab images are both constant over the seeds (black background) have z = 0."""
+    def means(stack):
+        grey = stack[..., : min(3, stack.shape[-1])].mean(axis=-1)[..., None]
+        return np.stack([block_means(img, block)[..., 0] for img in grey])
+
+    a, b = means(lab), means(ref)
+    ma, mb = a.mean(axis=0), b.mean(axis=0)
+    z = z_score(ma, a.var(axis=0, ddof=1) / len(a), 1, mb, b.var(axis=0, ddof=1) / len(b), 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(mb != 0, ma / mb, np.nan)
+    return BlockTest(z, ratio, sidak_bound(z.size, alpha))
+
+
+def assert_blocks_agree(lab: np.ndarray, ref: np.ndarray, what: str, block: int = BLOCK_SIZE) -> BlockTest:
+    """Every pixel of ``lab`` finite and non-negative, and no block past the Sidak bound."""
+    assert pixel_problem(lab, False) == "", f"{what}: {pixel_problem(lab, False)}"
+    result = block_test(lab, ref, block)
+    print(f"{what}: {result.summary()}")
+    assert not result.failing, f"{what}: {result.summary()}"
+    return result

@@ -207,7 +207,7 @@ class CameraPass(mi.SamplingIntegrator):
 
         self.counters.add("extension", n_ext)
         self.counters.add("shadow", n_shadow)
-        return dr.select(valid_ray, L, 0.0), valid_ray, []
+        return L, valid_ray, []             # (alpha only: L is kept, as in path.py)
 
     def direct_light(self, scene, sampler, ctx, si, bsdf, beta, L, active, floor):
         """(L, lanes that traced a BSDF-sampled ray): next-event estimation at ``si`` and the
