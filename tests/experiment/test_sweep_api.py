@@ -212,22 +212,21 @@ def isolation_config(tmp_path, integrator="lab_mis"):
     return config
 
 
-def test_the_sweep_times_its_renders_in_a_process_of_its_own(tmp_path):
-    """Each render traces a virtual call for every Mitsuba object alive in its process, so
-    with 20 small scenes held here a 1-spp lab_mis render takes several times as long in this
-    process (in_process=True) as in the sweep's render process, which holds only its own scene
-    (measured at 64x64: 22 against 4.6 ms); the bound, a factor of 2, leaves room for noise."""
-    import statistics
+def test_the_sweep_renders_in_a_process_of_its_own(tmp_path):
+    """Each render traces a virtual call for every Mitsuba object alive in its process, so the
+    sweep renders in a process that holds only its own scene (README: 20 small scenes held by
+    the caller made a 1-spp lab_mis render at 64x64 take 22 ms in the caller, 4.6 ms there).
+    Asserted by the process each row names, not by timing (the suite must pass under load)."""
+    import os
 
-    import mitsuba as mi
+    from mitsuba_lab.experiment.store import ResultStore
 
-    held = [mi.load_file(SCENE, res=8) for _ in range(20)]
-    times = {}
     for in_process in (False, True):
-        rows = mitsuba_lab.sweep(isolation_config(tmp_path), output=tmp_path / f"out_{in_process}", progress=False,
-                                 as_frame=False, in_process=in_process)
-        times[in_process] = statistics.median(r["wall_s"] for r in rows)
-    assert len(held) == 20 and times[False] < times[True] / 2, times
+        output = tmp_path / f"out_{in_process}"
+        mitsuba_lab.sweep(isolation_config(tmp_path), output=output, progress=False, as_frame=False,
+                          in_process=in_process)
+        pids = {r["pid"] for r in ResultStore(str(output)).stored_runs()}
+        assert len(pids) == 1 and (pids == {os.getpid()}) == in_process, (in_process, pids)
 
 
 def test_a_plugin_registered_only_in_the_calling_process_is_named(tmp_path):
