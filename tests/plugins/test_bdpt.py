@@ -286,7 +286,8 @@ def test_a_wrong_lens_density_is_caught(monkeypatch):
     from mitsuba_lab.plugins.integrators.bdpt import integrator
 
     right = integrator.sensor_constants
-    monkeypatch.setattr(integrator, "sensor_constants", lambda sensor: (1.25 * right(sensor)[0], right(sensor)[1]))
+    monkeypatch.setattr(integrator, "sensor_constants",
+                        lambda sensor, *rest: (1.25 * right(sensor, *rest)[0], right(sensor, *rest)[1]))
     scene = thin_lens_scene("cornell_box.xml", 0.2, 3.9)
     wrong = renders(scene, bdpt(), 16, SEEDS_LAB)
     result = z_scores(wrong, path_stack(scene, 64))
