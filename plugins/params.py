@@ -218,7 +218,10 @@ LAB_BDPT = (
           "(Veach's per-strategy images); empty = every strategy",
           check=lambda v: bdpt_only_strategy(v) is not None,
           expected="empty or 's,t' with s >= 0, t >= 1 and s + t >= 2"),
-) + AIM
+) + AIM + (
+    Param("count_rays", bool, True, "count camera, extension, shadow (NEE), connection, light-subpath and sensor "
+          "(light tracing's) rays (ray_counts())"),
+)
 
 #: lab_vcm's modes: the strategy kinds each enables (SmallVCM's estimators behind one MIS).
 VCM_MODES = {
@@ -266,7 +269,10 @@ LAB_VCM = (
           "its light subpath (lab_bdpt), or one, to one of them picked uniformly and counted n times, the MIS "
           "weights counting a connection as 1 / (mean vertices per light subpath)", choices=("all", "one")),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
-                                            "max_vertices", "aim", "aim_at"))
+                                            "max_vertices", "aim", "aim_at")) + (
+    replace(LAB_BDPT[-1], doc="count rays as lab_bdpt does, and merging's grid lookups (one per camera vertex "
+                              "that merges) under 'merge' (ray_counts())"),
+)
 
 #: Shared by every lab sampler (``LabSampler``).
 SAMPLER = (
@@ -313,6 +319,21 @@ MITSUBA_BASE_PARAMETERS = {
     "sampler": (),
 }
 
+_PER_PASS = "light subpaths are traced per pass, and passes are sized by 'max_vertices'"
+#: Mitsuba base parameters that a lab plugin refuses, with the reason (a one-line error).
+REFUSED_BASE_PARAMETERS = {
+    "lab_bdpt": {"samples_per_pass": _PER_PASS},
+    "lab_vcm": {"samples_per_pass": _PER_PASS},
+}
+
+
+def base_parameters(plugin: str, kind: str | None = None) -> tuple[str, ...]:
+    """The Mitsuba base parameters ``plugin`` accepts and leaves to Mitsuba (its kind's, less
+    those it refuses); ``kind`` defaults to ``plugin_kind(plugin)``."""
+    refused = REFUSED_BASE_PARAMETERS.get(plugin, {})
+    return tuple(p for p in MITSUBA_BASE_PARAMETERS[kind or plugin_kind(plugin) or "integrator"]
+                 if p not in refused)
+
 
 def plugin_kind(plugin_type: str) -> str | None:
     """'integrator' or 'sampler' for a lab plugin, None for any other name."""
@@ -352,6 +373,9 @@ def _check(plugin: str, given: dict, parameters: tuple[Param, ...], passthrough:
            ) -> tuple[dict, dict]:
     """(declared values with defaults, given Mitsuba base parameters); raises ParameterError."""
     names = {p.name for p in parameters}
+    for name, reason in REFUSED_BASE_PARAMETERS.get(plugin, {}).items():
+        if name in given:
+            raise ParameterError(f"{plugin}: parameter '{name}' is not supported: {reason}")
     unknown = [k for k in given if k not in names and k not in passthrough]
     if unknown:
         raise ParameterError(_unknown_message(plugin, unknown, parameters))
@@ -372,8 +396,7 @@ def resolve(plugin_type: str, params: dict) -> dict:
     parameters = declared(plugin_type)
     if parameters is None:
         return dict(params)
-    values, extra = _check(plugin_type, dict(params), parameters,
-                           MITSUBA_BASE_PARAMETERS[plugin_kind(plugin_type)])
+    values, extra = _check(plugin_type, dict(params), parameters, base_parameters(plugin_type))
     return {**values, **extra}
 
 
@@ -393,8 +416,7 @@ def read_properties(plugin: str, props, parameters: tuple[Param, ...] | None = N
         parameters = declared(plugin)
         if parameters is None:
             raise KeyError(f"{plugin}: no declared parameters")
-    kind = kind or plugin_kind(plugin) or "integrator"
-    passthrough = MITSUBA_BASE_PARAMETERS[kind]
+    passthrough = base_parameters(plugin, kind)
     types = type(props).Type
     skip = (types.Object, types.Reference, types.ResolvedReference)
     given = {}

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mitsuba_lab import check, check_verdicts
-from mitsuba_lab.check_verdicts import SKEW_MIN, Empty, Rung, Twin, Verdict, judge
+from mitsuba_lab.check_verdicts import SKEW_MIN, BiasRung, Empty, Rung, Twin, Verdict, judge, judge_consistent
 from mitsuba_lab.errors import LabError
 from mitsuba_lab.scene import make_integrator
 from mitsuba_lab.scene_xml import scene_defaults
@@ -24,6 +24,14 @@ SMALL = ["--res", "16", "--spp", "16", "--ref-spp", "64", "--splits", "4", "--ma
 def _private_reference_cache(tmp_path, monkeypatch):
     """References go to a cache of the test's own (``--cache`` defaults to $MITSUBA_LAB_CACHE)."""
     monkeypatch.setenv("MITSUBA_LAB_CACHE", str(tmp_path / "cache"))
+
+
+@pytest.fixture(autouse=True)
+def _path_tracers_unless_asked(request, monkeypatch):
+    """The path tracers only (check's strategies before the bidirectional ones), unless a test
+    is marked ``all_strategies``: the older tests' budgets and times stay as they were."""
+    if "all_strategies" not in request.keywords:
+        monkeypatch.setattr(check, "STRATEGIES", dict(check.PATH_STRATEGIES))
 
 
 def run_check(argv):
@@ -357,3 +365,39 @@ def test_a_missing_twin_is_one_line(tmp_path):
                                         '<scene version="3.0.0">\n<default name="twin" value="nowhere.xml"/>'))
     with pytest.raises(LabError, match="its twin scene nowhere.xml is not found"):
         run_check([str(scene), *SMALL])
+
+
+@pytest.mark.all_strategies
+def test_bidirectional_and_consistent_strategies_are_checked(tmp_path, monkeypatch):
+    """lab_bdpt and lab_vcm's bpt pass the z-test (the same image: lab_vcm's bpt is lab_bdpt's
+    estimator); lab_vcm's vcm and ppm and lab_photon are consistent: no "agrees" for them, their
+    note says what their bias^2 showed (here, 16x16 at 16 spp, none resolved: nothing claimed).
+    Their rays count, the bidirectional kinds summed in other_rays_per_pixel."""
+    monkeypatch.setattr(check, "STRATEGIES", dict(check.BIDIRECTIONAL_STRATEGIES))
+    prefix = str(tmp_path / "report")
+    status, text = run_check([os.path.join(ROOT, "scenes", "cornell_box.xml"), *SMALL, "-o", prefix])
+    assert status == 0, text
+    rows = {r["strategy"]: r for r in read_rows(prefix)}
+    assert rows["lab_bdpt"]["status"] == "ok" and rows["lab_vcm_bpt"]["status"] == "ok"
+    assert float(rows["lab_bdpt"]["z"]) == pytest.approx(float(rows["lab_vcm_bpt"]["z"]), abs=1e-3)   # (float atomics)
+    for name in ("lab_vcm", "lab_vcm_ppm", "lab_photon"):
+        row = rows[name]
+        assert row["status"] == "ok" and row["note"].startswith("consistent estimator: no bias resolved"), row
+        assert "convergence not measured" in row["note"] and "agree" not in row["note"]
+    for name in check.BIDIRECTIONAL_STRATEGIES:
+        assert float(rows[name]["camera_rays_per_pixel"]) == 16 and float(rows[name]["other_rays_per_pixel"]) > 0
+
+
+def test_a_consistent_estimator_converges_only_where_its_bias_shrinks():
+    """judge_consistent: a resolved bias^2 that falls by more than 3 standard errors from x1 to
+    x16 is "converging" with its log-log slope; one that holds fails; an unresolved one claims
+    nothing."""
+    falling = [BiasRung(1, 8, 4e-4, 2e-5), BiasRung(4, 32, 2e-4, 2e-5), BiasRung(16, 128, 1e-4, 2e-5)]
+    verdict = judge_consistent(falling, 0.2)
+    assert verdict.kind == "converging" and verdict.summary.startswith("converging: bias^2 0.0004 -> 0.0001")
+    assert "slope -0.50" in verdict.summary
+    steady = [BiasRung(1, 8, 4e-4, 2e-5), BiasRung(16, 128, 3.9e-4, 2e-5)]
+    assert judge_consistent(steady, 0.2).kind == "bias"
+    assert judge_consistent(steady, 0.2).summary.startswith("not converging")
+    quiet = judge_consistent([BiasRung(1, 8, 1e-5, 2e-5)], 0.2)
+    assert quiet.kind == "ok" and "convergence not measured" in quiet.summary

@@ -16,8 +16,13 @@ Resolution: ``--res N`` renders N x N. A scene that declares ``<default name="re
 (the shipped ones do) gets it as its ``res`` parameter; any other scene gets its first
 sensor's film width and height set to N by editing the XML (``scene_xml.load_scene_variant``).
 
+Strategies: lab_naive, lab_nee, lab_mis (power and balance), lab_bdpt, lab_vcm in modes bpt,
+vcm and ppm, and lab_photon (its sample count is its passes).
+
 Columns: finite fraction (of pixel channels), negative pixels, max value, fireflies,
-mean luminance, its z-score against the reference, rays per pixel by kind, time.
+mean luminance, its z-score against the reference, rays per pixel by kind (camera,
+extension, shadow, and the bidirectional integrators' other kinds summed: connections,
+light subpaths, rays to the sensor, merge lookups, photon segments), time.
 
 Firefly rule: with luminance Y = 0.2126 R + 0.7152 G + 0.0722 B of the combined
 image, a pixel is a firefly when Y > k * max(median of Y over the 5 x 5 pixels around
@@ -33,7 +38,11 @@ variance is taken as (sum_c w_c sd_c)^2 over its channels c, exact when the chan
 move together (as they do along one light path) and an upper bound otherwise
 (``reference_mean_variance``).
 
-Verdicts (``check_verdicts``): every lab strategy that applies is unbiased by design, so
+Verdicts (``check_verdicts``): lab_vcm's merging modes (vcm, ppm) and lab_photon are
+consistent, not unbiased: their row says "converging" with the measured log-log slope of bias^2
+against the samples (bias^2 at 1, 4 and 16 times the budget per split), fails when a resolved
+bias^2 does not shrink, and claims nothing when no bias is resolved. Every other lab strategy
+that applies is unbiased by design, so
 |z| > ``--z-max`` is a failure, with two exceptions that are told apart, not assumed. A mean
 too *low* may be an unbiased estimator whose rare, huge samples the budget does not resolve
 (a BSDF ray hitting a tiny light, an emitter sample inside a near-delta lobe): the strategy
@@ -62,18 +71,33 @@ import numpy as np
 from . import metrics
 from .metrics import luminance
 from .check_report import format_table, format_verdicts, verdict_kind, write_csv, write_html
-from .check_verdicts import (LADDER_SEED, LADDER_SPLITS, Rung, Twin, Verdict, empty_pixels, judge,
-                             ladder_factors, path_off_note, twin_status)
+from .check_verdicts import (LADDER_SEED, LADDER_SPLITS, BiasRung, Rung, Twin, Verdict, empty_pixels, judge,
+                             judge_consistent, ladder_factors, path_off_note, twin_status)
 from .commands.args import positive_int
 from .errors import LabError
 
 #: name -> (integrator type, parameters); max_depth comes from --max-depth.
-STRATEGIES = {
+PATH_STRATEGIES = {
     "lab_naive": ("lab_naive", {}),
     "lab_nee": ("lab_nee", {}),
     "lab_mis_power": ("lab_mis", {"heuristic": "power"}),
     "lab_mis_balance": ("lab_mis", {"heuristic": "balance"}),
 }
+#: The bidirectional and density-estimation strategies: lab_bdpt and lab_vcm's bpt are unbiased
+#: (the z-test), lab_vcm's vcm and ppm and lab_photon consistent (bias^2 shrinking). lab_photon's
+#: sample count is its passes (``Estimator.SAMPLE_COUNT_PARAMETER``), of fewer photons than its
+#: default: check's images are small.
+BIDIRECTIONAL_STRATEGIES = {
+    "lab_bdpt": ("lab_bdpt", {}),
+    "lab_vcm_bpt": ("lab_vcm", {"mode": "bpt"}),
+    "lab_vcm": ("lab_vcm", {"mode": "vcm"}),
+    "lab_vcm_ppm": ("lab_vcm", {"mode": "ppm"}),
+    "lab_photon": ("lab_photon", {"photons_per_pass": 10_000}),
+}
+STRATEGIES = {**PATH_STRATEGIES, **BIDIRECTIONAL_STRATEGIES}
+#: Ray kinds with a column of their own (the path tracers'); the bidirectional integrators'
+#: other kinds are summed in ``other_rays_per_pixel``.
+RAY_COLUMNS = ("camera", "extension", "shadow")
 REFERENCE = "path"
 #: Luminance weights (Rec. 709 primaries) of R, G, B.
 FIREFLY_WINDOW = 5
@@ -90,11 +114,13 @@ def _positive_float(text: str) -> float:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.description = (
         "Render every scene with every lab strategy that applies (lab_naive, lab_nee, lab_mis "
-        "power and balance) and Mitsuba's path as reference; print finite fraction, negative "
+        "power and balance, lab_bdpt, lab_vcm modes bpt, vcm and ppm, lab_photon) and Mitsuba's path as "
+        "reference; print finite fraction, negative "
         "pixels, max value, fireflies, mean and its z-score against the reference, rays per "
         "pixel by kind; write CSV + HTML. Exit status 1 when any strategy gives NaN, Inf or "
         "negative values or a mean beyond --z-max standard errors of the reference, except a low "
-        "mean with the marks of an unresolved heavy tail (a warning). A scene that declares an "
+        "mean with the marks of an unresolved heavy tail (a warning); the consistent ones (lab_vcm vcm "
+        "and ppm, lab_photon) are judged by their bias^2 shrinking as the budget grows. A scene that declares an "
         "unscaled twin (<default name=\"twin\" .../>) is also compared with path on the twin.")
     parser.add_argument("scenes", nargs="*", metavar="SCENE",
                         help="Mitsuba XML scene files (default: every scenes/stiff/*.xml)")
@@ -167,13 +193,21 @@ def measure(stack: np.ndarray, rays: dict, seconds: float, ref: dict, k: float) 
     row = {"finite_fraction": float(finite.mean()), "negative_pixels": negative,
            "max_value": float(stack[finite].max()) if finite.any() else math.nan,
            "mean": float(means.mean()), "time_s": seconds,
-           **{f"{kind}_rays_per_pixel": rays.get(kind, 0) / pixels for kind in
-              ("camera", "extension", "shadow")}}
+           **rays_per_pixel(rays, pixels)}
     row["fireflies"] = firefly_count(image, k, max(FIREFLY_FLOOR * ref["mean"], 1e-12))
     row["ref_mean"] = ref["mean"]
     row["z"] = (metrics.z_score(means.mean(), means.var(ddof=1), len(means), ref["mean"], ref["mean_variance"], 1)
                 if ref["finite"] else math.nan)
     row["split_means"] = means
+    return row
+
+
+def rays_per_pixel(rays: dict, pixels: int) -> dict:
+    """Row values: rays per pixel of each kind in ``RAY_COLUMNS``, and of every other kind summed
+    (lab_bdpt's connection, light subpath and sensor rays, lab_vcm's merge lookups, lab_photon's
+    photon segments)."""
+    row = {f"{kind}_rays_per_pixel": rays.get(kind, 0) / pixels for kind in RAY_COLUMNS}
+    row["other_rays_per_pixel"] = sum(v for k, v in rays.items() if k not in RAY_COLUMNS) / pixels
     return row
 
 
@@ -187,11 +221,12 @@ def reference_summary(reference, k: float) -> tuple[dict, dict]:
     pixels = luminance(image)
     mean = float(pixels.mean())
     summary = {"mean": mean, "mean_variance": reference_mean_variance(variance), "pixels": pixels,
-               "finite": bool(finite.all() and np.isfinite(variance).all())}
+               "finite": bool(finite.all() and np.isfinite(variance).all()),
+               "image": image[..., :3], "variance": np.asarray(variance, dtype=np.float64)[..., :3]}
     row = {"finite_fraction": float(finite.mean()), "negative_pixels": int(np.sum(np.any(image < 0, axis=-1))),
            "max_value": float(image[finite].max()) if finite.any() else math.nan, "mean": mean,
            "time_s": float(reference.meta.get("seconds", 0.0)),
-           **{f"{kind}_rays_per_pixel": 0.0 for kind in ("camera", "extension", "shadow")}}
+           **rays_per_pixel({}, 1)}
     floor = FIREFLY_FLOOR * float(np.nanmean(pixels))
     row["fireflies"] = firefly_count(image, k, max(floor, 1e-12))
     return summary, row
@@ -199,10 +234,37 @@ def reference_summary(reference, k: float) -> tuple[dict, dict]:
 
 # -- Rendering ----------------------------------------------------------------------------------
 
-def render_splits(scene, integrator, spp_total, splits, seed0):
+def is_consistent(kind: str, params: dict) -> bool:
+    """Biased for a finite budget, consistent as it grows: a merging radius that shrinks within a
+    render (lab_vcm's merging modes, lab_photon: ``Estimator.separate_reason``)."""
+    from .plugins.integrators.estimator import lookup
+    from .plugins.params import resolve
+
+    estimator = lookup(kind)
+    return estimator is not None and bool(estimator.separate_reason(resolve(kind, params)))
+
+
+def budget_integrator(kind: str, params: dict, spp: int):
+    """(integrator, samples per pixel to render) of ``spp`` samples of the strategy: an
+    integrator whose sample count is a parameter of its own (lab_photon's passes) gets it there
+    and renders one sample per pixel of each."""
+    from .plugins.integrators.estimator import sample_count_parameters
+    from .scene import make_integrator
+
+    parameter = sample_count_parameters().get(kind)
+    if parameter is None:
+        return make_integrator(kind, params), spp
+    return make_integrator(kind, {**params, parameter: spp}), 1
+
+
+def render_splits(scene, strategy, spp_total, splits, seed0):
+    """(splits x H x W x 3 images, rays by kind, seconds) of ``splits`` renders of the strategy
+    ((integrator type, parameters)), ``spp_total`` / ``splits`` samples per pixel each, seeds
+    ``seed0``.."""
     from .render import render
 
     spp = spp_total // splits
+    integrator, spp = budget_integrator(*strategy, spp)
     images, rays, seconds = [], {}, 0.0
     for index in range(splits):
         image, stats = render(scene, integrator, spp=spp, seed=seed0 + index)
@@ -213,7 +275,7 @@ def render_splits(scene, integrator, spp_total, splits, seed0):
     return np.stack(images), rays, seconds
 
 
-def render_ladder(scene, integrator, stack, spp, escalate: int):
+def render_ladder(scene, strategy, stack, spp, escalate: int):
     """The budgets of ``check_verdicts.judge``: the first (``stack``: its splits of ``spp``
     samples per pixel each) and the larger ones, rendered here (``LADDER_SPLITS`` splits of
     4, 16, ... x ``spp`` up to ``escalate`` x, seeds from rung x ``LADDER_SEED``). Returns
@@ -224,7 +286,7 @@ def render_ladder(scene, integrator, stack, spp, escalate: int):
     sums, weighted, samples = first.sum(axis=0), first.mean() * spp * len(stack), spp * len(stack)
     seconds = 0.0
     for index, factor in enumerate(ladder_factors(escalate), 1):
-        more, _, wall = render_splits(scene, integrator, spp * factor * LADDER_SPLITS, LADDER_SPLITS,
+        more, _, wall = render_splits(scene, strategy, spp * factor * LADDER_SPLITS, LADDER_SPLITS,
                                       index * LADDER_SEED)
         seconds += wall
         lum = luminance(more.astype(np.float64))
@@ -341,16 +403,53 @@ def _z_against(row: dict, mean: float, variance: float) -> float:
     return metrics.z_score(row["mean"], np.var(means, ddof=1), len(means), mean, variance, 1)
 
 
-def judge_strategy(row, stack, scene, integrator, args, judged, path_ref, twin) -> None:
+def mean_bias_squared(images: np.ndarray, judged: dict) -> tuple[float, float]:
+    """(bias^2, its standard error) of the mean luminance of ``images`` (splits x H x W x C)
+    against the judged reference: (m - m_ref)^2 less the variance of that difference (the splits'
+    spread and the reference's own error), which makes it unbiased for the squared bias; its
+    error from Var(d^2) = 4 d^2 v + 2 v^2 for a normal difference d of variance v. The image mean
+    is the quantity check's z-test judges, and far less noisy than any pixel's."""
+    means = luminance(images.astype(np.float64)).mean(axis=(1, 2))
+    d = float(means.mean()) - judged["mean"]
+    v = float(np.var(means, ddof=1)) / len(means) + judged["mean_variance"]
+    return d * d - v, math.sqrt(4 * d * d * v + 2 * v * v)
+
+
+def bias_ladder(scene, strategy, stack, spp, args, judged) -> list[BiasRung]:
+    """bias^2 of the image mean against the judged reference (``mean_bias_squared``) at the first
+    budget (``stack``) and, when it is resolved there, at 4, 16, ... x the samples per split up to
+    ``--escalate`` x (``--splits`` splits each, seeds from rung x ``LADDER_SEED``): how a
+    consistent estimator's bias shrinks as its iterations grow."""
+    def rung(factor, images):
+        return BiasRung(factor, spp * factor, *mean_bias_squared(images, judged))
+
+    rungs = [rung(1, stack)]
+    if rungs[0].resolved:
+        for index, factor in enumerate(ladder_factors(args.escalate), 1):
+            more, _, _ = render_splits(scene, strategy, spp * factor * args.splits, args.splits, index * LADDER_SEED)
+            rungs.append(rung(factor, more))
+    return rungs
+
+
+def judge_strategy(row, stack, scene, strategy, args, judged, path_ref, twin) -> None:
     """Fill the row's status, note and evidence (module doc, ``check_verdicts``)."""
     problems = [name for name, bad in (("NaN/Inf", row["finite_fraction"] < 1),
                                        ("negative", row["negative_pixels"] > 0)) if bad]
+    if is_consistent(*strategy):
+        verdict = Verdict("ok")
+        if judged["finite"] and not problems:
+            verdict = judge_consistent(bias_ladder(scene, strategy, stack, args.spp // args.splits, args, judged),
+                                       judged["mean"])
+        row["note"], row["evidence"] = verdict.summary, verdict.evidence
+        status = {"ok": "ok", "converging": "converging"}.get(verdict.kind, "FAIL: bias not shrinking")
+        row["status"] = "FAIL: " + ", ".join(problems) if problems else status
+        return
     verdict = Verdict("ok")
     if judged["finite"] and not problems:
         rungs = [Rung(1, args.spp // args.splits, row["split_means"])]
         verdict = judge(rungs, judged["mean"], judged["mean_variance"], args.z_max)
         if verdict.kind != "ok" and row["z"] < 0:      # a low mean: larger budgets tell bias from tail
-            rungs, sums, lab_mean, samples, wall = render_ladder(scene, integrator, stack, rungs[0].spp,
+            rungs, sums, lab_mean, samples, wall = render_ladder(scene, strategy, stack, rungs[0].spp,
                                                                  args.escalate)
             empty = empty_pixels(sums, judged["pixels"], lab_mean, judged["mean"], samples)
             verdict = judge(rungs, judged["mean"], judged["mean_variance"], args.z_max, empty)
@@ -371,7 +470,7 @@ def judge_strategy(row, stack, scene, integrator, args, judged, path_ref, twin) 
 
 
 def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
-    from .scene import SceneTraits, equivalent_strategies, make_integrator, strategy_applicability
+    from .scene import SceneTraits, equivalent_strategies, strategy_applicability
 
     scene = load_check_scene(path, args.res, defines)
     traits = SceneTraits.from_scene(scene)
@@ -398,11 +497,11 @@ def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
                          "note": f"the same estimator as {same} on this scene: not rendered "
                                  f"(its row's numbers)", "evidence": []})
             continue
-        integrator = make_integrator(kind, {**params, **depth})
-        render_splits(scene, integrator, args.splits, 1, 0)               # warm-up: compile
-        stack, rays, seconds = render_splits(scene, integrator, args.spp, args.splits, 0)
+        chosen = (kind, {**params, **depth})
+        render_splits(scene, chosen, args.splits, 1, 0)               # warm-up: compile
+        stack, rays, seconds = render_splits(scene, chosen, args.spp, args.splits, 0)
         row = {"scene": name, "strategy": strategy, **measure(stack, rays, seconds, judged, args.firefly_k)}
-        judge_strategy(row, stack, scene, integrator, args, judged, path_ref, twin)
+        judge_strategy(row, stack, scene, chosen, args, judged, path_ref, twin)
         measured[strategy] = row
         rows.append(row)
     return rows, warnings

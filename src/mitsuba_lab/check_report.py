@@ -7,7 +7,7 @@ from .reporting import dict_rows, fmt, html_page, html_table, write_csv as write
 
 COLUMNS = ("scene", "strategy", "status", "finite_fraction", "negative_pixels", "max_value",
            "fireflies", "mean", "ref_mean", "z", "camera_rays_per_pixel",
-           "extension_rays_per_pixel", "shadow_rays_per_pixel", "time_s", "z_twin", "note", "evidence")
+           "extension_rays_per_pixel", "shadow_rays_per_pixel", "other_rays_per_pixel", "time_s", "z_twin", "note", "evidence")
 
 
 def _fmt(value, digits=4) -> str:
@@ -16,7 +16,7 @@ def _fmt(value, digits=4) -> str:
 
 def format_table(rows: list[dict]) -> str:
     head = (f"{'scene':26s} {'strategy':18s} {'status':24s} {'finite':>7s} {'neg':>5s} {'max':>9s} "
-            f"{'ffly':>5s} {'mean':>9s} {'z':>7s} {'cam/px':>7s} {'ext/px':>7s} {'shd/px':>7s}")
+            f"{'ffly':>5s} {'mean':>9s} {'z':>7s} {'cam/px':>7s} {'ext/px':>7s} {'shd/px':>7s} {'oth/px':>7s}")
     lines = [head]
     for r in rows:
         lines.append(
@@ -24,7 +24,8 @@ def format_table(rows: list[dict]) -> str:
             f"{_fmt(r.get('finite_fraction')):>7s} {_fmt(r.get('negative_pixels')):>5s} "
             f"{_fmt(r.get('max_value')):>9s} {_fmt(r.get('fireflies')):>5s} {_fmt(r.get('mean')):>9s} "
             f"{_fmt(r.get('z'), 3):>7s} {_fmt(r.get('camera_rays_per_pixel'), 3):>7s} "
-            f"{_fmt(r.get('extension_rays_per_pixel'), 3):>7s} {_fmt(r.get('shadow_rays_per_pixel'), 3):>7s}"
+            f"{_fmt(r.get('extension_rays_per_pixel'), 3):>7s} {_fmt(r.get('shadow_rays_per_pixel'), 3):>7s} "
+            f"{_fmt(r.get('other_rays_per_pixel'), 3):>7s}"
             + (f"  {r['note']}" if r.get("note") and not verdict_kind(r) else
                "  (see the verdicts below)" if verdict_kind(r) else ""))
     return "\n".join(lines)

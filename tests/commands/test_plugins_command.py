@@ -56,6 +56,23 @@ def test_lab_mis_table():
     assert "timeout" in out.splitlines()[-1]          # Mitsuba's base parameters are named too
 
 
+@pytest.mark.parametrize("name", ["lab_bdpt", "lab_vcm"])
+def test_a_refused_base_parameter_is_not_listed(name):
+    """lab_bdpt and lab_vcm refuse samples_per_pass (their passes are sized by max_vertices): the
+    table lists only the base parameters they accept, and using the refused one is an error
+    naming the plugin (params.REFUSED_BASE_PARAMETERS)."""
+    from mitsuba_lab.plugins import params
+
+    code, out, _ = run(["plugins", name])
+    assert code == 0
+    last = out.splitlines()[-1]
+    assert "timeout" in last and "block_size" in last and "samples_per_pass" not in last
+    assert "count_rays" in out
+    with pytest.raises(params.ParameterError, match=f"^{name}: parameter 'samples_per_pass' is not supported"):
+        params.resolve(name, {"samples_per_pass": 4})
+    assert params.resolve("lab_mis", {"samples_per_pass": 4})["samples_per_pass"] == 4
+
+
 def test_defaults_are_shown_as_written():
     assert [command.show(v) for v in (True, False, 2.0, 2.0 / 3.0, -1, "owen", 1 << 21)] == \
         ["true", "false", "2", "0.666667", "-1", "owen", "2097152"]

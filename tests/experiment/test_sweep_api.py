@@ -270,3 +270,18 @@ def test_what_the_render_process_prints_reaches_this_process(tmp_path, capsys):
     config["samplers"] = {"sobol": {"type": "lab_sobol"}}
     mitsuba_lab.sweep(config, output=tmp_path / "out", progress=False, as_frame=False)
     assert "lab_sobol: sample_count=3 is not a power of two" in capsys.readouterr().err
+
+
+def test_a_bidirectional_sweep_fills_the_rays_per_sample_column(tmp_path):
+    """lab_vcm counts its rays by kind (count_rays): results.csv has a column for each kind it
+    counted, and the report's rays/sample cell names the bidirectional ones after extension and
+    shadow rays (empty before lab_bdpt and lab_vcm counted)."""
+    rows = mitsuba_lab.sweep(isolation_config(tmp_path, "lab_vcm"), output=tmp_path / "out", progress=False,
+                             as_frame=False, in_process=True)
+    pixels = 32 * 32
+    for row in rows:
+        assert row["rays_camera"] == pixels * row["spp"]
+        assert row["rays_light"] > 0 and row["rays_sensor"] > 0 and row["rays_merge"] > 0
+    summary = (tmp_path / "out" / "report" / "summary.md").read_text()
+    cell = next(line for line in summary.splitlines() if line.startswith("| 1 ")).split("|")[-2]
+    assert "; connection " in cell and " light " in cell and " merge " in cell, cell

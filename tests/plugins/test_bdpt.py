@@ -286,7 +286,8 @@ def test_a_wrong_lens_density_is_caught(monkeypatch):
     from mitsuba_lab.plugins.integrators.bdpt import integrator
 
     right = integrator.sensor_constants
-    monkeypatch.setattr(integrator, "sensor_constants", lambda sensor: (1.25 * right(sensor)[0], right(sensor)[1]))
+    monkeypatch.setattr(integrator, "sensor_constants",
+                        lambda sensor, *rest: (1.25 * right(sensor, *rest)[0], right(sensor, *rest)[1]))
     scene = thin_lens_scene("cornell_box.xml", 0.2, 3.9)
     wrong = renders(scene, bdpt(), 16, SEEDS_LAB)
     result = z_scores(wrong, path_stack(scene, 64))
@@ -391,7 +392,10 @@ def test_no_nan_inf_or_negative_on_stiff_scenes(name):
     assert pixel_problem(image, False) == "", f"{name}: {pixel_problem(image, False)}"
 
 
-def test_refusals_are_one_line():
+@pytest.mark.parametrize("plugin", ["lab_bdpt", "lab_vcm"])
+def test_refusals_are_one_line(plugin):
+    """Each refusal names the plugin refused: lab_vcm, built on lab_bdpt's driver, is named as
+    itself (samples_per_pass, develop=False, the sensor, nesting, the variant)."""
     import mitsuba_lab
 
     scene = load_scene(scene_path("cornell_box.xml"), res=16)
@@ -399,24 +403,28 @@ def test_refusals_are_one_line():
                           ({"only_strategy": "2"}, "parameter 'only_strategy' must be"),
                           ({"heuristic": "max"}, "parameter 'heuristic' must be one of balance, power"),
                           ({"max_vertices": 10}, "parameter 'max_vertices' must be an integer >= 1024"),
-                          ({"samples_per_pass": 4}, "'samples_per_pass' is not supported")):
-        with pytest.raises(Exception, match=match):
-            make_integrator("lab_bdpt", params)
-    with pytest.raises(ValueError, match="develop=False"):
-        bdpt().render(scene, develop=False)
+                          ({"samples_per_pass": 4}, "parameter 'samples_per_pass' is not supported: light "
+                                                    "subpaths are traced per pass")):
+        if plugin == "lab_vcm" and ("strategies" in params or "only_strategy" in params):
+            continue                                    # (lab_bdpt's own parameters)
+        with pytest.raises(Exception, match=f"{plugin}: {match}"):
+            make_integrator(plugin, params)
+    with pytest.raises(ValueError, match=f"{plugin}: render.develop=False"):
+        make_integrator(plugin, {}).render(scene, develop=False)
     ortho = mi.load_dict({"type": "scene", "sensor": {"type": "orthographic"},
                           "light": {"type": "point", "position": [0, 0, 1]}, "floor": {"type": "rectangle"}})
-    with pytest.raises(ValueError, match="perspective and thinlens sensors only so far, not OrthographicCamera"):
-        bdpt().render(ortho, spp=1)
-    aov = mi.load_dict({"type": "aov", "aovs": "d:depth", "inner": {"type": "lab_bdpt"}})
-    with pytest.raises(Exception, match="cannot be nested"):
+    with pytest.raises(ValueError, match=f"{plugin} supports perspective and thinlens sensors only so far, not "
+                                         f"OrthographicCamera"):
+        make_integrator(plugin, {}).render(ortho, spp=1)
+    aov = mi.load_dict({"type": "aov", "aovs": "d:depth", "inner": {"type": plugin}})
+    with pytest.raises(Exception, match=f"{plugin}: cannot be nested.*render the scene with {plugin} directly"):
         aov.render(scene, spp=1)
     if variant("ad_rgb_polarized") in mi.variants():
         try:
             mitsuba_lab.use_variant(variant("ad_rgb_polarized"))
-            with pytest.raises(Exception, match=f"variant '{variant('ad_rgb_polarized')}' is not supported: "
-                                                f".*use {variant('ad_rgb')}"):
-                mi.load_dict({"type": "lab_bdpt"})
+            with pytest.raises(Exception, match=f"{plugin}: variant '{variant('ad_rgb_polarized')}' is not "
+                                                f"supported: .*use {variant('ad_rgb')}"):
+                mi.load_dict({"type": plugin})
         finally:
             mitsuba_lab.use_variant(HOME)
 
@@ -439,3 +447,30 @@ def test_the_planner_knows_what_a_subset_cannot_render():
                                     ("caustic.xml", "light", "'hit', 'nee' or 'connect'")):
         ok, reason = verdict(name, strategies)
         assert not ok and f"strategies={strategies} cannot render" in reason and needs in reason, reason
+
+
+def test_rays_are_counted_by_kind_without_changing_the_image():
+    """count_rays (the default) counts every kind of ray lab_bdpt traces; strategies=camera traces
+    lab_mis's rays, and counts them as lab_mis does, ray for ray. On one thread (float atomics
+    then add in one order) the image with counting is the image without, bit for bit."""
+    import drjit as dr
+
+    scene = load_scene(scene_path("cornell_box.xml"), res=16)
+    threads = dr.thread_count()
+    dr.set_thread_count(1)
+    try:
+        counted, plain = bdpt(), bdpt(count_rays=False)
+        images = [np.array(mi.render(scene, integrator=i, spp=4, seed=2)) for i in (counted, plain)]
+    finally:
+        dr.set_thread_count(threads)
+    assert np.array_equal(*images)
+    rays = counted.ray_counts()
+    assert set(rays) == {"camera", "extension", "shadow", "connection", "light", "sensor"}
+    assert rays["camera"] == 16 * 16 * 4 and all(rays[k] > rays["camera"] / 2 for k in rays), rays
+    assert counted.ray_counts() == dict.fromkeys(rays, 0)          # read resets
+    assert set(plain.ray_counts().values()) == {0}
+    camera_side, mis = bdpt(strategies="camera"), make_integrator("lab_mis", {"max_depth": MAX_DEPTH})
+    for integrator in (camera_side, mis):
+        mi.render(scene, integrator=integrator, spp=4, seed=2)
+    expected = mis.ray_counts()
+    assert camera_side.ray_counts() == {**expected, "connection": 0, "light": 0, "sensor": 0}

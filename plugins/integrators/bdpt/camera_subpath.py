@@ -26,6 +26,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators import spawn
+from mitsuba_lab.plugins.integrators.counters import tally
 from mitsuba_lab.plugins.integrators.direct import finite_or_zero as spectrum_or_zero
 from mitsuba_lab.plugins.integrators.roulette import kept, russian_roulette
 
@@ -57,11 +58,12 @@ class CameraPass:
     grid: object = None                  # lab_vcm: the light vertices' grid (``merge``), else None
     connect_share: float = 0.0           # lab_vcm: connections' Russian roulette (``connection_roulette``)
     connect_one: bool = False            # lab_vcm: one connection per camera vertex (``connect_to_one_light_vertex``)
+    counters: object = None              # ``counters.RayCounters`` when counting rays (count_rays), else None
 
 
-def sensor_constants(sensor: mi.Sensor) -> tuple[float, tuple]:
+def sensor_constants(sensor: mi.Sensor, plugin: str = "lab_bdpt") -> tuple[float, tuple]:
     """(1 / A', optical axis) of a pinhole sensor, from ``sample_direction`` at a point on its
-    axis, where the direction density 1 / (A' cos^3) is 1 / A'."""
+    axis, where the direction density 1 / (A' cos^3) is 1 / A' (errors name ``plugin``)."""
     to_world = sensor.world_transform()
     near = float(sensor.near_clip()) if hasattr(sensor, "near_clip") else 1e-2
     far = float(sensor.far_clip()) if hasattr(sensor, "far_clip") else 1e4
@@ -71,7 +73,7 @@ def sensor_constants(sensor: mi.Sensor) -> tuple[float, tuple]:
     ds, importance = sensor.sample_direction(it, mi.Point2f(0.5, 0.5))
     value = float(dr.max(mi.unpolarized_spectrum(importance))[0]) * z * z
     if not value > 0:
-        raise ValueError("lab_bdpt: the sensor's principal point lies outside its crop window, which is "
+        raise ValueError(f"{plugin}: the sensor's principal point lies outside its crop window, which is "
                          "not supported")
     axis = to_world @ mi.Vector3f(0, 0, 1)
     axis = dr.normalize(axis)
@@ -118,6 +120,7 @@ def connection(scene, cp: CameraPass, si, bsdf, beta, mis: SubpathMis, depth, sl
         taken, factor = connection_roulette(value, estimate, cp.connect_share, u, depth_y)
         use &= taken
         value *= factor
+    tally(cp.counters, "connection", use)
     use &= ~scene.ray_test(spawn.spawn_ray_to(si, y.p, floor), use)
     return dr.select(use, value, 0.0), prev
 
@@ -207,6 +210,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
     valid_ray = active & ((scene.environment() is not None) and not hide)
     prev_p = mi.Point3f(ray.o)                 # where the segment to the next vertex starts
     pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
+    tally(cp.counters, "camera", active)
     if dr.hint(hide and emitter_hits, mode="scalar"):
         ray, pi = spawn.pass_through_emitters(scene, ray, pi, active, floor)
 
@@ -249,6 +253,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         active_next = active & (depth < max_depth)
         nee_on = smooth & active_next & strategy_mask(cp.only, 1, depth + 1) & ("nee" in w.enabled)
         ds, em_weight = spawn.sample_visible_emitter(scene, si, sampler.next_2d(), floor, nee_on)
+        tally(cp.counters, "shadow", nee_on)
         nee_on &= ds.pdf > 0
         wo = si.to_local(ds.d)
         f, pdf_fwd, bs, bsdf_weight = bsdf.eval_pdf_sample(ctx, si, wo, sampler.next_1d(), sampler.next_2d(),
@@ -306,5 +311,6 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
             # lab_vcm's ppm: the merge took the smooth lobes' light; only a delta lobe goes on
             active_next &= ~smooth | mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
         pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
+        tally(cp.counters, "extension", active_next)
         active = active_next
     return L, valid_ray

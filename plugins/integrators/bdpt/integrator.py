@@ -10,6 +10,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators import spawn, spectral
 from mitsuba_lab.plugins.integrators.aim import AimedEmission
+from mitsuba_lab.plugins.integrators.counters import RayCounters
 from mitsuba_lab.plugins.integrators.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.params import UNBOUNDED, bdpt_only_strategy
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
@@ -134,6 +135,12 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                          Mitsuba's cosine-weighted emission)
     aim_at        string ``specular`` (every shape whose BSDF has only delta
                          lobes) or shape ids joined by ``,`` (Default: ``specular``)
+    count_rays    bool   Count rays by kind, read with ``ray_counts()``: camera,
+                         extension (camera subpaths' BSDF-sampled rays), shadow
+                         (next-event estimation), connection (the shadow rays of
+                         s, t >= 2 connections), light (rays of light subpaths)
+                         and sensor (light tracing's rays to the sensor; one per
+                         test, even through hidden emitters). (Default: true)
     ============= ====== ========================================================
 
     Handles: area lights (any shape, textured or not), point, spot and directional lights,
@@ -143,7 +150,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     size and crop window;
     RGB, mono and spectral variants (spectral: one set of wavelengths per pass, drawn from the
     sensor, so a pass is one sample per pixel; ``spectral.py``). Refused in one line:
-    polarized variants, other sensors, ``render(develop=False)``, ``samples_per_pass``.
+    polarized variants, other sensors, ``render(develop=False)``, ``samples_per_pass`` (``params.REFUSED_BASE_PARAMETERS``).
     Participating media are ignored (one warning). Light-subpath seeds come from the
     render's seed; each pass has its own.
 
@@ -155,14 +162,13 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     """
     ESTIMATOR = Bidirectional
     PARAMETERS = Bidirectional.PARAMETERS
+    #: The kinds ``ray_counts()`` reports.
+    RAY_KINDS = ("camera", "extension", "shadow", "connection", "light", "sensor")
 
     def __init__(self, props: mi.Properties):
         name = self.ESTIMATOR.plugin_name
-        values = plugin_settings(name, props, self.PARAMETERS, "integrator")
-        check_variant()
-        if "samples_per_pass" in props:
-            raise ValueError("lab_bdpt: parameter 'samples_per_pass' is not supported: light subpaths are "
-                             "traced per pass, and passes are sized by 'max_vertices'")
+        values = plugin_settings(name, props, self.PARAMETERS, "integrator")   # (samples_per_pass refused)
+        check_variant(name)
         super().__init__(props)
         self.values = values
         self.estimator = self.ESTIMATOR(values)
@@ -170,6 +176,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         self.only = bdpt_only_strategy(values.get("only_strategy", ""))
         self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
         self.stats = BdptStats()
+        self.counters = RayCounters(self.RAY_KINDS)
         self.vertices_per_path = FIRST_GUESS_VERTICES
         self._pass = None                     # CameraPass while a pass's camera subpaths run
 
@@ -181,8 +188,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             # Mitsuba's render(sensor index) calls render(sensor object) back: the pass is set up
             return mi.SamplingIntegrator.render(self, scene, sensor, seed, spp, develop, evaluate)
         if not develop:
-            raise ValueError("lab_bdpt: render(develop=False) is not supported: light tracing splats "
-                             "into a film of its own, added to the camera image when developed")
+            raise self.error("render(develop=False) is not supported: light tracing splats into a film of "
+                             "its own, added to the camera image when developed")
         traits = SceneTraits.from_scene(scene)
         problem = self.ESTIMATOR.unsupported(traits)
         if problem:
@@ -198,8 +205,10 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         light_depth = -1 if self.max_depth == DEPTH_UNBOUNDED else self.max_depth
         only = self.only
         aim = AimedEmission(scene, v["aim"], v["aim_at"], self.ESTIMATOR.plugin_name)
-        tracer = LightTracer(scene, sensor, light_depth, v["rr_depth"], None, floor, only, v["hide_emitters"], aim)
-        inv_area, axis = sensor_constants(sensor)
+        tracer = LightTracer(scene, sensor, light_depth, v["rr_depth"], None, floor, only, v["hide_emitters"], aim,
+                             self.ESTIMATOR.plugin_name)
+        tracer.counters = counters = self.counters if v["count_rays"] else None
+        inv_area, axis = sensor_constants(sensor, self.ESTIMATOR.plugin_name)
         self.stats = stats = BdptStats()
         self.connectable_per_path = FIRST_GUESS_VERTICES    # (the same first guess in every render)
         total, done, index = None, 0, 0
@@ -227,7 +236,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                                     self.max_depth, v["rr_depth"], v["hide_emitters"], floor,
                                     traits.hittable_emitters, only, count,
                                     self.pass_grid(vertices, stored, plan, stats), self.connect_share,
-                                    self.connect_one)
+                                    self.connect_one, counters)
             start = time.perf_counter()
             try:
                 if u is None:
@@ -335,8 +344,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             self.vertices_per_path = max(0.25, n / count)
             if n > max_vertices:
                 if count == 1:
-                    raise ValueError(f"lab_bdpt: one light subpath stored {n} vertices, more than "
-                                     f"max_vertices = {max_vertices}: raise max_vertices or set max_depth")
+                    raise self.error(f"one light subpath stored {n} vertices, more than max_vertices = "
+                                     f"{max_vertices}: raise max_vertices or set max_depth")
                 return None
             capacity = n                               # same seed, same subpaths: now they fit
         self.vertices_per_path = max(0.25, n / count)
@@ -352,13 +361,22 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     def sample(self, scene, sampler, ray, medium=None, active=True):
         """The t >= 2 strategies of one pass (called by Mitsuba's render inside ``render``)."""
         if self._pass is None:
-            raise ValueError("lab_bdpt: cannot be nested inside another integrator (such as aov or moment) "
-                             "that calls its sample(): its light subpaths are traced per pass by its own "
-                             "render(); render the scene with lab_bdpt directly")
+            name = self.ESTIMATOR.plugin_name
+            raise self.error(f"cannot be nested inside another integrator (such as aov or moment) that calls "
+                             f"its sample(): its light subpaths are traced per pass by its own render(); "
+                             f"render the scene with {name} directly")
         L, valid = trace_camera_subpaths(scene, self._pass, sampler, mi.Ray3f(ray), active)
         return L, valid, []
 
     # -- Reporting --------------------------------------------------------------------
+
+    def error(self, text: str) -> ValueError:
+        """A one-line error naming this plugin (lab_bdpt, or lab_vcm built on it)."""
+        return ValueError(f"{self.ESTIMATOR.plugin_name}: {text}")
+
+    def ray_counts(self, reset: bool = True) -> dict[str, int]:
+        """Rays traced since the last reset, by kind (``RAY_KINDS``; all zero when count_rays is off)."""
+        return self.counters.read(reset)
 
     def bdpt_stats(self) -> dict:
         """Statistics of the last render (``BdptStats``), as plain values."""

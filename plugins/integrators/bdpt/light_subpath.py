@@ -36,6 +36,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators import spawn, spectral
+from mitsuba_lab.plugins.integrators.counters import tally
 from mitsuba_lab.plugins.integrators.photon.tracer import adjoint_correction
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 
@@ -50,12 +51,12 @@ def finite_or_zero(x):
     return dr.select(dr.isfinite(x), x, 0.0)
 
 
-def check_variant() -> None:
-    """Refuse variants lab_bdpt cannot render yet (one line)."""
+def check_variant(plugin: str = "lab_bdpt") -> None:
+    """Refuse variants lab_bdpt (and ``plugin``, built on it) cannot render yet (one line)."""
     if mi.is_polarized:
         # Light and camera subpaths would need the same Stokes frames at every connection.
         variant = mi.variant()
-        raise ValueError(f"lab_bdpt: variant '{variant}' is not supported: bidirectional paths carry "
+        raise ValueError(f"{plugin}: variant '{variant}' is not supported: bidirectional paths carry "
                          f"unpolarized light; use {variant.replace('_polarized', '')}")
 
 
@@ -115,17 +116,22 @@ class LightTracer:
 
     ``max_depth``: longest path in segments, emitter to sensor (-1: unbounded; 1: emitters seen
     directly only; Mitsuba's meaning); ``rr_depth``: Russian roulette from this many light
-    segments on; ``weights``: the MIS weights (default ``BdptWeights(strategies="light")``).
+    segments on; ``weights``: the MIS weights (default ``BdptWeights(strategies="light")``);
+    ``plugin``: the plugin its errors name.
     """
+    #: ``counters.RayCounters`` counting light subpaths' rays and light tracing's rays to the
+    #: sensor (set by the integrator when it counts rays), else None
+    counters = None
 
     def __init__(self, scene: mi.Scene, sensor: mi.Sensor, max_depth: int = -1, rr_depth: int = 5,
                  weights: BdptWeights | None = None, offset_floor: float = 1.0, only: tuple = (),
-                 hide_emitters: bool = False, aim=None):
+                 hide_emitters: bool = False, aim=None, plugin: str = "lab_bdpt"):
         if not isinstance(max_depth, int) or max_depth < -1 or max_depth == 0:
-            raise ValueError(f"lab_bdpt: max_depth must be -1 (unbounded) or >= 1, got {max_depth!r}")
+            raise ValueError(f"{plugin}: max_depth must be -1 (unbounded) or >= 1, got {max_depth!r}")
         if not isinstance(rr_depth, int) or rr_depth < 1:
-            raise ValueError(f"lab_bdpt: rr_depth must be an integer >= 1, got {rr_depth!r}")
-        check_variant()
+            raise ValueError(f"{plugin}: rr_depth must be an integer >= 1, got {rr_depth!r}")
+        check_variant(plugin)
+        self.plugin = plugin
         self.scene, self.sensor = scene, sensor
         self.max_depth = max_depth
         self.rr_depth = rr_depth
@@ -134,7 +140,7 @@ class LightTracer:
         self.table = EmitterTable(scene, aim)     # (aim: aim.AimedEmission, or None)
         self.only = only                     # () or the one strategy (s, t) to splat
         self.hide_emitters = hide_emitters   # camera rays pass through area emitters
-        self.spectra = spectral.EmitterSpectra(scene, "lab_bdpt") if mi.is_spectral else None
+        self.spectra = spectral.EmitterSpectra(scene, plugin) if mi.is_spectral else None
         #: spectral variants: (wavelengths, the sensor's spectral weight) of the pass
         self.pass_spectrum = None
 
@@ -143,6 +149,7 @@ class LightTracer:
         """The sensor sample is usable and not occluded from ``it`` (with ``hide_emitters``, area
         emitters on the way do not occlude: the camera sees through them)."""
         active = active & (ds.pdf > 0)
+        tally(self.counters, "sensor", active)     # (once, even through hidden emitters)
         ray = spawn.spawn_ray_to(it, ds.p, self.floor)
         if dr.hint(not self.hide_emitters, mode="scalar"):
             return active & ~self.scene.ray_test(ray, active)
@@ -182,7 +189,7 @@ class LightTracer:
         sample_dir = mi.Point2f(rng.next_float32(), rng.next_float32())
         if dr.hint(self.spectra is not None, mode="scalar"):
             if self.pass_spectrum is None:
-                raise ValueError("lab_bdpt: a spectral variant's light subpaths need the pass's wavelengths")
+                raise ValueError(f"{self.plugin}: a spectral variant's light subpaths need the pass's wavelengths")
             wavelengths, sensor_weight = self.pass_spectrum
             ray, ray_weight = self.spectra.emit(emitter, emitter_index, time, wavelengths, sample_pos, sample_dir)
             scale = scale * sensor_weight         # what a camera ray's weight carries
@@ -247,6 +254,7 @@ class LightTracer:
         active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_depth > 1)
         while dr.hint(active, max_iterations=-1, label="lab_bdpt light subpath"):
             si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
+            tally(self.counters, "light", active)
             active &= si.is_valid()
             vertices_reached += dr.select(active, 1, 0)
             cos_in = dr.abs(dr.dot(si.n, ray.d))

@@ -146,6 +146,11 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            of two up to it (more pay where light tracing and
                            merging carry the image, as through glass); 0 =
                            light_paths only (Default: 0)
+    count_rays      bool   Count rays as lab_bdpt does (``ray_counts()``), and
+                           merging's grid lookups, one per camera vertex whose
+                           merge runs, under ``merge`` (lookups, not rays). With
+                           ``pilot``, the pilot's rays and those of the render
+                           it chose are counted too (Default: true)
     max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices, aim, aim_at: as
                            lab_bdpt (``aim``: the light subpaths that merge too).
     =============== ====== ========================================================
@@ -168,6 +173,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     """
     ESTIMATOR = VertexMerging
     PARAMETERS = VertexMerging.PARAMETERS
+    RAY_KINDS = LabBDPTIntegrator.RAY_KINDS + ("merge",)
     #: In mode vcm, a connection that would add less than this share of its lane's estimate so
     #: far runs with probability (its share / this) (``camera_subpath.connection_roulette``;
     #: README: the Cornell box 9% faster for 1% more variance); mode bpt keeps lab_bdpt's image.
@@ -234,7 +240,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     def _path_tracer(self):
         """lab_mis with this one's path length, roulette, hidden emitters and heuristic: path
         tracing alone, the estimator of lab_vcm's mode pt."""
-        shared = ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta")
+        shared = ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta", "count_rays")
         return mi.load_dict({"type": "lab_mis", **{k: self.values[k] for k in shared}})
 
     @staticmethod
@@ -300,9 +306,10 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     def _render_chosen(self, scene, sensor, seed, spp, develop, evaluate):
         sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
         start = time.perf_counter()
-        camera = self._path_tracer()
-        choice, pilot_image, pilot_spp, scores = self._pilot(scene, sensor, seed, spp, self._companion(), camera)
+        camera, every = self._path_tracer(), self._companion()
+        choice, pilot_image, pilot_spp, scores = self._pilot(scene, sensor, seed, spp, every, camera)
         pilot_s = time.perf_counter() - start
+        chosen = None
         if choice is None:
             image, seconds = self._timed(camera, scene, sensor, seed, spp, develop, evaluate)
             self.stats = BdptStats(passes=1, camera_s=seconds)
@@ -317,6 +324,9 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             chosen = self._companion(choice)
             image = chosen.render(scene, sensor, seed, spp, develop, evaluate)
             self.stats = chosen.stats
+        for integrator in (camera, every, chosen):    # (the pilot's rays are this render's cost too)
+            if integrator is not None:
+                self.counters.add_counts(integrator.ray_counts())
         self.stats.pilot_s, self.stats.chose_path_tracing = pilot_s, choice is None
         self.stats.light_paths_chosen = 0.0 if choice is None else self.values["light_paths"] * choice
         self.stats.pilot_scores = {("path tracing" if r is None else self.values["light_paths"] * r): float(v)

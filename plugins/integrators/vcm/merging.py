@@ -36,6 +36,7 @@ from mitsuba_lab.plugins.integrators.bdpt.light_subpath import finite_or_zero, r
 from mitsuba_lab.plugins.integrators.bdpt.vertices import (NO_MERGE, POINT, POINT_WIDTH, RECORD, RECORD_WIDTH,
                                                            read, spectrum_at, unbits, vector)
 from mitsuba_lab.plugins.integrators.bdpt.weights import SubpathMis
+from mitsuba_lab.plugins.integrators.counters import tally
 from mitsuba_lab.plugins.integrators.kernels import kernel
 from mitsuba_lab.plugins.integrators.photon.gather import NORMAL_COS
 from mitsuba_lab.plugins.integrators.photon.grid import cell_of, counting_sort, hash_cell, table_size_for
@@ -138,6 +139,7 @@ class VertexGrid:
         result = mi.Spectrum(0)
         k = mi.UInt32(0)
         active = mi.Bool(active) & taken
+        tally(cp.counters, "merge", active)         # (a grid lookup, not a ray)
         while dr.hint(active & (k < 8), label="lab_vcm merge cells"):
             cell = corner + mi.Vector3i(mi.Int32(k & 1), mi.Int32((k >> 1) & 1), mi.Int32(k >> 2))
             bucket = hash_cell(cell, self.mask, iteration)

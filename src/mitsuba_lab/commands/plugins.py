@@ -155,7 +155,7 @@ def format_plugin(name: str) -> str:
     widths = [max(len(row[i]) for row in rows) for i in range(4)]
     lines = [f"{name} ({kind})" + (f": {about}" if about else "")]
     lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)) + "  " + row[4] for row in rows]
-    base = declarations.MITSUBA_BASE_PARAMETERS.get(kind, ())
+    base = declarations.base_parameters(name, kind)
     if base:
         lines.append(f"also accepted, read by Mitsuba's base class: {', '.join(base)}")
     return "\n".join(line.rstrip() for line in lines)

@@ -23,7 +23,7 @@ from . import viewer
 from .analysis import (FLOOR_WARNING_FACTOR, PointStats, curve, equal_time_budgets, pilot_light_paths, point_stats,
                        run_image)
 from .reference import Reference
-from .report_sections import SectionTables
+from .report_sections import OTHER_RAY_KINDS, SectionTables
 from .spectrum import plot_error_spectra, slope_table
 from .store import ResultStore
 from .strategy_grid import grid_section
@@ -88,9 +88,11 @@ class Report(SectionTables):
     def write_csv(self) -> None:
         runs = self.store.current_runs()
         region_names = sorted({n for r in runs for n in r.get("regions", {})})
-        columns = list(CSV_COLUMNS) + [f"rays_{k}" for k in RAY_KINDS] + \
+        # (the other kinds only when some run counted them: lab_bdpt's, lab_vcm's, lab_photon's)
+        kinds = RAY_KINDS + tuple(k for k in OTHER_RAY_KINDS if any(k in r.get("rays", {}) for r in runs))
+        columns = list(CSV_COLUMNS) + [f"rays_{k}" for k in kinds] + \
             [f"region_{n}_{m}" for n in region_names for m in ("mse", "rel_mse")] + ["pilot_light_paths"]
-        rows = [values + [row.get("rays", {}).get(k) for k in RAY_KINDS] +
+        rows = [values + [row.get("rays", {}).get(k) for k in kinds] +
                 [row.get("regions", {}).get(n, {}).get(m) for n in region_names for m in ("mse", "rel_mse")] +
                 [pilot_light_paths(row.get("integrator_stats") or {})]
                 for row, values in zip(runs, dict_rows(runs, CSV_COLUMNS))]

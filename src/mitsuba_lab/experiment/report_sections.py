@@ -29,6 +29,22 @@ from .spectrum import fit_slope, slope_cell, slope_note
 TIME_SPREAD_NOTED = 1.5
 
 
+#: Ray kinds the rays/sample column names after extension and shadow rays (the bidirectional
+#: integrators' own, and lab_photon's photon segments; camera rays are one per sample everywhere).
+OTHER_RAY_KINDS = ("connection", "light", "sensor", "merge", "photon")
+
+
+def rays_cell(rays_per_sample: dict) -> str:
+    """Extension and shadow rays per sample, then the other kinds an integrator counts (lab_bdpt's
+    connection, light subpath and sensor rays, lab_vcm's merge lookups, lab_photon's photon segments) by name; n/a when the
+    integrator counts none."""
+    if not rays_per_sample:
+        return fmt(None)
+    cell = f"{fmt(rays_per_sample.get('extension'))}, {fmt(rays_per_sample.get('shadow'))}"
+    others = [f"{kind} {fmt(rays_per_sample[kind])}" for kind in OTHER_RAY_KINDS if kind in rays_per_sample]
+    return cell + (f"; {', '.join(others)}" if others else "")
+
+
 def budget_cell(c: dict) -> str:
     """One cell of a region's table at a budget (``region_at_budgets``); a single seed has no
     standard error, so none is printed."""
@@ -59,12 +75,12 @@ class SectionTables:
         rows.sort(key=lambda r: r[0], reverse=True)
         short = f"{MIN_TRUSTED_TIME_S * 1000:g} ms"
         header = ["rank", "strategy", "spp", "time s", "MSE", "corrected MSE", "relMSE (+- seed std)", "efficiency",
-                  "slope log MSE / log t", "FLIP", "CIEDE2000", "rays / sample (ext, shadow)"]
+                  "slope log MSE / log t", "FLIP", "CIEDE2000", "rays / sample (ext, shadow; others)"]
         body = [[rank if ranked else "not ranked", label(key), p.spp,
                  fmt(p.time_s) + ("" if timing_trusted(p) else f" (< {short})"), fmt(p.mse), fmt(p.mse_corrected),
                  f"{fmt(p.rel_mse)} +- {fmt(p.rel_mse_std, 2)}", fmt(p.efficiency), slope_cell(s), fmt(p.flip),
                  fmt(p.ciede2000),
-                 f"{fmt(p.rays_per_sample.get('extension'))}, {fmt(p.rays_per_sample.get('shadow'))}"]
+                 rays_cell(p.rays_per_sample)]
                 for rank, ((ranked, _), key, p, s) in enumerate(rows, 1)]
         caption = (f"Each strategy's longest point (median wall time of one render). Renders shorter than "
                    f"{short} are timing noise (launch overhead and scheduler jitter): such a point is not "
