@@ -18,6 +18,7 @@ from mitsuba_lab.scene import SceneTraits
 
 from . import splats
 from .camera_subpath import CameraPass, sensor_constants, trace_camera_subpaths
+from .endpoints import direction_is_delta
 from .estimator import Bidirectional
 from .light_subpath import LightTracer, check_variant
 from .vertices import NONE, LightVertices, vertex_bytes
@@ -227,7 +228,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                                     self.max_depth, v["rr_depth"], v["hide_emitters"], floor,
                                     traits.hittable_emitters, only, count,
                                     self.pass_grid(vertices, stored, plan, stats), self.connect_share,
-                                    self.connect_one)
+                                    self.connect_one, direction_is_delta(sensor))
             start = time.perf_counter()
             try:
                 if u is None:
