@@ -404,10 +404,12 @@ def test_refusals_are_one_line():
             make_integrator("lab_bdpt", params)
     with pytest.raises(ValueError, match="develop=False"):
         bdpt().render(scene, develop=False)
-    ortho = mi.load_dict({"type": "scene", "sensor": {"type": "orthographic"},
+    meter = mi.load_dict({"type": "scene",
+                          "sensor": {"type": "radiancemeter", "film": {"type": "hdrfilm", "width": 1, "height": 1}},
                           "light": {"type": "point", "position": [0, 0, 1]}, "floor": {"type": "rectangle"}})
-    with pytest.raises(ValueError, match="perspective and thinlens sensors only so far, not OrthographicCamera"):
-        bdpt().render(ortho, spp=1)
+    with pytest.raises(ValueError, match="perspective, thinlens and orthographic sensors only so far, not "
+                                         "RadianceMeter"):
+        bdpt().render(meter, spp=1)
     aov = mi.load_dict({"type": "aov", "aovs": "d:depth", "inner": {"type": "lab_bdpt"}})
     with pytest.raises(Exception, match="cannot be nested"):
         aov.render(scene, spp=1)
