@@ -166,9 +166,9 @@ class ProjectorEmission:
     Mitsuba's projector is a pinhole camera run backwards: ``sample_ray`` draws a film point uv
     from its irradiance texture (``Texture.sample_position``: by the texels for a bitmap,
     uniform for a constant; density p_uv on [0, 1]^2) and emits through the point of its image
-    plane at distance 1 that uv maps to. uv is affine in that plane's coordinates, and a patch
-    of the plane at angle theta from the optical axis subtends cos^3 theta / distance-1 area per
-    unit solid angle, so
+    plane at distance 1 that uv maps to. uv is affine in that plane's coordinates (density
+    p_uv / A on the plane), and at angle theta from the optical axis the plane holds
+    1 / cos^3 theta of its area per unit solid angle (distance 1 / cos theta, tilted by theta), so
 
         p(w) = p_uv(uv(w)) / (A cos^3 theta),   A the image plane's area at distance 1,
 
