@@ -107,7 +107,7 @@ def test_agrees_with_mitsuba_path(name):
 
 
 USER_SCENES = ["textured_mesh_room", "principled_and_blend", "spot_and_directional", "normal_bump_maps",
-               "thinlens_envmap", "mixed_lights_crop"]
+               "thinlens_envmap", "mixed_lights_crop", "instanced_ortho"]
 
 
 @pytest.fixture(scope="module")
