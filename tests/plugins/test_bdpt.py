@@ -122,8 +122,8 @@ def test_users_scenes_agree_with_mitsuba_path(user_assets, name):
     """tests/user_scenes.py's scenes: OBJ/PLY meshes, textures, a textured area light,
     principled and blended BSDFs, spot and directional lights, an EXR environment map and a
     constant one, normal and bump maps (where the light side's shading-normal correction must use
-    the map's normal: ``light_subpath.transported``), non-square films, a crop window, and two
-    with a thin lens."""
+    the map's normal: ``light_subpath.transported``), non-square films, a crop window, two
+    with a thin lens and one orthographic with instanced shape groups (no light tracing there)."""
     import user_scenes
 
     scene = user_scenes.load(user_assets, name)
