@@ -107,7 +107,7 @@ def test_agrees_with_mitsuba_path(name):
 
 
 USER_SCENES = ["textured_mesh_room", "principled_and_blend", "spot_and_directional", "normal_bump_maps",
-               "thinlens_envmap", "mixed_lights_crop"]
+               "thinlens_envmap", "mixed_lights_crop", "instanced_ortho"]
 
 
 @pytest.fixture(scope="module")
@@ -122,8 +122,8 @@ def test_users_scenes_agree_with_mitsuba_path(user_assets, name):
     """tests/user_scenes.py's scenes: OBJ/PLY meshes, textures, a textured area light,
     principled and blended BSDFs, spot and directional lights, an EXR environment map and a
     constant one, normal and bump maps (where the light side's shading-normal correction must use
-    the map's normal: ``light_subpath.transported``), non-square films, a crop window, and two
-    with a thin lens."""
+    the map's normal: ``light_subpath.transported``), non-square films, a crop window, two
+    with a thin lens and one orthographic with instanced shape groups (no light tracing there)."""
     import user_scenes
 
     scene = user_scenes.load(user_assets, name)
@@ -411,11 +411,12 @@ def test_refusals_are_one_line(plugin):
             make_integrator(plugin, params)
     with pytest.raises(ValueError, match=f"{plugin}: render.develop=False"):
         make_integrator(plugin, {}).render(scene, develop=False)
-    ortho = mi.load_dict({"type": "scene", "sensor": {"type": "orthographic"},
+    meter = mi.load_dict({"type": "scene",
+                          "sensor": {"type": "radiancemeter", "film": {"type": "hdrfilm", "width": 1, "height": 1}},
                           "light": {"type": "point", "position": [0, 0, 1]}, "floor": {"type": "rectangle"}})
-    with pytest.raises(ValueError, match=f"{plugin} supports perspective and thinlens sensors only so far, not "
-                                         f"OrthographicCamera"):
-        make_integrator(plugin, {}).render(ortho, spp=1)
+    with pytest.raises(ValueError, match=f"{plugin} supports perspective, thinlens and orthographic sensors only "
+                                         f"so far, not RadianceMeter"):
+        make_integrator(plugin, {}).render(meter, spp=1)
     aov = mi.load_dict({"type": "aov", "aovs": "d:depth", "inner": {"type": plugin}})
     with pytest.raises(Exception, match=f"{plugin}: cannot be nested.*render the scene with {plugin} directly"):
         aov.render(scene, spp=1)

@@ -84,7 +84,7 @@ def recursive_weights(g, mis, wrong=None):
         pdf_rev = fw[i] if wrong == "swap" else rv[i]
         state = mis.scatter_light(state, fw[i], pdf_rev, cos_out, delta[i])
     camera = {}
-    state = mis.start_camera(rv[k])
+    state = mis.start_camera(rv[k], delta[k])            # (delta[k]: an orthographic sensor)
     for i in range(k - 1, -1, -1):
         state = mis.after_hit(state, d2[i], cc[i])
         camera[i] = state
@@ -171,6 +171,35 @@ def test_a_wrong_update_is_caught(wrong):
     assert err > 1e3 * RTOL
 
 
+@pytest.mark.parametrize("merging", [False, True])
+def test_an_orthographic_sensor_leaves_light_tracing_out(merging):
+    """A sensor whose direction is a delta (``delta[k]``: orthographic) makes t = 1 infeasible;
+    the camera subpath that starts with its t = 1 term at 0 (``start_camera(delta=True)``)
+    weights the other strategies (merging too) as the brute force does, summing to 1, while the
+    pinhole's start, which still counts t = 1 in every other strategy's sum, is caught."""
+    worst, caught = 0.0, np.inf
+    subset = KINDS + ("merge",) if merging else KINDS
+    for k in range(1, 8):
+        g = random_paths(k, seed=4100 + k)
+        g["delta"][k] = True
+        area = 0.5 if merging else 0.0
+        mis = BdptWeights("power", 2.0, strategies=subset, light_paths=g["light_paths"], merge_area=area)
+        p_light, p_camera = area_densities(g)
+        walk = recursive_weights_with_merging if merging else recursive_weights
+        with np.errstate(all="ignore"):
+            got = walk(g, mis)
+            ref = brute_force_weights(p_light, p_camera, g["delta"], 2.0, subset, g["nee"], g["light_paths"], area)
+            pinhole = walk({**g, "delta": np.concatenate([g["delta"][:k], np.zeros((1, N), bool)])}, mis)
+        pinhole[k] = 0.0                                 # (t = 1 never runs: only the start differs)
+        worst = max(worst, _max_rel(got, ref))
+        caught = min(caught, _max_rel(pinhole, ref))
+        reach = ref.sum(axis=0) > 0
+        assert np.all(got[k] == 0.0) and reach.mean() > 0.5
+        np.testing.assert_allclose(got.sum(axis=0)[reach], 1.0, rtol=RTOL)
+    print(f"orthographic, merging {merging}: max relative error {worst:.2e}; the pinhole's start: {caught:.2e}")
+    assert worst < RTOL and caught > 1e3 * RTOL
+
+
 def test_bad_settings_are_refused():
     with pytest.raises(ValueError, match="lab_bdpt: strategies"):
         BdptWeights(strategies=("hit", "photons"))
@@ -249,7 +278,7 @@ def merging_states(g, mis):
         state = mis.after_hit(state, d2[i - 1], cl[i])
         light[i] = state
         state = mis.scatter_light(state, fw[i], rv[i], cc[i], delta[i])
-    camera, state = {}, mis.start_camera(rv[k])
+    camera, state = {}, mis.start_camera(rv[k], delta[k])
     for i in range(k - 1, 0, -1):
         state = mis.after_hit(state, d2[i], cc[i])
         camera[i] = state

@@ -30,7 +30,7 @@ from mitsuba_lab.plugins.integrators.counters import tally
 from mitsuba_lab.plugins.integrators.direct import finite_or_zero as spectrum_or_zero
 from mitsuba_lab.plugins.integrators.roulette import kept, russian_roulette
 
-from .endpoints import EmitterTable, nee_density
+from .endpoints import EmitterTable, direction_is_delta, nee_density
 from .light_subpath import carried, finite_or_zero, reverse_pdf, strategy_mask, transported
 from .vertices import NONE, LightVertices
 from .weights import BdptWeights, SubpathMis
@@ -59,12 +59,17 @@ class CameraPass:
     connect_share: float = 0.0           # lab_vcm: connections' Russian roulette (``connection_roulette``)
     connect_one: bool = False            # lab_vcm: one connection per camera vertex (``connect_to_one_light_vertex``)
     counters: object = None              # ``counters.RayCounters`` when counting rays (count_rays), else None
+    sensor_delta: bool = False           # the sensor's direction is a delta (orthographic): no t = 1
 
 
 def sensor_constants(sensor: mi.Sensor, plugin: str = "lab_bdpt") -> tuple[float, tuple]:
     """(1 / A', optical axis) of a pinhole sensor, from ``sample_direction`` at a point on its
-    axis, where the direction density 1 / (A' cos^3) is 1 / A' (errors name ``plugin``)."""
+    axis, where the direction density 1 / (A' cos^3) is 1 / A' (errors name ``plugin``). An
+    orthographic sensor has no direction density (its direction is a delta,
+    ``CameraPass.sensor_delta``): 1 in its place."""
     to_world = sensor.world_transform()
+    if direction_is_delta(sensor):
+        return 1.0, _axis(to_world)
     near = float(sensor.near_clip()) if hasattr(sensor, "near_clip") else 1e-2
     far = float(sensor.far_clip()) if hasattr(sensor, "far_clip") else 1e4
     z = (near * far) ** 0.5
@@ -75,9 +80,13 @@ def sensor_constants(sensor: mi.Sensor, plugin: str = "lab_bdpt") -> tuple[float
     if not value > 0:
         raise ValueError(f"{plugin}: the sensor's principal point lies outside its crop window, which is "
                          "not supported")
-    axis = to_world @ mi.Vector3f(0, 0, 1)
-    axis = dr.normalize(axis)
-    return value, (float(axis.x[0]), float(axis.y[0]), float(axis.z[0]))
+    return value, _axis(to_world)
+
+
+def _axis(to_world) -> tuple:
+    """The sensor's optical axis (its local +z) in world space."""
+    axis = dr.normalize(to_world @ mi.Vector3f(0, 0, 1))
+    return (float(axis.x[0]), float(axis.y[0]), float(axis.z[0]))
 
 
 def connection_roulette(value, estimate, share: float, u, depth_y):
@@ -195,7 +204,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
     head = dr.gather(mi.UInt32, cp.last, lane)
     active = mi.Bool(active) & dr.full(mi.Bool, True, lanes)
     cos_cam = dr.dot(ray.d, mi.Vector3f(*cp.axis))
-    start = w.start_camera(dr.opaque(mi.Float, cp.inv_image_area) / (cos_cam * dr.square(cos_cam)))
+    start = w.start_camera(dr.opaque(mi.Float, cp.inv_image_area) / (cos_cam * dr.square(cos_cam)), cp.sensor_delta)
     dvcm, dvc, first = mi.Float(start.dvcm), mi.Float(start.dvc), mi.Float(start.first)
     merging = cp.grid is not None
     dvm = mi.Float(start.dvm) if merging else 0.0

@@ -10,6 +10,7 @@ densities, all including the emitter's selection probability (``Scene.pdf_emitte
   1 / (pi R^2));
 * ``pdf_dir``: solid-angle density of the emitted direction (area light: cosine-weighted,
   cos / pi; point: uniform sphere, 1 / (4 pi); spot: uniform in the cone of ``cutoff_angle``;
+  ``projector``: by its irradiance texture through its frustum, ``ProjectorEmission``;
   ``constant`` and ``envmap``: the same density as emitter sampling's; ``directional``: 1, the
   delta stripped). ``constant`` starts its rays on the bounding sphere with cosine-weighted
   directions, which is the same joint density per unit solid angle and projected area;
@@ -23,8 +24,9 @@ densities, all including the emitter's selection probability (``Scene.pdf_emitte
 For an emitter at infinity the "vertex" x_0 is a direction: its densities are per unit solid
 angle, and the weights take cos = 1 and dist^2 = 1 on the segment that touches it
 (``weights.py``). Supported: area lights (rectangles, spheres, meshes, ..., textured or not),
-point, spot, ``constant``, ``envmap`` and ``directional`` emitters, pinhole (``perspective``)
-sensors.
+point, spot, ``projector`` (constant or textured), ``constant``, ``envmap`` and ``directional``
+emitters, pinhole (``perspective``) and thin-lens sensors, and orthographic ones, whose
+direction is a delta (``direction_is_delta``: light tracing cannot reach them).
 """
 from __future__ import annotations
 
@@ -33,10 +35,21 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-_AREA, _AREA_TEXTURED, _POINT, _SPOT, _DIRECTIONAL, _ENVIRONMENT = 0, 1, 2, 3, 4, 5
+#: Emitter kinds; the delta positions (point, spot, projector) lie between _POINT and _PROJECTOR,
+#: the emitters at infinity from _DIRECTIONAL on.
+_AREA, _AREA_TEXTURED, _POINT, _SPOT, _PROJECTOR, _DIRECTIONAL, _ENVIRONMENT = 0, 1, 2, 3, 4, 5, 6
 #: Plugin class -> kind (an area light's kind also depends on its texture).
-_KINDS = {"AreaLight": _AREA, "PointLight": _POINT, "SpotLight": _SPOT, "DirectionalEmitter": _DIRECTIONAL,
-          "ConstantBackgroundEmitter": _ENVIRONMENT, "EnvironmentMapEmitter": _ENVIRONMENT}
+_KINDS = {"AreaLight": _AREA, "PointLight": _POINT, "SpotLight": _SPOT, "Projector": _PROJECTOR,
+          "DirectionalEmitter": _DIRECTIONAL, "ConstantBackgroundEmitter": _ENVIRONMENT,
+          "EnvironmentMapEmitter": _ENVIRONMENT}
+#: Sensors whose direction is a delta given the sampled film point (no light vertex joins them).
+DELTA_DIRECTION_SENSORS = ("OrthographicCamera",)
+
+
+def direction_is_delta(sensor: mi.Sensor) -> bool:
+    """The sensor's ray direction is fixed by its film point (orthographic): light tracing
+    (t = 1) cannot reach it, and the weights count t = 1 as impossible (``start_camera``)."""
+    return sensor.class_name() in DELTA_DIRECTION_SENSORS
 
 
 def _textured(emitter) -> bool:
@@ -62,12 +75,14 @@ class EmitterTable:
         ids = dr.reinterpret_array(mi.UInt32, scene.emitters_dr()).numpy().tolist() if emitters else []
         size = (max(ids) if ids else 0) + 1
         kind, pmf, inv_area, cone = [0] * size, [0.0] * size, [0.0] * size, [0.0] * size
+        #: ``ProjectorEmission`` of each projector (empty: no code for them in the kernels)
+        self.projectors = []
         for index, (emitter, slot) in enumerate(zip(emitters, ids)):
             name = emitter.class_name()
             if name not in _KINDS:
                 raise ValueError(f"lab_bdpt: emitter '{emitter.id() or name}' ({name}) is not supported: "
                                  f"its emission densities are not known (supported: area, point, spot, "
-                                 f"constant, envmap, directional)")
+                                 f"projector, constant, envmap, directional)")
             kind[slot] = _KINDS[name]
             pmf[slot] = float(scene.pdf_emitter(mi.UInt32(index))[0])
             if name == "AreaLight":
@@ -79,6 +94,8 @@ class EmitterTable:
             elif name == "SpotLight":
                 cutoff = math.radians(float(mi.traverse(emitter)["cutoff_angle"][0]))
                 cone[slot] = 1.0 / (2.0 * math.pi * (1.0 - math.cos(cutoff)))
+            elif name == "Projector":                  # its direction density varies: per lane, below
+                self.projectors.append(ProjectorEmission(emitter, slot))
             else:                                      # at infinity: rays start on a disk of radius R
                 inv_area[slot] = 1.0 / (math.pi * bounding_radius(scene) ** 2)
                 cone[slot] = 1.0
@@ -100,13 +117,13 @@ class EmitterTable:
         sampling (``nee_density``: area, or solid angle at infinity), needed for textured
         area lights and environments, which sample positions or directions the same way for
         emission as for emitter sampling (for the others it may be None). ``delta``: the
-        emitter cannot be hit (point, spot, directional). ``point``, ``direction``: the emitted
-        point and direction (world space), which an area light's density depends on when it
-        aims (``aim``)."""
+        emitter cannot be hit (point, spot, projector, directional). ``point``, ``direction``:
+        the emitted point and direction (world space), which an area light's density depends
+        on when it aims (``aim``), and a projector's always."""
         slot = self.slot(emitter)
         kind = dr.gather(mi.UInt32, self.kind, slot, active)
         pmf = dr.gather(mi.Float, self.pmf, slot, active)
-        position_delta = (kind == _POINT) | (kind == _SPOT)
+        position_delta = (kind >= _POINT) & (kind <= _PROJECTOR)
         pos = dr.select(position_delta, pmf, pmf * dr.gather(mi.Float, self.inv_area, slot, active))
         if self.aim is None:
             area_dir = cos_out * dr.inv_pi
@@ -114,11 +131,23 @@ class EmitterTable:
             raise ValueError("lab_bdpt: an aiming emitter's density needs the emitted point and direction")
         else:
             area_dir = self.aim.pdf(cos_out, point, direction)
-        direction = dr.select(kind >= _POINT, dr.gather(mi.Float, self.cone, slot, active), area_dir)
+        pdf_dir = dr.select(kind >= _POINT, dr.gather(mi.Float, self.cone, slot, active), area_dir)
+        if self.projectors:
+            pdf_dir = self._projected(slot, direction, active, pdf_dir)
         if pdf_nee is not None:
             pos = dr.select(kind == _AREA_TEXTURED, pdf_nee, pos)
-            direction = dr.select(kind == _ENVIRONMENT, pdf_nee / dr.maximum(pmf, 1e-30), direction)
-        return pos, direction, position_delta | (kind == _DIRECTIONAL)
+            pdf_dir = dr.select(kind == _ENVIRONMENT, pdf_nee / dr.maximum(pmf, 1e-30), pdf_dir)
+        return pos, pdf_dir, position_delta | (kind == _DIRECTIONAL)
+
+    def _projected(self, slot, direction, active, pdf_dir):
+        """``pdf_dir`` with each projector's lanes given its density of the emitted ``direction``
+        (one call per projector: its texture is not reachable through the emitter pointer)."""
+        if direction is None:
+            raise ValueError("lab_bdpt: a projector's density needs the emitted direction")
+        for projector in self.projectors:
+            mine = active & (slot == projector.slot)
+            pdf_dir = dr.select(mine, projector.pdf_direction(direction, mine), pdf_dir)
+        return pdf_dir
 
 
 def bounding_radius(scene: mi.Scene) -> float:
@@ -129,6 +158,68 @@ def bounding_radius(scene: mi.Scene) -> float:
     if not bbox.valid():
         return eps
     return max(eps, float(bbox.bounding_sphere().radius) * (1.0 + eps))
+
+
+class ProjectorEmission:
+    """A ``projector``'s density of an emitted direction, as its ``sample_ray`` draws it.
+
+    Mitsuba's projector is a pinhole camera run backwards: ``sample_ray`` draws a film point uv
+    from its irradiance texture (``Texture.sample_position``: by the texels for a bitmap,
+    uniform for a constant; density p_uv on [0, 1]^2) and emits through the point of its image
+    plane at distance 1 that uv maps to. uv is affine in that plane's coordinates (density
+    p_uv / A on the plane), and at angle theta from the optical axis the plane holds
+    1 / cos^3 theta of its area per unit solid angle (distance 1 / cos theta, tilted by theta), so
+
+        p(w) = p_uv(uv(w)) / (A cos^3 theta),   A the image plane's area at distance 1,
+
+    and 0 outside the frustum. uv(w) and the frustum test are the projector's own
+    (``sample_direction`` at the point one unit along w), p_uv is the texture's
+    ``pdf_position``, the same one that ``sample_ray``'s weight divides by: the light side's
+    emission and the camera side's next-event estimation see the same density. Assumes a rigid
+    ``to_world`` (a ``lookat``), as Mitsuba's projector does for its rays to be unit vectors.
+    """
+
+    def __init__(self, emitter, slot: int):
+        self.emitter, self.slot = emitter, slot
+        self.texture = _irradiance_texture(emitter)
+        origin = emitter.sample_position(0.0, mi.Point2f(0.5))[0].p
+        self.origin = tuple(float(c[0]) for c in origin)
+        self.area = _image_plane_area(emitter)
+        if self.texture is not None:                   # (builds its sampling table outside any kernel)
+            dr.eval(self.texture.pdf_position(mi.Point2f(0.5, 0.5)))
+
+    def pdf_direction(self, direction, active):
+        """Solid-angle density of emitting along the unit world ``direction`` (lanes ``active``)."""
+        it = dr.zeros(mi.Interaction3f, dr.width(direction))
+        it.p = mi.Point3f(*self.origin) + direction
+        ds, _ = self.emitter.sample_direction(it, mi.Point2f(0.5), active)
+        inside = active & (ds.pdf > 0)             # (the frustum: uv in [0, 1]^2, in front)
+        cos = -dr.dot(dr.normalize(ds.n), ds.d)    # ds.d points back at the projector
+        p_uv = mi.Float(1.0) if self.texture is None else self.texture.pdf_position(ds.uv, inside)
+        return dr.select(inside & (cos > 0), p_uv / (self.area * cos * dr.square(cos)), 0.0)
+
+
+def _irradiance_texture(emitter):
+    """The projector's ``irradiance`` texture object (None: none found, sampled uniformly as
+    Mitsuba's base ``Texture`` is): the node of its own parameters ``irradiance.<name>``."""
+    params = mi.traverse(emitter)
+    for key in params.keys():
+        if key.startswith("irradiance.") and key.count(".") == 1:
+            return params.properties[key][2]
+    return None
+
+
+def _image_plane_area(emitter) -> float:
+    """A, the area of a projector's image plane at distance 1 (uv in [0, 1]^2), from its own
+    mapping: uv is affine in x / z and y / z, so its slopes between two points each side of
+    the axis give the plane's width and height."""
+    to_world = emitter.world_transform()
+    it = dr.zeros(mi.Interaction3f, 4)
+    it.p = to_world @ mi.Point3f(mi.Float(1, -1, 0, 0), mi.Float(0, 0, 1, -1), mi.Float(1, 1, 1, 1))
+    uv = emitter.sample_direction(it, mi.Point2f(0.5))[0].uv
+    u, v = uv.x.numpy().astype(float), uv.y.numpy().astype(float)
+    width, height = 2.0 / abs(u[0] - u[1]), 2.0 / abs(v[2] - v[3])
+    return float(width * height)
 
 
 def nee_density(scene: mi.Scene, ref: mi.Interaction3f, ds: mi.DirectionSample3f, infinite, active=True):

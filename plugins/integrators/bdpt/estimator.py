@@ -6,12 +6,24 @@ from mitsuba_lab.plugins.integrators.estimator import Estimator
 from mitsuba_lab.plugins.params import bdpt_strategy_kinds
 
 #: Delta emitters whose densities ``endpoints.py`` knows (plugin names, as users write them).
-SUPPORTED_DELTA_EMITTERS = ("point", "spot", "directional")
+SUPPORTED_DELTA_EMITTERS = ("point", "spot", "projector", "directional")
 
 
 #: Sensors whose direction density (and a lens position density, the same for every strategy)
-#: the weights know: the pinhole and the thin lens, 1 / (A' cos^3) from the point on the lens.
-SUPPORTED_SENSORS = ("PerspectiveCamera", "ThinLensCamera")
+#: the weights know: the pinhole and the thin lens, 1 / (A' cos^3) from the point on the lens;
+#: and the orthographic sensor, whose direction is a delta: every strategy but light tracing.
+SUPPORTED_SENSORS = ("PerspectiveCamera", "ThinLensCamera", "OrthographicCamera")
+#: Sensors light tracing cannot reach (a delta direction): t = 1 has no weight, nothing splats.
+UNREACHABLE_SENSORS = ("OrthographicCamera",)
+
+
+def reachable_kinds(traits, kinds) -> set:
+    """The strategy kinds that can contribute on the scene's sensor: all of ``kinds`` but light
+    tracing (``light``) where the sensor's direction is a delta (orthographic)."""
+    kinds = set(kinds)
+    if traits.sensor_kinds and traits.sensor_kinds[0] in UNREACHABLE_SENSORS:
+        kinds.discard("light")
+    return kinds
 
 
 class Bidirectional(Estimator):
@@ -29,9 +41,11 @@ class Bidirectional(Estimator):
         """Left out of scenes it cannot render correctly, with the reason:
 
         * participating media (neither subpath sees them);
-        * emitters whose emission densities ``endpoints.py`` does not know (``projector``, and
-          any plugin of unknown kind);
-        * sensors other than ``perspective`` and ``thinlens`` (orthographic, ...);
+        * emitters whose emission densities ``endpoints.py`` does not know (any plugin of
+          unknown kind);
+        * sensors other than ``perspective``, ``thinlens`` and ``orthographic`` (on an
+          orthographic sensor light tracing, t = 1, contributes nothing: its direction is a
+          delta, so the strategies left must reach the light);
         * a ``strategies`` subset without the strategies some light of the scene needs: an
           emitter seen directly needs ``hit`` or ``light`` (an environment: ``hit``), light
           from delta emitters ``nee`` or ``light`` for its direct part, a scene whose BSDFs
@@ -54,22 +68,25 @@ class Bidirectional(Estimator):
         whose densities it does not know. (Media and strategy subsets only leave light out.)"""
         if traits.other_emitters:
             return ("lab_bdpt does not support emitters of unknown kind (only area, point, spot, "
-                    "directional, constant and envmap)")
+                    "projector, directional, constant and envmap)")
         unsupported = sorted(set(traits.delta_emitters) - set(SUPPORTED_DELTA_EMITTERS))
         if unsupported:
             return f"lab_bdpt does not support {', '.join(unsupported)} emitters yet"
         sensors = traits.sensor_kinds
         if sensors and sensors[0] not in SUPPORTED_SENSORS:
-            return (f"lab_bdpt supports perspective and thinlens sensors only so far, not {sensors[0]} "
-                    f"(light tracing must be able to reach it)")
+            return (f"lab_bdpt supports perspective, thinlens and orthographic sensors only so far, not "
+                    f"{sensors[0]} (its densities are not known)")
         return ""
 
     @staticmethod
     def _subset_problem(traits, kinds) -> str:
         """What light of the scene the enabled strategy kinds cannot reach ('' if none)."""
-        kinds = set(kinds)
+        kinds = reachable_kinds(traits, kinds)
         if not traits.emits_light:
             return ""
+        if not kinds:                                  # (light tracing alone, on an orthographic sensor)
+            return ("cannot render through an orthographic sensor (light tracing cannot reach a sensor "
+                    "whose direction is a delta; that needs 'hit', 'nee' or 'connect')")
         if traits.environment_emitters and "hit" not in kinds:
             return "cannot render the environment seen directly (that needs 'hit')"
         if traits.area_emitters and not kinds & {"hit", "light"}:

@@ -19,6 +19,7 @@ from mitsuba_lab.scene import SceneTraits
 
 from . import splats
 from .camera_subpath import CameraPass, sensor_constants, trace_camera_subpaths
+from .endpoints import direction_is_delta
 from .estimator import Bidirectional
 from .light_subpath import LightTracer, check_variant
 from .vertices import NONE, LightVertices, vertex_bytes
@@ -144,10 +145,14 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     ============= ====== ========================================================
 
     Handles: area lights (any shape, textured or not), point, spot and directional lights,
-    ``constant`` and ``envmap``; smooth, delta and mixed BSDFs (``plastic``: connections use
-    the smooth lobes, the delta lobes are followed); shading normals (the adjoint correction
-    on the light side); the ``perspective`` (pinhole) and ``thinlens`` sensors with any film
-    size and crop window;
+    ``projector`` (constant or textured ``irradiance``: emitted by its texture through its
+    frustum, with the direction density its ``sample_ray`` uses), ``constant`` and ``envmap``;
+    smooth, delta and mixed BSDFs (``plastic``: connections use the smooth lobes, the delta
+    lobes are followed); shading normals (the adjoint correction on the light side); the
+    ``perspective`` (pinhole), ``thinlens`` and ``orthographic`` sensors with any film size
+    and crop window. An orthographic sensor's direction is a delta, so no light vertex can be
+    joined to it: there light tracing (t = 1, ``strategies = "light"``) splats nothing and
+    the MIS weights count it as impossible, and every other strategy renders the image;
     RGB, mono and spectral variants (spectral: one set of wavelengths per pass, drawn from the
     sensor, so a pass is one sample per pixel; ``spectral.py``). Refused in one line:
     polarized variants, other sensors, ``render(develop=False)``, ``samples_per_pass`` (``params.REFUSED_BASE_PARAMETERS``).
@@ -236,7 +241,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                                     self.max_depth, v["rr_depth"], v["hide_emitters"], floor,
                                     traits.hittable_emitters, only, count,
                                     self.pass_grid(vertices, stored, plan, stats), self.connect_share,
-                                    self.connect_one, counters)
+                                    self.connect_one, counters, direction_is_delta(sensor))
             start = time.perf_counter()
             try:
                 if u is None:

@@ -41,7 +41,7 @@ from mitsuba_lab.plugins.integrators.photon.tracer import adjoint_correction
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
 
 from . import splats
-from .endpoints import EmitterTable, camera_direction_pdf, nee_density
+from .endpoints import EmitterTable, camera_direction_pdf, direction_is_delta, nee_density
 from .vertices import NONE, LightVertices
 from .weights import BdptWeights, SubpathMis
 
@@ -140,6 +140,7 @@ class LightTracer:
         self.table = EmitterTable(scene, aim)     # (aim: aim.AimedEmission, or None)
         self.only = only                     # () or the one strategy (s, t) to splat
         self.hide_emitters = hide_emitters   # camera rays pass through area emitters
+        self.reaches_sensor = not direction_is_delta(sensor)   # (orthographic: t = 1 is impossible)
         self.spectra = spectral.EmitterSpectra(scene, plugin) if mi.is_spectral else None
         #: spectral variants: (wavelengths, the sensor's spectral weight) of the pass
         self.pass_spectrum = None
@@ -218,8 +219,9 @@ class LightTracer:
         ds_0.p, ds_0.n, ds_0.uv, ds_0.time, ds_0.emitter = ps.p, ps.n, ps.uv, time, emitter
 
         # ---------------- s = 1, t = 1: the emitter point seen directly ----------------
-        # (light tracing disabled, e.g. lab_vcm's bpm: nothing splatted, the same random numbers)
-        tracing = "light" in w.enabled
+        # (light tracing disabled, e.g. lab_vcm's bpm, or a sensor it cannot reach, orthographic:
+        # nothing splatted, the same random numbers)
+        tracing = "light" in w.enabled and self.reaches_sensor
         u0 = mi.Point2f(rng.next_float32(), rng.next_float32())
         if dr.hint(tracing, mode="scalar"):
             si0 = mi.SurfaceInteraction3f(ps, ray.wavelengths)

@@ -26,7 +26,8 @@ off; SmallVCM's ``dVCM`` and ``dVC``), updated per vertex in O(1):
   kind the innermost ratio belongs to, so a ``strategies`` subset can switch it off).
 
 Delta vertices are exact: a strategy that would join a delta emitter's point by a camera hit, or
-that would connect at a delta-lobe vertex, has density 0 and drops out of every sum. A delta
+that would connect at a delta-lobe vertex, has density 0 and drops out of every sum; so does
+t = 1 when the sensor's direction is a delta (orthographic: ``start_camera``). A delta
 lobe's forward and reverse selection probabilities are taken equal (Fresnel reflection and
 transmission are reciprocal), so they cancel. Delta densities are passed with the delta
 stripped (e.g. a point light's position density is its selection probability), the same way on
@@ -257,10 +258,17 @@ class BdptWeights:
         dvc = _select(delta, 0.0 * dvcm, _gate(self.e["hit"], self._m(cos_light / pdf_emit)))
         return SubpathMis(dvcm, dvc, 1.0, dvc * self.inv_eta, self.start_merges())
 
-    def start_camera(self, pdf_cam) -> SubpathMis:
+    def start_camera(self, pdf_cam, delta=False) -> SubpathMis:
         """State at the sensor after sampling a ray; ``pdf_cam``: the sensor's direction density
-        of it (solid angle, per unit film area as the t = 1 strategy's splat uses it)."""
-        return SubpathMis(self._m(self.light_paths / pdf_cam), 0.0 * pdf_cam, 1.0, 0.0 * pdf_cam)
+        of it (solid angle, per unit film area as the t = 1 strategy's splat uses it).
+
+        ``delta``: the sensor's direction is a delta given its sampled position (orthographic:
+        the film point is the sampled quantity, the direction follows). No light vertex can then
+        be joined to the sensor, so t = 1 has density 0 relative to every other strategy, as a
+        connection at a delta lobe has: ``dvcm``, the t = 1 term that the camera side carries
+        into every other strategy's sum, starts at 0 (``pdf_cam`` then only gives its shape)."""
+        dvcm = _select(delta, 0.0 * pdf_cam, self._m(self.light_paths / pdf_cam))
+        return SubpathMis(dvcm, 0.0 * pdf_cam, 1.0, 0.0 * pdf_cam)
 
     def after_hit(self, state: SubpathMis, dist2, cos_in) -> SubpathMis:
         """State at a new vertex: ``dist2`` the squared segment length, ``cos_in`` |cos| at the new
@@ -398,8 +406,9 @@ class BdptWeights:
 def feasible(delta):
     """Which strategies s = 0 .. k can build a path with these delta flags (numpy bools, k + 1
     long): ``delta[0]`` a delta emitter (it cannot be hit, but can be connected to),
-    ``delta[i]`` for 0 < i < k a delta lobe at x_i (no connection may end there); the sensor
-    vertex ``delta[k]`` must be False."""
+    ``delta[i]`` for 0 < i < k a delta lobe at x_i (no connection may end there), ``delta[k]``
+    a sensor whose direction is a delta (orthographic: no light vertex can be joined to it, so
+    t = 1, s = k, is infeasible)."""
     import numpy as np
 
     delta = np.asarray(delta, dtype=bool)

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from mitsuba_lab.plugins import params as declarations
-from mitsuba_lab.plugins.integrators.bdpt.estimator import Bidirectional
+from mitsuba_lab.plugins.integrators.bdpt.estimator import Bidirectional, reachable_kinds
 
 
 def merges_first(params: dict) -> bool:
@@ -31,7 +31,8 @@ class VertexMerging(Bidirectional):
 
     @classmethod
     def applicability(cls, traits, params: dict) -> tuple[bool, str]:
-        """As lab_bdpt's (media, unknown emitters and sensors, light a mode cannot reach);
+        """As lab_bdpt's (media, unknown emitters and sensors, light a mode cannot reach, light
+        tracing, mode lt, on an orthographic sensor);
         merging reaches any light that arrives at a smooth surface the camera sees."""
         problem = cls.media_problem(traits) or cls.unsupported(traits)
         if problem:
@@ -42,7 +43,7 @@ class VertexMerging(Bidirectional):
         if missing:
             return False, f"lab_vcm with mode={mode} {missing}"
         if (not merges_first(params) and traits.emits_light and traits.delta_emitters
-                and not set(kinds) & {"nee", "light"}):
+                and not reachable_kinds(traits, kinds) & {"nee", "light"}):
             return False, (f"lab_vcm with mode={mode} and merge_first=false cannot render direct light from "
                            f"delta emitters on what the camera sees (that needs merging at the first vertex, "
                            f"'nee' or 'light')")

@@ -161,8 +161,10 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     merges run under a Russian roulette: their weights cannot exceed a bound b known before any
     light vertex is read, so they run with probability min(1, 2b) and count 1 / it (unbiased;
     it skips the lookups MIS would mostly discard, as in diffuse scenes with few light
-    vertices). Supports what lab_bdpt supports (RGB, mono and spectral variants; spectral:
-    one iteration per pass). Statistics of the
+    vertices). Supports what lab_bdpt supports (projector emitters; orthographic sensors, where
+    light tracing cannot reach the sensor: no t = 1 technique there, in any mode or MIS sum,
+    and mode ``lt`` renders nothing; RGB, mono and spectral variants; spectral: one iteration
+    per pass). Statistics of the
     last render (``bdpt_stats()``): light, grid and camera time, the radii; with ``pilot`` the
     pilot's time, whether it chose path tracing alone, the light subpaths it chose and each
     choice's score (relative variance x seconds per iteration).
