@@ -32,3 +32,18 @@ class RayCounters:
         if reset:
             self.reset()
         return {kind: int(v) for kind, v in zip(self.KINDS, values)}
+
+
+class WorkCounters(RayCounters):
+    """lab_bdpt's and lab_vcm's camera-side work, by kind: camera rays, extension rays, next-event
+    estimation's shadow rays, connections (each with its shadow ray) and merge lookups (light
+    vertices read by a merge). lab_vcm's pilot prices a render by them (``selection.PilotCosts``);
+    the light side's work is read from what the light passes already return (``BdptStats``)."""
+    KINDS = ("camera", "extension", "shadow", "connection", "merge")
+
+
+def count(counters: RayCounters | None, kind: str, per_lane=1, active=True):
+    """``counters.add(kind, per_lane, active)``, or nothing without counters (a render that is
+    not counted compiles the same kernels as before counting existed)."""
+    if counters is not None:
+        counters.add(kind, per_lane, active)

@@ -26,6 +26,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators import spawn
+from mitsuba_lab.plugins.integrators.counters import count
 from mitsuba_lab.plugins.integrators.direct import finite_or_zero as spectrum_or_zero
 from mitsuba_lab.plugins.integrators.roulette import kept, russian_roulette
 
@@ -57,6 +58,7 @@ class CameraPass:
     grid: object = None                  # lab_vcm: the light vertices' grid (``merge``), else None
     connect_share: float = 0.0           # lab_vcm: connections' Russian roulette (``connection_roulette``)
     connect_one: bool = False            # lab_vcm: one connection per camera vertex (``connect_to_one_light_vertex``)
+    counters: object = None              # lab_vcm's pilot: the work done, by kind (``counters.WorkCounters``)
 
 
 def sensor_constants(sensor: mi.Sensor) -> tuple[float, tuple]:
@@ -118,6 +120,7 @@ def connection(scene, cp: CameraPass, si, bsdf, beta, mis: SubpathMis, depth, sl
         taken, factor = connection_roulette(value, estimate, cp.connect_share, u, depth_y)
         use &= taken
         value *= factor
+    count(cp.counters, "connection", 1, use)
     use &= ~scene.ray_test(spawn.spawn_ray_to(si, y.p, floor), use)
     return dr.select(use, value, 0.0), prev
 
@@ -214,6 +217,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         # light tracing alone: the camera ray only tells which pixels see something (alpha)
         return mi.Spectrum(0), valid_ray | (active & pi.is_valid())
 
+    count(cp.counters, "camera", 1, active)
     while dr.hint(active, max_iterations=-1, label="lab_bdpt camera subpath"):
         si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
         depth += dr.select(active, 1, 0)       # an escaped ray's segment ends at the environment
@@ -248,6 +252,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         # ---------------- s = 1: next-event estimation (+ the BSDF sample, one call) ----------------
         active_next = active & (depth < max_depth)
         nee_on = smooth & active_next & strategy_mask(cp.only, 1, depth + 1) & ("nee" in w.enabled)
+        count(cp.counters, "shadow", 1, nee_on)
         ds, em_weight = spawn.sample_visible_emitter(scene, si, sampler.next_2d(), floor, nee_on)
         nee_on &= ds.pdf > 0
         wo = si.to_local(ds.d)
@@ -305,6 +310,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         if dr.hint(merging and cp.grid.first_only, mode="scalar"):
             # lab_vcm's ppm: the merge took the smooth lobes' light; only a delta lobe goes on
             active_next &= ~smooth | mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        count(cp.counters, "extension", 1, active_next)
         pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
         active = active_next
     return L, valid_ray

@@ -10,6 +10,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators import spawn, spectral
 from mitsuba_lab.plugins.integrators.aim import AimedEmission
+from mitsuba_lab.plugins.integrators.counters import WorkCounters
 from mitsuba_lab.plugins.integrators.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.params import UNBOUNDED, bdpt_only_strategy
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
@@ -25,7 +26,8 @@ from .weights import BdptWeights
 
 #: max_depth = -1 (unbounded) as the loops hold it.
 DEPTH_UNBOUNDED = 0xFFFFFFFF
-#: First guess of stored light vertices per light subpath (then learnt from each pass).
+#: First guess of stored light vertices per light subpath, at the start of every render (then
+#: learnt from each of its passes: what one render learns never sizes the next one's passes).
 FIRST_GUESS_VERTICES = 3.0
 
 
@@ -170,8 +172,9 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         self.only = bdpt_only_strategy(values.get("only_strategy", ""))
         self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
         self.stats = BdptStats()
-        self.vertices_per_path = FIRST_GUESS_VERTICES
+        self.vertices_per_path = FIRST_GUESS_VERTICES   # (learnt within a render, reset by the next)
         self._pass = None                     # CameraPass while a pass's camera subpaths run
+        self.counters = None                  # WorkCounters while ``count_work`` (lab_vcm's pilot)
 
     # -- Driver -------------------------------------------------------------------
 
@@ -201,7 +204,10 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         tracer = LightTracer(scene, sensor, light_depth, v["rr_depth"], None, floor, only, v["hide_emitters"], aim)
         inv_area, axis = sensor_constants(sensor)
         self.stats = stats = BdptStats()
-        self.connectable_per_path = FIRST_GUESS_VERTICES    # (the same first guess in every render)
+        # what the passes learn lives in this render: the same first guesses in every render
+        self.vertices_per_path = FIRST_GUESS_VERTICES
+        self.connectable_per_path = FIRST_GUESS_VERTICES
+        self.counters = WorkCounters() if self.count_work else None
         total, done, index = None, 0, 0
         light_paths = v.get("light_paths", 1.0)         # (lab_vcm: 1)
         u_passes = spectral.pass_samples(seed, spp) if mi.is_spectral else None   # a pass is one spp there
@@ -227,7 +233,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                                     self.max_depth, v["rr_depth"], v["hide_emitters"], floor,
                                     traits.hittable_emitters, only, count,
                                     self.pass_grid(vertices, stored, plan, stats), self.connect_share,
-                                    self.connect_one)
+                                    self.connect_one, self.counters)
             start = time.perf_counter()
             try:
                 if u is None:
@@ -266,6 +272,9 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     #: The light subpaths' own seed; None: the render's (lab_vcm's pilot crosses light and camera
     #: seeds to tell their shares of the variance apart).
     light_seed = None
+    #: Count the work of each render by kind (``work_counts``; lab_vcm's pilot prices a render by
+    #: it). Off, the kernels are the ones that count nothing.
+    count_work = False
 
     def light_subpaths_that_fit(self) -> int:
         """Light subpaths whose vertices fit in ``max_vertices`` (from the passes so far)."""
@@ -363,6 +372,23 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     def bdpt_stats(self) -> dict:
         """Statistics of the last render (``BdptStats``), as plain values."""
         return self.stats.as_dict()
+
+    def work_counts(self) -> dict[str, int]:
+        """The last render's work by kind (with ``count_work``; else {}): the camera side's rays,
+        connections and merge lookups as counted (``counters.WorkCounters``), the light side's
+        from its passes: ``light_rays`` (each light subpath's emitted ray and one more per
+        surface vertex it reached, those ended by the depth or Russian roulette included),
+        ``sensor_rays`` (light tracing's joins of x_0 and of each such vertex to the sensor, 0
+        without light tracing), ``light_vertices`` (stored, for connections and the grids) and
+        ``passes``. Upper bounds where a subpath ends early; the same render counts the same."""
+        if self.counters is None:
+            return {}
+        s = self.stats
+        traced = s.light_subpaths + s.light_vertices_reached
+        counts = self.counters.read(reset=False)
+        counts.update(light_rays=traced, sensor_rays=traced if "light" in self.kinds else 0,
+                      light_vertices=s.light_vertices_stored, passes=s.passes)
+        return counts
 
     def settings(self) -> dict:
         return dict(self.values)

@@ -36,6 +36,7 @@ from mitsuba_lab.plugins.integrators.bdpt.light_subpath import finite_or_zero, r
 from mitsuba_lab.plugins.integrators.bdpt.vertices import (NO_MERGE, POINT, POINT_WIDTH, RECORD, RECORD_WIDTH,
                                                            read, spectrum_at, unbits, vector)
 from mitsuba_lab.plugins.integrators.bdpt.weights import SubpathMis
+from mitsuba_lab.plugins.integrators.counters import count
 from mitsuba_lab.plugins.integrators.kernels import kernel
 from mitsuba_lab.plugins.integrators.photon.gather import NORMAL_COS
 from mitsuba_lab.plugins.integrators.photon.grid import cell_of, counting_sort, hash_cell, table_size_for
@@ -148,6 +149,7 @@ class VertexGrid:
             bounds = dr.gather(mi.ArrayXu, self.buckets, bucket, reach, shape=(2, dr.width(bucket)))
             j, end = mi.UInt32(bounds[0]), mi.UInt32(bounds[1])
             while dr.hint(j < end, label="lab_vcm merge vertices"):
+                count(cp.counters, "merge", 1, j < end)
                 slot = mi.UInt32(j)
                 point = read(self.points, POINT_WIDTH, slot)
                 p, n_y = vector(point, POINT["p"], mi.Point3f), vector(point, POINT["n"], mi.Normal3f)
