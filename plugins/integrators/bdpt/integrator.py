@@ -50,6 +50,7 @@ class BdptStats:
     chose_path_tracing: bool = False  # lab_vcm pilot: the pilot chose path tracing alone
     light_paths_chosen: float = 0.0   # lab_vcm pilot: the light subpaths per camera subpath chosen (0: none)
     pilot_scores: dict = field(default_factory=dict)   # lab_vcm pilot: relative variance x s per iteration
+    pilot_costs: str = ""             # lab_vcm pilot: how it priced an iteration (counted or measured work)
 
     def as_dict(self) -> dict:
         return asdict(self)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import Counter
 
 import drjit as dr
 import mitsuba as mi
@@ -135,8 +136,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            technique and with path tracing alone, spp / 128
                            iterations each, at least 4; one 4x longer of path
                            tracing; with light_paths_max, one more of every
-                           technique) measures each choice's relative
-                           variance and time per iteration, and the render
+                           technique) estimates each choice's relative
+                           variance and cost per iteration, and the render
                            is the lowest's: lab_mis's (path tracing alone,
                            mode pt's estimator; the pilot's path tracing
                            averaged in; it must win by 0.8x) or every
@@ -146,6 +147,26 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            of two up to it (more pay where light tracing and
                            merging carry the image, as through glass); 0 =
                            light_paths only (Default: 0)
+    pilot_costs     string With pilot, an iteration's cost: ``counted``, the
+                           work the pilot renders count by kind (camera,
+                           extension and shadow rays, connections, merge
+                           lookups, light-subpath and sensor rays, stored
+                           light vertices, passes) times the ``cost_*``
+                           parameters, so the same scene, settings, seed and
+                           variant make the same choice on any machine, busy
+                           or not; ``measured``, the pilot renders' wall-clock
+                           times (the choice then depends on the machine's
+                           load). (Default: ``counted``)
+    cost_*          float  Nanoseconds per unit of each kind of counted work
+                           (``cost_camera_ray``, ``cost_extension_ray``,
+                           ``cost_shadow_ray``, ``cost_connection``,
+                           ``cost_merge``: a light vertex a merge reads,
+                           ``cost_light_ray``, ``cost_sensor_ray``,
+                           ``cost_light_vertex``, ``cost_pass``,
+                           ``cost_path_ray`` and ``cost_path_shadow_ray``:
+                           path tracing alone's). Defaults: fitted once by
+                           ``benchmarks/bench_pilot_costs.py``
+                           (``params.PILOT_WORK_COSTS``)
     max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices, aim, aim_at: as
                            lab_bdpt (``aim``: the light subpaths that merge too).
     =============== ====== ========================================================
@@ -159,8 +180,9 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     vertices). Supports what lab_bdpt supports (RGB, mono and spectral variants; spectral:
     one iteration per pass). Statistics of the
     last render (``bdpt_stats()``): light, grid and camera time, the radii; with ``pilot`` the
-    pilot's time, whether it chose path tracing alone, the light subpaths it chose and each
-    choice's score (relative variance x seconds per iteration).
+    pilot's time, whether it chose path tracing alone, the light subpaths it chose, each
+    choice's score (relative variance x seconds per iteration) and ``pilot_costs``; with counted
+    costs the pilot's counts are in ``pilot_work`` (every technique's and path tracing's).
 
     .. code-block:: python
 
@@ -255,19 +277,24 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     def _pilot(self, scene, sensor, seed: int, spp: int, every, camera):
         """(the choice: a multiple of light_paths, or None for path tracing alone; path tracing's
         pilot image, the mean of its iterations; their number; each choice's relative variance x
-        seconds per iteration), from pilot renders of both (``selection``)."""
+        seconds per iteration), from pilot renders of both (``selection``): priced by the work
+        they count (``pilot_costs = counted``) or by their times (``measured``)."""
         iterations = pilot_iterations(spp)
         ratios = light_path_ratios(self.values["light_paths"], self.values["light_paths_max"])
+        counted = self.values["pilot_costs"] == "counted"
         channels = 1 if mi.is_monochromatic else 3
         base = seed ^ self.PILOT_SALT
         images = {"every": [], "shared": [], "camera": []}
         large, camera_times = [], []
+        every.count_work, every_work = counted, Counter()
+        camera.ray_counts()                     # (path tracing's rays from here on)
         for r in range(PILOT_RENDERS):
             for name, integrator in (("every", every), ("camera", camera)):
                 image, seconds = self._timed(integrator, scene, sensor, pass_seed(base, r + 1), iterations)
                 images[name].append(np.array(image)[..., :channels])
                 if name == "every":
                     large.append(self._pass_times(every))
+                    every_work.update(every.work_counts())
                 else:
                     camera_times.append(seconds)
         if len(ratios) > 1:       # render 0's camera seed, a light seed of its own
@@ -275,18 +302,27 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             image, _ = self._timed(every, scene, sensor, pass_seed(base, 1), iterations)
             images["shared"].append(np.array(image)[..., :channels])
             every.light_seed = None
-        # marginal costs of an iteration: every technique's from one iteration more than none,
-        # path tracing's (cheaper, its times noisier) from PATH_TRACING_SIZE x the iterations; the
-        # one-iteration render twice, the second timed (on a fresh clone a first one took 1.1 s,
-        # not ~20 ms, and every iteration looked costless)
-        for _ in range(2):
-            self._timed(every, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), 1)
+        if not counted:
+            # marginal costs of an iteration: every technique's from one iteration more than none,
+            # path tracing's (cheaper, its times noisier) from PATH_TRACING_SIZE x the iterations;
+            # the one-iteration render twice, the second timed (on a fresh clone a first one took
+            # 1.1 s, not ~20 ms, and every iteration looked costless)
+            for _ in range(2):
+                self._timed(every, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), 1)
         longer = PATH_TRACING_SIZE * iterations
         image, camera_long = self._timed(camera, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), longer)
         film = sensor.film()
-        costs = PilotCosts.from_sizes(self._pass_times(every), tuple(np.median(np.array(large), axis=0)),
-                                      iterations, every.pass_iterations(int(film.size()[0]) * int(film.size()[1])),
-                                      (float(np.median(camera_times)), camera_long), iterations, longer)
+        pass_iterations = every.pass_iterations(int(film.size()[0]) * int(film.size()[1]))
+        if counted:
+            path_work = camera.ray_counts()
+            costs = PilotCosts.from_counts(every_work, PILOT_RENDERS * iterations, pass_iterations, path_work,
+                                           PILOT_RENDERS * iterations + longer, self.values)
+            self.pilot_work = {"every": dict(every_work), "path tracing": path_work}
+        else:
+            costs = PilotCosts.from_sizes(self._pass_times(every), tuple(np.median(np.array(large), axis=0)),
+                                          iterations, pass_iterations,
+                                          (float(np.median(camera_times)), camera_long), iterations, longer)
+            self.pilot_work = {}
         camera_images = np.array(images["camera"])
         variances = pilot_variances(np.array(images["every"]), np.array(images["shared"]) if images["shared"] else None,
                                     camera_images, iterations, np.array(image)[..., :channels], longer)
@@ -318,6 +354,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             image = chosen.render(scene, sensor, seed, spp, develop, evaluate)
             self.stats = chosen.stats
         self.stats.pilot_s, self.stats.chose_path_tracing = pilot_s, choice is None
+        self.stats.pilot_costs = self.values["pilot_costs"]
         self.stats.light_paths_chosen = 0.0 if choice is None else self.values["light_paths"] * choice
         self.stats.pilot_scores = {("path tracing" if r is None else self.values["light_paths"] * r): float(v)
                                    for r, v in scores.items()}
