@@ -281,10 +281,10 @@ LAB_VCM = (
           "VCM); false leaves the light arriving there to light tracing, NEE and connections, and that merge "
           "out of every MIS sum (ppm always merges there)"),
     Param("pilot", bool, False, "efficiency-aware choice for the whole image (modes vcm and bpt): a pilot (1/8 "
-          "of the iterations in all) measures relative variance x time per iteration with every technique and with "
-          "path tracing alone, and the render uses the lower (path tracing alone: mode pt, lab_mis's estimator)"),
+          "of the iterations in all) estimates relative variance x cost per iteration (pilot_costs) with every "
+          "technique and with path tracing alone, and the render uses the lower (path tracing alone: mode pt, lab_mis's estimator)"),
     Param("light_paths_max", float, 0.0, "with pilot: the most light subpaths per camera subpath the pilot may "
-          "choose, powers of two times light_paths up to it, by their measured relative variance x time; 0 = "
+          "choose, powers of two times light_paths up to it, by their relative variance x cost; 0 = "
           "light_paths only", check=lambda v: v == 0.0 or 1.0 / 64 <= v <= 64,
           expected="0 or a number in [1/64, 64]"),
     Param("pilot_costs", str, "counted", "with pilot: how the pilot prices an iteration: counted, its pilot renders' "
