@@ -236,6 +236,34 @@ VCM_MODES = {
 #: Density-estimation kernels (``integrators/kernels.py``), lab_vcm's ``kernel``.
 KERNELS = ("epanechnikov", "constant")
 
+#: How lab_vcm's pilot prices an iteration (``pilot_costs``).
+PILOT_COSTS = ("counted", "measured")
+
+
+def _cost(name: str, default: float, what: str) -> Param:
+    return Param(name, float, default, f"with pilot_costs = counted: nanoseconds per {what}",
+                 check=lambda v: v >= 0.0 and math.isfinite(v), expected="a finite number >= 0")
+
+
+#: lab_vcm's pilot with ``pilot_costs = counted``: the cost of each kind of counted work, in
+#: nanoseconds (``selection.PilotCosts.from_counts``). The defaults were fitted once by
+#: ``benchmarks/bench_pilot_costs.py`` (48x48, 1 and 8 iterations, max_depth 8, medians of 3 rounds
+#: on the Cornell box, the caustic and light_in_glass; 2 shared cores, llvm_ad_rgb, Dr.Jit 1.5):
+#: only their ratios matter to the choice, and only roughly.
+PILOT_WORK_COSTS = (
+    _cost("cost_camera_ray", 980.0, "camera ray of every technique's camera subpaths (with its first vertex)"),
+    _cost("cost_extension_ray", 660.0, "extension ray of every technique's camera subpaths (with its vertex)"),
+    _cost("cost_shadow_ray", 0.0, "next-event estimation's shadow ray at a camera vertex"),
+    _cost("cost_connection", 1250.0, "connection of a camera vertex to a light vertex (with its shadow ray)"),
+    _cost("cost_merge", 410.0, "light vertex a merge lookup reads"),
+    _cost("cost_light_ray", 180.0, "light-subpath ray (with its vertex)"),
+    _cost("cost_sensor_ray", 220.0, "light tracing's join of a light vertex to the sensor (with its splat)"),
+    _cost("cost_light_vertex", 760.0, "stored light vertex (storing and bucketing it)"),
+    _cost("cost_pass", 71e6, "pass of every technique (its fixed cost: Python, kernel launches)"),
+    _cost("cost_path_ray", 180.0, "camera or extension ray of path tracing alone (lab_mis)"),
+    _cost("cost_path_shadow_ray", 550.0, "shadow ray of path tracing alone (lab_mis)"),
+)
+
 #: lab_vcm (vertex connection and merging).
 LAB_VCM = (
     Param("mode", str, "vcm", "which techniques: vcm (all), bpt (connections: lab_bdpt), bpm (merging), "
@@ -256,12 +284,17 @@ LAB_VCM = (
           "VCM); false leaves the light arriving there to light tracing, NEE and connections, and that merge "
           "out of every MIS sum (ppm always merges there)"),
     Param("pilot", bool, False, "efficiency-aware choice for the whole image (modes vcm and bpt): a pilot (1/8 "
-          "of the iterations in all) measures relative variance x time per iteration with every technique and with "
-          "path tracing alone, and the render uses the lower (path tracing alone: mode pt, lab_mis's estimator)"),
+          "of the iterations in all) estimates relative variance x cost per iteration (pilot_costs) with every "
+          "technique and with path tracing alone, and the render uses the lower (path tracing alone: mode pt, lab_mis's estimator)"),
     Param("light_paths_max", float, 0.0, "with pilot: the most light subpaths per camera subpath the pilot may "
-          "choose, powers of two times light_paths up to it, by their measured relative variance x time; 0 = "
+          "choose, powers of two times light_paths up to it, by their relative variance x cost; 0 = "
           "light_paths only", check=lambda v: v == 0.0 or 1.0 / 64 <= v <= 64,
           expected="0 or a number in [1/64, 64]"),
+    Param("pilot_costs", str, "counted", "with pilot: how the pilot prices an iteration: counted, its pilot renders' "
+          "work by kind (rays, connections, merge lookups, stored light vertices, passes) times the cost_* parameters, "
+          "so the choice depends only on the scene, settings, seed and variant; or measured, their wall-clock times "
+          "(the choice then depends on the machine's load)", choices=PILOT_COSTS),
+) + PILOT_WORK_COSTS + (
     Param("merge_vertices", str, "all", "which light vertices merge (mode vcm): all, or caustic, only those "
           "reached through a delta lobe (Jensen's caustic photons); merging is then a technique only there, and "
           "every other path's light comes from the other techniques", choices=("all", "caustic")),
@@ -270,8 +303,8 @@ LAB_VCM = (
           "weights counting a connection as 1 / (mean vertices per light subpath)", choices=("all", "one")),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
                                             "max_vertices", "aim", "aim_at")) + (
-    replace(LAB_BDPT[-1], doc="count rays as lab_bdpt does, and merging's grid lookups (one per camera vertex "
-                              "that merges) under 'merge' (ray_counts())"),
+    replace(LAB_BDPT[-1], doc="count rays as lab_bdpt does, and under 'merge' the light vertices merging's grid "
+                              "lookups read (ray_counts())"),
 )
 
 #: Shared by every lab sampler (``LabSampler``).

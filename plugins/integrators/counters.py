@@ -42,8 +42,8 @@ class RayCounters:
         return {kind: int(v) for kind, v in zip(self.kinds, values)}
 
 
-def tally(counters: RayCounters | None, kind: str, active) -> None:
-    """One ray of ``kind`` for each ``active`` lane, when counting (``counters`` not None):
-    nothing is traced into the kernel otherwise."""
+def tally(counters: RayCounters | None, kind: str, active, per_lane=1) -> None:
+    """``per_lane`` (one, or a UInt32) of ``kind`` for each ``active`` lane, when counting
+    (``counters`` not None): nothing is traced into the kernel otherwise."""
     if counters is not None:
-        counters.add(kind, mi.UInt32(1), active)
+        counters.add(kind, mi.UInt32(per_lane), active)

@@ -187,10 +187,11 @@ def test_the_pilot_finds_where_more_light_subpaths_lower_the_variance():
     """`vcm_auto`'s pilot at 64x64 on 3 seeds: on light_in_glass (its room lit only through the
     glass, so light tracing and merging carry it) the camera subpaths' share of the variance is
     below a fifth (measured 0.02 to 0.07): more light subpaths lower the rest; on the caustic
-    scene above a half (0.86 to 0.97). The count it then picks also depends on the pass times of
-    the process it runs in (a pass's own cost, ~15 ms in a fresh process, measured 107 ms late in
-    the test suite), so it is not asserted here (``choose`` is, above); on the Cornell box,
-    rendering 512 iterations, it chooses path tracing alone."""
+    scene above a half (0.86 to 0.97). The count it then picks also depends on the ``cost_*``
+    parameters (with ``pilot_costs = measured``, on the pass times of the process it runs in: a
+    pass's own cost, ~15 ms in a fresh process, measured 107 ms late in the test suite), so it is
+    not asserted here (``choose`` is, above); on the Cornell box, rendering 512 iterations, it
+    chooses path tracing alone."""
     for name, low in (("stiff/light_in_glass.xml", True), ("caustic.xml", False)):
         scene = load_scene(scene_path(name), res=64)
         integrator = vcm(**AUTO)

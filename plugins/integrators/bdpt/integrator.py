@@ -27,7 +27,8 @@ from .weights import BdptWeights
 
 #: max_depth = -1 (unbounded) as the loops hold it.
 DEPTH_UNBOUNDED = 0xFFFFFFFF
-#: First guess of stored light vertices per light subpath (then learnt from each pass).
+#: First guess of stored light vertices per light subpath, at the start of every render (then
+#: learnt from each of its passes: what one render learns never sizes the next one's passes).
 FIRST_GUESS_VERTICES = 3.0
 
 
@@ -50,6 +51,7 @@ class BdptStats:
     chose_path_tracing: bool = False  # lab_vcm pilot: the pilot chose path tracing alone
     light_paths_chosen: float = 0.0   # lab_vcm pilot: the light subpaths per camera subpath chosen (0: none)
     pilot_scores: dict = field(default_factory=dict)   # lab_vcm pilot: relative variance x s per iteration
+    pilot_costs: str = ""             # lab_vcm pilot: how it priced an iteration (counted or measured work)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -182,6 +184,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
         self.stats = BdptStats()
         self.counters = RayCounters(self.RAY_KINDS)
+        self._counted_before = {}             # ray counts when the last render began (work_counts)
         self.vertices_per_path = FIRST_GUESS_VERTICES
         self._pass = None                     # CameraPass while a pass's camera subpaths run
 
@@ -215,7 +218,10 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         tracer.counters = counters = self.counters if v["count_rays"] else None
         inv_area, axis = sensor_constants(sensor, self.ESTIMATOR.plugin_name)
         self.stats = stats = BdptStats()
-        self.connectable_per_path = FIRST_GUESS_VERTICES    # (the same first guess in every render)
+        # what the passes learn lives in this render: the same first guesses in every render
+        self.vertices_per_path = FIRST_GUESS_VERTICES
+        self.connectable_per_path = FIRST_GUESS_VERTICES
+        self._counted_before = self.counters.read(reset=False) if counters is not None else {}
         total, done, index = None, 0, 0
         light_paths = v.get("light_paths", 1.0)         # (lab_vcm: 1)
         u_passes = spectral.pass_samples(seed, spp) if mi.is_spectral else None   # a pass is one spp there
@@ -280,7 +286,6 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     #: The light subpaths' own seed; None: the render's (lab_vcm's pilot crosses light and camera
     #: seeds to tell their shares of the variance apart).
     light_seed = None
-
     def light_subpaths_that_fit(self) -> int:
         """Light subpaths whose vertices fit in ``max_vertices`` (from the passes so far)."""
         return max(1, int(self.values["max_vertices"] / (1.25 * self.vertices_per_path)))
@@ -386,6 +391,18 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     def bdpt_stats(self) -> dict:
         """Statistics of the last render (``BdptStats``), as plain values."""
         return self.stats.as_dict()
+
+    def work_counts(self) -> dict[str, int]:
+        """The last render's work by kind (lab_vcm's pilot prices a render by it): its rays as
+        ``ray_counts()`` counts them (needs ``count_rays``; else {}), and from its passes
+        ``light_vertices`` (stored, for connections and the grids) and ``passes``. The same
+        scene, settings, seed and variant count the same."""
+        if not self.values["count_rays"]:
+            return {}
+        now = self.counters.read(reset=False)
+        counts = {kind: now[kind] - self._counted_before.get(kind, 0) for kind in now}
+        counts.update(light_vertices=self.stats.light_vertices_stored, passes=self.stats.passes)
+        return counts
 
     def settings(self) -> dict:
         return dict(self.values)

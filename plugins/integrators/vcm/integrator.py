@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import Counter
 
 import drjit as dr
 import mitsuba as mi
@@ -135,8 +136,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            technique and with path tracing alone, spp / 128
                            iterations each, at least 4; one 4x longer of path
                            tracing; with light_paths_max, one more of every
-                           technique) measures each choice's relative
-                           variance and time per iteration, and the render
+                           technique) estimates each choice's relative
+                           variance and cost per iteration, and the render
                            is the lowest's: lab_mis's (path tracing alone,
                            mode pt's estimator; the pilot's path tracing
                            averaged in; it must win by 0.8x) or every
@@ -147,10 +148,30 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            merging carry the image, as through glass); 0 =
                            light_paths only (Default: 0)
     count_rays      bool   Count rays as lab_bdpt does (``ray_counts()``), and
-                           merging's grid lookups, one per camera vertex whose
-                           merge runs, under ``merge`` (lookups, not rays). With
+                           under ``merge`` the light vertices merging's grid
+                           lookups read (reads, not rays). With
                            ``pilot``, the pilot's rays and those of the render
                            it chose are counted too (Default: true)
+    pilot_costs     string With pilot, an iteration's cost: ``counted``, the
+                           work the pilot renders count by kind (camera,
+                           extension and shadow rays, connections, merge
+                           lookups, light-subpath and sensor rays, stored
+                           light vertices, passes) times the ``cost_*``
+                           parameters, so the same scene, settings, seed and
+                           variant make the same choice on any machine, busy
+                           or not; ``measured``, the pilot renders' wall-clock
+                           times (the choice then depends on the machine's
+                           load). (Default: ``counted``)
+    cost_*          float  Nanoseconds per unit of each kind of counted work
+                           (``cost_camera_ray``, ``cost_extension_ray``,
+                           ``cost_shadow_ray``, ``cost_connection``,
+                           ``cost_merge``: a light vertex a merge reads,
+                           ``cost_light_ray``, ``cost_sensor_ray``,
+                           ``cost_light_vertex``, ``cost_pass``,
+                           ``cost_path_ray`` and ``cost_path_shadow_ray``:
+                           path tracing alone's). Defaults: fitted once by
+                           ``benchmarks/bench_pilot_costs.py``
+                           (``params.PILOT_WORK_COSTS``)
     max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices, aim, aim_at: as
                            lab_bdpt (``aim``: the light subpaths that merge too).
     =============== ====== ========================================================
@@ -166,8 +187,9 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     and mode ``lt`` renders nothing; RGB, mono and spectral variants; spectral: one iteration
     per pass). Statistics of the
     last render (``bdpt_stats()``): light, grid and camera time, the radii; with ``pilot`` the
-    pilot's time, whether it chose path tracing alone, the light subpaths it chose and each
-    choice's score (relative variance x seconds per iteration).
+    pilot's time, whether it chose path tracing alone, the light subpaths it chose, each
+    choice's score (relative variance x seconds per iteration) and ``pilot_costs``; with counted
+    costs the pilot's counts are in ``pilot_work`` (every technique's and path tracing's).
 
     .. code-block:: python
 
@@ -234,7 +256,9 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     def _companion(self, ratio: float = 1.0):
         """lab_vcm with every technique of this one, without the pilot, at ``ratio`` x its
         light_paths."""
-        params = dict(self.values, pilot=False, light_paths_max=0.0, light_paths=self.values["light_paths"] * ratio)
+        # (counting rays always: the counted pilot prices its renders by them)
+        params = dict(self.values, pilot=False, light_paths_max=0.0, light_paths=self.values["light_paths"] * ratio,
+                      count_rays=True)
         if self.merging:
             params["radius"] = self._radius
         return mi.load_dict({"type": "lab_vcm", **params})
@@ -242,8 +266,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     def _path_tracer(self):
         """lab_mis with this one's path length, roulette, hidden emitters and heuristic: path
         tracing alone, the estimator of lab_vcm's mode pt."""
-        shared = ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta", "count_rays")
-        return mi.load_dict({"type": "lab_mis", **{k: self.values[k] for k in shared}})
+        shared = ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta")
+        return mi.load_dict({"type": "lab_mis", "count_rays": True, **{k: self.values[k] for k in shared}})
 
     @staticmethod
     def _timed(integrator, scene, sensor, seed: int, spp: int, develop=True, evaluate=True):
@@ -263,19 +287,24 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     def _pilot(self, scene, sensor, seed: int, spp: int, every, camera):
         """(the choice: a multiple of light_paths, or None for path tracing alone; path tracing's
         pilot image, the mean of its iterations; their number; each choice's relative variance x
-        seconds per iteration), from pilot renders of both (``selection``)."""
+        seconds per iteration), from pilot renders of both (``selection``): priced by the work
+        they count (``pilot_costs = counted``) or by their times (``measured``)."""
         iterations = pilot_iterations(spp)
         ratios = light_path_ratios(self.values["light_paths"], self.values["light_paths_max"])
+        counted = self.values["pilot_costs"] == "counted"
         channels = 1 if mi.is_monochromatic else 3
         base = seed ^ self.PILOT_SALT
         images = {"every": [], "shared": [], "camera": []}
         large, camera_times = [], []
+        every_work = Counter()
+        camera.ray_counts()                     # (path tracing's rays from here on)
         for r in range(PILOT_RENDERS):
             for name, integrator in (("every", every), ("camera", camera)):
                 image, seconds = self._timed(integrator, scene, sensor, pass_seed(base, r + 1), iterations)
                 images[name].append(np.array(image)[..., :channels])
                 if name == "every":
                     large.append(self._pass_times(every))
+                    every_work.update(every.work_counts())
                 else:
                     camera_times.append(seconds)
         if len(ratios) > 1:       # render 0's camera seed, a light seed of its own
@@ -283,18 +312,27 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             image, _ = self._timed(every, scene, sensor, pass_seed(base, 1), iterations)
             images["shared"].append(np.array(image)[..., :channels])
             every.light_seed = None
-        # marginal costs of an iteration: every technique's from one iteration more than none,
-        # path tracing's (cheaper, its times noisier) from PATH_TRACING_SIZE x the iterations; the
-        # one-iteration render twice, the second timed (on a fresh clone a first one took 1.1 s,
-        # not ~20 ms, and every iteration looked costless)
-        for _ in range(2):
-            self._timed(every, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), 1)
+        if not counted:
+            # marginal costs of an iteration: every technique's from one iteration more than none,
+            # path tracing's (cheaper, its times noisier) from PATH_TRACING_SIZE x the iterations;
+            # the one-iteration render twice, the second timed (on a fresh clone a first one took
+            # 1.1 s, not ~20 ms, and every iteration looked costless)
+            for _ in range(2):
+                self._timed(every, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), 1)
         longer = PATH_TRACING_SIZE * iterations
         image, camera_long = self._timed(camera, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), longer)
         film = sensor.film()
-        costs = PilotCosts.from_sizes(self._pass_times(every), tuple(np.median(np.array(large), axis=0)),
-                                      iterations, every.pass_iterations(int(film.size()[0]) * int(film.size()[1])),
-                                      (float(np.median(camera_times)), camera_long), iterations, longer)
+        pass_iterations = every.pass_iterations(int(film.size()[0]) * int(film.size()[1]))
+        if counted:
+            path_work = camera.ray_counts(reset=False)
+            costs = PilotCosts.from_counts(every_work, PILOT_RENDERS * iterations, pass_iterations, path_work,
+                                           PILOT_RENDERS * iterations + longer, self.values)
+            self.pilot_work = {"every": dict(every_work), "path tracing": path_work}
+        else:
+            costs = PilotCosts.from_sizes(self._pass_times(every), tuple(np.median(np.array(large), axis=0)),
+                                          iterations, pass_iterations,
+                                          (float(np.median(camera_times)), camera_long), iterations, longer)
+            self.pilot_work = {}
         camera_images = np.array(images["camera"])
         variances = pilot_variances(np.array(images["every"]), np.array(images["shared"]) if images["shared"] else None,
                                     camera_images, iterations, np.array(image)[..., :channels], longer)
@@ -327,9 +365,10 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             image = chosen.render(scene, sensor, seed, spp, develop, evaluate)
             self.stats = chosen.stats
         for integrator in (camera, every, chosen):    # (the pilot's rays are this render's cost too)
-            if integrator is not None:
+            if integrator is not None and self.values["count_rays"]:
                 self.counters.add_counts(integrator.ray_counts())
         self.stats.pilot_s, self.stats.chose_path_tracing = pilot_s, choice is None
+        self.stats.pilot_costs = self.values["pilot_costs"]
         self.stats.light_paths_chosen = 0.0 if choice is None else self.values["light_paths"] * choice
         self.stats.pilot_scores = {("path tracing" if r is None else self.values["light_paths"] * r): float(v)
                                    for r, v in scores.items()}

@@ -139,7 +139,7 @@ class VertexGrid:
         result = mi.Spectrum(0)
         k = mi.UInt32(0)
         active = mi.Bool(active) & taken
-        tally(cp.counters, "merge", active)         # (a grid lookup, not a ray)
+        reads = mi.UInt32(0)                        # light vertices this merge reads (count_rays)
         while dr.hint(active & (k < 8), label="lab_vcm merge cells"):
             cell = corner + mi.Vector3i(mi.Int32(k & 1), mi.Int32((k >> 1) & 1), mi.Int32(k >> 2))
             bucket = hash_cell(cell, self.mask, iteration)
@@ -149,6 +149,8 @@ class VertexGrid:
             reach = active & (dr.squared_norm(gap) < radius2)
             bounds = dr.gather(mi.ArrayXu, self.buckets, bucket, reach, shape=(2, dr.width(bucket)))
             j, end = mi.UInt32(bounds[0]), mi.UInt32(bounds[1])
+            if dr.hint(cp.counters is not None, mode="scalar"):
+                reads += dr.select(j < end, end - j, 0)
             while dr.hint(j < end, label="lab_vcm merge vertices"):
                 slot = mi.UInt32(j)
                 point = read(self.points, POINT_WIDTH, slot)
@@ -172,4 +174,5 @@ class VertexGrid:
                     result += dr.select(cos_g > 0, f_cos * beta_y * (weight / dr.maximum(cos_g, 1e-30)), 0.0)
                 j += 1
             k += 1
+        tally(cp.counters, "merge", taken, reads)
         return beta * result * (scale * dr.gather(mi.Float, self.normalisation, iteration))

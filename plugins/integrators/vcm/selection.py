@@ -24,8 +24,13 @@ measured variance and cost; this is its coarsest form, one choice for the whole 
   misses (a caustic, a light behind glass) counts as error, not as a small variance, while in
   the renders with shared seeds light both sample alike counts for neither (a pilot's own spread
   underestimates a heavy tail: experiments/vcm_notes.md);
-* cost per iteration, from the pilot's times at two sizes (``PilotCosts``; one render of every
-  technique with one iteration, one of path tracing with ``PATH_TRACING_SIZE`` times as many): the light pass and
+* cost per iteration (``PilotCosts``), with ``pilot_costs = counted`` (the default) the work the
+  pilot renders counted, by kind (``WORK_COSTS``: rays, connections, merge lookups, stored light
+  vertices, passes), times the ``cost_*`` parameters (nanoseconds per unit, fitted once by
+  ``benchmarks/bench_pilot_costs.py``), so the choice is a function of the scene, the settings,
+  the seed and the variant alone; with ``measured``, from the pilot's times at two sizes (one
+  render of every technique with one iteration, one of path tracing with ``PATH_TRACING_SIZE``
+  times as many), so it also depends on the machine's load. Either way the light pass and
   grid grow with the light subpaths, the camera pass (which merges) as their square root
   (``bench_vcm.py``: 3.9x and 4.0x from 1 to 16 light subpaths on light_in_glass and the
   Cornell box), and a pass's fixed cost is shared by fewer iterations;
@@ -61,6 +66,15 @@ PATH_TRACING_SIZE = 4
 PATH_TRACING_MARGIN = 0.8
 #: Most light subpaths per camera subpath lab_vcm traces (``params.LAB_VCM``'s light_paths).
 MOST_LIGHT_PATHS = 64.0
+#: The parameter that prices each kind of counted work (``pilot_costs = counted``), per part of an
+#: iteration: every technique's light passes and grids (lab_bdpt's ``work_counts()``, light
+#: side), its camera passes (camera side), and path tracing's (lab_mis's ``ray_counts()``).
+WORK_COSTS = {
+    "light": {"light": "cost_light_ray", "sensor": "cost_sensor_ray", "light_vertices": "cost_light_vertex"},
+    "camera": {"camera": "cost_camera_ray", "extension": "cost_extension_ray", "shadow": "cost_shadow_ray",
+               "connection": "cost_connection", "merge": "cost_merge"},
+    "path_tracing": {"camera": "cost_path_ray", "extension": "cost_path_ray", "shadow": "cost_path_shadow_ray"},
+}
 
 
 def pilot_iterations(spp: int) -> int:
@@ -148,6 +162,20 @@ class PilotCosts:
         per_pass = max(small[0] + small[1] - light - camera, 0.0)
         path = max(path_tracing[1] - path_tracing[0], 0.0) / max(path_large - path_small, 1)
         return PilotCosts(camera, light, per_pass, pass_iterations, path)
+
+    @staticmethod
+    def from_counts(every: dict, iterations: int, pass_iterations: float, path_tracing: dict, path_iterations: int,
+                    costs: dict):
+        """From counted work (``pilot_costs = counted``): ``every``, every technique's counts over
+        renders of ``iterations`` iterations in all, ``path_tracing``, path tracing's over
+        ``path_iterations``; ``costs``, lab_vcm's parameters (``WORK_COSTS``: nanoseconds per
+        unit; ``cost_pass`` per pass). No clock is read: the same counts, the same costs."""
+        def seconds(counts: dict, part: str) -> float:
+            return 1e-9 * sum(counts.get(kind, 0) * costs[name] for kind, name in WORK_COSTS[part].items())
+
+        return PilotCosts(seconds(every, "camera") / iterations, seconds(every, "light") / iterations,
+                          1e-9 * costs["cost_pass"], pass_iterations,
+                          seconds(path_tracing, "path_tracing") / path_iterations)
 
     def every_at(self, ratio: float) -> float:
         """Every technique's with ``ratio`` x light_paths (passes hold 1 / ratio the iterations)."""

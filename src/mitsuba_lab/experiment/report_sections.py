@@ -36,7 +36,7 @@ OTHER_RAY_KINDS = ("connection", "light", "sensor", "merge", "photon")
 
 def rays_cell(rays_per_sample: dict) -> str:
     """Extension and shadow rays per sample, then the other kinds an integrator counts (lab_bdpt's
-    connection, light subpath and sensor rays, lab_vcm's merge lookups, lab_photon's photon segments) by name; n/a when the
+    connection, light subpath and sensor rays, the light vertices lab_vcm's merges read, lab_photon's photon segments) by name; n/a when the
     integrator counts none."""
     if not rays_per_sample:
         return fmt(None)
