@@ -55,7 +55,7 @@ def main(argv=None) -> int:
 
     import mitsuba as mi
 
-    import mitsuba_lab  # noqa: F401
+    import mitsuba_lab
     from agreement import block_test, renders
     from mitsuba_lab.scene import load_scene, make_integrator
     import user_scenes
@@ -66,7 +66,7 @@ def main(argv=None) -> int:
     print("|---|---|---|---|---|---|---|---|")
     failures = 0
     for variant in args.variants.split(","):
-        mi.set_variant(variant)
+        mitsuba_lab.use_variant(variant)
         for name in args.scenes.split(","):
             if name in USER_SCENES:
                 scene, depth = user_scenes.load(assets, name), user_scenes.max_depth(name)
