@@ -53,8 +53,6 @@ def main(argv=None) -> int:
     parser.add_argument("--estimators", default=",".join(ESTIMATORS))
     args = parser.parse_args(argv)
 
-    import mitsuba as mi
-
     import mitsuba_lab
     from agreement import block_test, renders
     from mitsuba_lab.scene import load_scene, make_integrator
