@@ -142,15 +142,24 @@ LAB_MIS = PATH_TRACER + (
     Param("emitter_samples", int, 1, "shadow rays per vertex, n_L", **_int_at_least(1)),
 )
 
-#: Aimed emission (``integrators/aim.py``): lab_photon, lab_bdpt and lab_vcm.
-AIM = (
-    Param("aim", float, 0.0, "share of an area light's emitted directions aimed at the bounding spheres of the "
-          "aim_at shapes (Jensen's projection map, simplest form); 0 = cosine-weighted only, as Mitsuba emits",
-          check=lambda v: 0.0 <= v < 1.0, expected="a number in [0, 1)"),
+#: Aimed emission (``integrators/aim.py``): lab_photon, lab_bdpt and lab_vcm. Aiming changes nothing in
+#: a scene without aim_at shapes (the light emits as Mitsuba samples it), so it is on by default.
+AIM_DEFAULT, VCM_AIM_DEFAULT = 0.5, 0.9
+
+
+def _aim(default: float) -> tuple[Param, ...]:
+    return (
+        Param("aim", float, default, "share of an area light's emitted directions aimed at the bounding spheres of "
+              "the aim_at shapes, where a scene has them (Jensen's projection map, simplest form); 0 = "
+              "cosine-weighted only, as Mitsuba emits",
+              check=lambda v: 0.0 <= v < 1.0, expected="a number in [0, 1)"),
     Param("aim_at", str, "specular", "shapes aimed at: specular (every shape whose BSDF has only delta lobes) "
           "or shape ids joined by ','", check=lambda v: bool(v.strip()) and all(t.strip() for t in v.split(",")),
           expected="'specular' or shape ids joined by ','"),
-)
+    )
+
+
+AIM = _aim(AIM_DEFAULT)
 
 #: lab_photon (progressive photon mapping). Its max_depth is -1 or >= 1: a camera
 #: path needs one segment to reach a photon.
@@ -159,7 +168,8 @@ LAB_PHOTON = (
     Param("passes", int, 16, "passes (photon maps) averaged", **_int_at_least(1)),
     Param("alpha", float, 2.0 / 3.0, "radius reduction r_{i+1}^2 = r_i^2 (i + alpha) / (i + 1)",
           check=lambda v: 0.0 < v < 1.0, expected="a number in (0, 1)"),
-    Param("radius", float, 0.0, "first-pass radius in scene units; 0 = automatic",
+    Param("radius", float, 0.0, "first-pass radius in scene units; 0 = automatic (one pixel's width at the "
+          "first surfaces the camera sees)",
           check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
     Param("max_depth", int, UNBOUNDED, "longest path in segments (camera + light subpath), -1 unbounded",
           check=lambda v: v == UNBOUNDED or v >= 1, expected="-1 (unbounded) or an integer >= 1"),
@@ -264,13 +274,16 @@ PILOT_WORK_COSTS = (
     _cost("cost_path_shadow_ray", 550.0, "shadow ray of path tracing alone (lab_mis)"),
 )
 
+#: lab_vcm's pilot: the most light subpaths per camera subpath it may choose unless told.
+VCM_LIGHT_PATHS_MAX = 16.0
+
 #: lab_vcm (vertex connection and merging).
 LAB_VCM = (
     Param("mode", str, "vcm", "which techniques: vcm (all), bpt (connections: lab_bdpt), bpm (merging), "
           "ppm (merging at the first smooth camera vertex), lt (light tracing), pt (path tracing: lab_mis)",
           choices=tuple(VCM_MODES)),
     Param("radius", float, 0.0, "first iteration's merging radius r_1 in scene units; 0 = automatic "
-          "(the scene's bounding-box diagonal over the film's larger side)",
+          "(one pixel's width at the first surfaces the camera sees)",
           check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
     Param("alpha", float, 0.75, "radius schedule r_i = r_1 i^((alpha - 1) / 2), iteration i = sample i",
           check=lambda v: 0.0 < v < 1.0, expected="a number in (0, 1)"),
@@ -283,11 +296,12 @@ LAB_VCM = (
     Param("merge_first", bool, False, "merge at the camera's first vertex too (modes vcm and bpm; Georgiev's "
           "VCM); false leaves the light arriving there to light tracing, NEE and connections, and that merge "
           "out of every MIS sum (ppm always merges there)"),
-    Param("pilot", bool, False, "efficiency-aware choice for the whole image (modes vcm and bpt): a pilot (1/8 "
-          "of the iterations in all) estimates relative variance x cost per iteration (pilot_costs) with every "
-          "technique and with path tracing alone, and the render uses the lower (path tracing alone: mode pt, lab_mis's estimator)"),
-    Param("light_paths_max", float, 0.0, "with pilot: the most light subpaths per camera subpath the pilot may "
-          "choose, powers of two times light_paths up to it, by their relative variance x cost; 0 = "
+    Param("pilot", bool, True, "efficiency-aware choice for the whole image (modes vcm and bpt; on by default in "
+          "mode vcm only): a pilot (1/8 of the iterations in all) estimates relative variance x cost per iteration "
+          "(pilot_costs) with every technique and with path tracing alone, and the render uses the lower (path "
+          "tracing alone: mode pt, lab_mis's estimator)"),
+    Param("light_paths_max", float, VCM_LIGHT_PATHS_MAX, "with pilot: the most light subpaths per camera subpath the "
+          "pilot may choose, powers of two times light_paths up to it, by their relative variance x cost; 0 = "
           "light_paths only", check=lambda v: v == 0.0 or 1.0 / 64 <= v <= 64,
           expected="0 or a number in [1/64, 64]"),
     Param("pilot_costs", str, "counted", "with pilot: how the pilot prices an iteration: counted, its pilot renders' "
@@ -302,7 +316,7 @@ LAB_VCM = (
           "its light subpath (lab_bdpt), or one, to one of them picked uniformly and counted n times, the MIS "
           "weights counting a connection as 1 / (mean vertices per light subpath)", choices=("all", "one")),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
-                                            "max_vertices", "aim", "aim_at")) + (
+                                            "max_vertices")) + _aim(VCM_AIM_DEFAULT) + (
     replace(LAB_BDPT[-1], doc="count rays as lab_bdpt does, and under 'merge' the light vertices merging's grid "
                               "lookups read (ray_counts())"),
 )

@@ -174,14 +174,15 @@ def test_lab_photon_keeps_its_expectation():
 
 
 @pytest.mark.parametrize("plugin", ["lab_bdpt", "lab_vcm", "lab_photon"])
-def test_no_aim_or_no_target_renders_the_same_image(plugin):
-    for name, aim in (("caustic.xml", 0.0), ("cornell_box.xml", 0.5)):
-        scene = load_scene(scene_path(name), res=16)
-        base = {"max_depth": MAX_DEPTH}
-        images = [np.array(mi.render(scene, integrator=make_integrator(plugin, p), spp=4, seed=5))
-                  for p in (base, {**base, "aim": aim})]
-        # (splats add with float atomics: ~1e-6 from run to run)
-        np.testing.assert_allclose(images[0], images[1], rtol=2e-4, atol=1e-5, err_msg=f"{plugin} aim={aim} on {name}")
+def test_no_target_renders_the_same_image(plugin):
+    """The default aim (on) and aim 0 render the same image where nothing is aimed at: the Cornell
+    box has no specular shape (same random numbers, the light emits as Mitsuba samples it)."""
+    scene = load_scene(scene_path("cornell_box.xml"), res=16)
+    base = {"max_depth": MAX_DEPTH, **({"pilot": False} if plugin == "lab_vcm" else {})}
+    images = [np.array(mi.render(scene, integrator=make_integrator(plugin, p), spp=4, seed=5))
+              for p in (base, {**base, "aim": 0.0})]
+    # (splats add with float atomics: ~1e-6 from run to run)
+    np.testing.assert_allclose(images[0], images[1], rtol=2e-4, atol=1e-5, err_msg=f"{plugin} default aim on the box")
 
 
 @pytest.mark.parametrize("plugin", ["lab_bdpt", "lab_vcm", "lab_photon"])

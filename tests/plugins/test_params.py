@@ -159,7 +159,7 @@ DEFAULTS = {
     "lab_mis": {**PATH_DEFAULTS, "heuristic": "power", "beta": 2.0, "emitter_samples": 1},
     "lab_photon": {"photons_per_pass": 100_000, "passes": 16, "alpha": 2.0 / 3.0, "radius": 0.0,
                    "max_depth": -1, "rr_depth": 5, "direct": "nee", "max_records": 1 << 21,
-                   "hide_emitters": False, "aim": 0.0, "aim_at": "specular"},
+                   "hide_emitters": False, "aim": 0.5, "aim_at": "specular"},
     "lab_independent": {"sample_count": 4, "seed": 0},
     "lab_stratified": {"sample_count": 4, "seed": 0, "jitter": True},
     "lab_halton": {"sample_count": 4, "seed": 0, "randomization": "owen"},

@@ -134,8 +134,10 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                          ``aim_at`` shapes (Jensen's projection map in its
                          simplest form; ``aim.py``): more light subpaths through
                          the glass that focuses a caustic. Unbiased: emission
-                         weights and MIS use the mixture's density. (Default: 0:
-                         Mitsuba's cosine-weighted emission)
+                         weights and MIS use the mixture's density. In a scene
+                         without aim_at shapes the light emits as Mitsuba's
+                         does, same random numbers (Default: 0.5; 0:
+                         Mitsuba's cosine-weighted emission everywhere)
     aim_at        string ``specular`` (every shape whose BSDF has only delta
                          lobes) or shape ids joined by ``,`` (Default: ``specular``)
     count_rays    bool   Count rays by kind, read with ``ray_counts()``: camera,
@@ -190,14 +192,17 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
 
     # -- Driver -------------------------------------------------------------------
 
+    def refuse_undeveloped(self, develop: bool) -> None:
+        if not develop:
+            raise self.error("render(develop=False) is not supported: light tracing splats into a film of "
+                             "its own, added to the camera image when developed")
+
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
         if self._pass is not None:
             # Mitsuba's render(sensor index) calls render(sensor object) back: the pass is set up
             return mi.SamplingIntegrator.render(self, scene, sensor, seed, spp, develop, evaluate)
-        if not develop:
-            raise self.error("render(develop=False) is not supported: light tracing splats into a film of "
-                             "its own, added to the camera image when developed")
+        self.refuse_undeveloped(develop)
         traits = SceneTraits.from_scene(scene)
         problem = self.ESTIMATOR.unsupported(traits)
         if problem:

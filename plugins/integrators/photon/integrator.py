@@ -11,6 +11,7 @@ import mitsuba as mi
 from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.integrators import spawn
 from mitsuba_lab.plugins.integrators.aim import AimedEmission
+from mitsuba_lab.plugins.integrators.footprint import pixel_footprint
 from mitsuba_lab.plugins.integrators.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
@@ -26,8 +27,6 @@ from .tracer import PhotonTracer
 
 #: max_depth = -1 (unbounded) is stored as this many segments (sums of depths stay in uint32).
 DEPTH_CAP = 1 << 30
-#: Automatic radius: r_1 = RADIUS_SCALE x (bounding-box diagonal) / max(film width, height).
-RADIUS_SCALE = 1.0
 #: Smallest record buffer; also the smallest allowed ``max_records`` (declared in params.py).
 MIN_RECORDS = params.PHOTON_MIN_RECORDS
 
@@ -65,13 +64,6 @@ def radius_schedule(r1: float, passes: int, alpha: float) -> list[float]:
     for i in range(1, passes):
         r2.append(r2[-1] * (i + alpha) / (i + 1))
     return [math.sqrt(v) for v in r2]
-
-
-def automatic_radius(scene: mi.Scene, sensor: mi.Sensor) -> float:
-    bbox = scene.bbox()
-    diag = float(dr.norm(bbox.max - bbox.min)) if bbox.valid() else 1.0
-    size = sensor.film().crop_size()
-    return RADIUS_SCALE * max(diag, 1e-6) / max(int(size[0]), int(size[1]), 1)
 
 
 @dataclass
@@ -120,7 +112,7 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     as P grows), never unbiased. Compare it with unbiased estimators by MSE =
     bias^2 + variance, not by z-scores of the mean. The bias is largest where the
     radiance changes within r: the edges of surfaces (the kernel's disk sticks out),
-    sharp caustics (blurred peaks: a caustic wants r_1 below the automatic value).
+    sharp caustics (blurred peaks).
 
     **Density estimate** (``gather.py``): at every camera vertex with a smooth BSDF
     lobe, L = sum_p f(wo, wi_p) |wi_p . n_s| / |wi_p . n_p| Phi_p K(|x - x_p| / r) / r^2
@@ -141,10 +133,10 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
                             P x spp camera samples per pixel.
     alpha            float  Radius reduction, 0 < alpha < 1 (Default: 2/3)
     radius           float  First-pass radius r_1 in scene units; 0 = automatic:
-                            r_1 = diag / max(W, H), the scene bounding box's
-                            diagonal over the film's larger side, i.e. about the
-                            footprint of one pixel if the scene fills the view.
-                            (Default: 0)
+                            one pixel's width at the first surfaces the camera
+                            sees (the median over a grid of pixels,
+                            ``footprint.py``), so it follows the film and the
+                            sensor. (Default: 0)
     max_depth        int    Longest path in segments (camera + light subpath),
                             -1 = unbounded, otherwise >= 1 (0 is refused: the
                             camera needs one segment to reach a photon; the
@@ -171,7 +163,8 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     aim              float  Share in [0, 1) of an area light's photons emitted
                             towards the bounding spheres of the ``aim_at``
                             shapes, their power scaled by the mixture's
-                            density, as lab_bdpt's light subpaths (Default: 0)
+                            density, as lab_bdpt's light subpaths; nothing changes
+                            in a scene without aim_at shapes (Default: 0.5)
     aim_at           string ``specular`` or shape ids joined by ``,``
                             (Default: ``specular``)
     ================ ====== ======================================================
@@ -251,7 +244,7 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         tracer = PhotonTracer(scene, max_segments=min(depth - 1, DEPTH_CAP), min_segments=min_segments,
                               rr_depth=cfg.rr_depth, offset_floor=floor,
                               aim=AimedEmission(scene, cfg.aim, cfg.aim_at, "lab_photon"))
-        r1 = cfg.radius if cfg.radius > 0 else automatic_radius(scene, sensor)
+        r1 = cfg.radius if cfg.radius > 0 else pixel_footprint(scene, sensor)
         radii = radius_schedule(r1, cfg.passes, cfg.alpha)
         stats.radius_first, stats.radius_last = radii[0], radii[-1]
         # Spectral variants: one wavelength sample per pass, shared by photons and camera rays.

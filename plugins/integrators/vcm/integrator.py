@@ -11,7 +11,8 @@ import numpy as np
 
 from mitsuba_lab.plugins.integrators.bdpt.integrator import BdptStats, LabBDPTIntegrator, pass_seed
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, iteration_sizes
-from mitsuba_lab.plugins.integrators.photon.integrator import automatic_radius
+from mitsuba_lab.plugins.integrators.footprint import pixel_footprint
+from mitsuba_lab.plugins.params import VCM_LIGHT_PATHS_MAX
 from mitsuba_lab.plugins.integrators.support import render_arguments
 
 from .estimator import VertexMerging, merges_first
@@ -83,8 +84,9 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            ``pt`` (emitter hits and next-event estimation: lab_mis's
                            estimator). (Default: ``vcm``)
     radius          float  r_1, the first iteration's merging radius in scene
-                           units; 0 = the scene's bounding-box diagonal over the
-                           film's larger side, as lab_photon (Default: 0)
+                           units; 0 = one pixel's width at the first surfaces
+                           the camera sees (``footprint.py``), as lab_photon
+                           (Default: 0)
     alpha           float  Radius schedule r_i = r_1 i^((alpha - 1) / 2), in (0, 1)
                            (Default: 0.75)
     light_paths     float  Light subpaths per camera subpath in each iteration, in
@@ -141,12 +143,13 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            is the lowest's: lab_mis's (path tracing alone,
                            mode pt's estimator; the pilot's path tracing
                            averaged in; it must win by 0.8x) or every
-                           technique's (``selection``; Default: false)
+                           technique's (``selection``; Default: true in mode
+                           vcm, false in the others)
     light_paths_max float  With pilot: the most light subpaths per camera
                            subpath it may choose, light_paths times a power
                            of two up to it (more pay where light tracing and
                            merging carry the image, as through glass); 0 =
-                           light_paths only (Default: 0)
+                           light_paths only (Default: 16 with the pilot, else 0)
     count_rays      bool   Count rays as lab_bdpt does (``ray_counts()``), and
                            under ``merge`` the light vertices merging's grid
                            lookups read (reads, not rays). With
@@ -173,7 +176,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            ``benchmarks/bench_pilot_costs.py``
                            (``params.PILOT_WORK_COSTS``)
     max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices, aim, aim_at: as
-                           lab_bdpt (``aim``: the light subpaths that merge too).
+                           lab_bdpt (``aim``: the light subpaths that merge too;
+                           Default: 0.9).
     =============== ====== ========================================================
 
     A light vertex merges with a camera vertex when within r_i, facing the same way (normals
@@ -216,6 +220,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         # (no first merge: merging from the camera's second vertex on; ``BdptWeights.merge_from``)
         self.merge_from = 1 if merges_first(self.values) or not self.merging else 2
         self._radius = 0.0
+        self._pilot_defaults(props)
         if self.values["light_paths_max"] and not self.values["pilot"]:
             raise ValueError("lab_vcm: light_paths_max is the most light subpaths the pilot may choose: it needs "
                              "pilot = true")
@@ -234,15 +239,25 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             raise ValueError(f"lab_vcm: connections = 'one' picks the light vertex a camera vertex connects to; "
                              f"mode '{self.values['mode']}' makes no connections")
 
+    def _pilot_defaults(self, props):
+        """Unless given: the pilot in mode vcm only (mode bpt is lab_bdpt's estimator, the other modes
+        have no choice to make), choosing up to VCM_LIGHT_PATHS_MAX light subpaths."""
+        v = self.values
+        if "pilot" not in props:
+            v["pilot"] = v["mode"] == "vcm"
+        if "light_paths_max" not in props:
+            v["light_paths_max"] = max(VCM_LIGHT_PATHS_MAX, v["light_paths"]) if v["pilot"] else 0.0
+
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
         if self._pass is None and self.merging:
             r1 = self.values["radius"]
             if not r1 > 0:
                 chosen = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
-                r1 = automatic_radius(scene, chosen)
+                r1 = pixel_footprint(scene, chosen)
             self._radius = r1
         if self._pass is None and self.values["pilot"]:
+            self.refuse_undeveloped(develop)
             return self._render_chosen(scene, sensor, seed, spp, develop, evaluate)
         return super().render(scene, sensor, seed, spp, develop, evaluate)
 

@@ -1,0 +1,53 @@
+"""A pixel's footprint in the scene: the default merging radius of lab_vcm and lab_photon.
+
+Merging blurs light over a disc of radius r; a disc about one pixel wide where the camera
+looks is as much blur as the film can show, so the first radius is the median, over a grid of
+pixels, of the distance between the first camera hits of a pixel's centre ray and of its
+neighbour's ray (the ray differential one pixel to the side, carried to the same distance).
+This follows the film (resolution, crop) and the sensor (field of view, orthographic width,
+thin lens: the lens centre's ray) instead of a number per scene. Rays that leave the scene
+are skipped; when every ray leaves, the scene's bounding-box diagonal over the film's larger
+side is used.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+#: at most this many pixels per film side are probed (a grid of pixel centres)
+PROBES_PER_SIDE = 32
+
+
+def bbox_radius(scene: mi.Scene, sensor: mi.Sensor) -> float:
+    """The scene's bounding-box diagonal over the film's larger side (the fallback)."""
+    bbox = scene.bbox()
+    diag = float(dr.norm(bbox.max - bbox.min)) if bbox.valid() else 1.0
+    size = sensor.film().crop_size()
+    return max(diag, 1e-6) / max(int(size[0]), int(size[1]), 1)
+
+
+def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor) -> float:
+    """Median width of one pixel at the first surfaces the camera sees, in scene units."""
+    film = sensor.film()
+    size = np.array(film.crop_size(), dtype=np.int64)
+    offset = np.array(film.crop_offset(), dtype=np.int64)
+    full = np.array(film.size(), dtype=np.float64)
+    axes = [(np.arange(min(n, PROBES_PER_SIDE)) + 0.5) * n / min(n, PROBES_PER_SIDE) for n in size]
+    px, py = np.meshgrid(axes[0] + offset[0], axes[1] + offset[1], indexing="xy")
+    pos = mi.Point2f(mi.Float(px.ravel() / full[0]), mi.Float(py.ravel() / full[1]))
+    n = dr.width(pos)
+    wavelength = mi.Float(0.5) if not mi.is_spectral else mi.Float(0.5) + dr.zeros(mi.Float, n)
+    ray, _ = sensor.sample_ray_differential(mi.Float(0.0) + dr.zeros(mi.Float, n), wavelength, pos,
+                                            mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(mi.Ray3f(ray))
+    t = si.t
+    # a pixel's neighbour ray, carried to the centre ray's hit distance (ray differentials are one pixel apart)
+    dx = (ray.o_x + ray.d_x * t) - (ray.o + ray.d * t)
+    dy = (ray.o_y + ray.d_y * t) - (ray.o + ray.d * t)
+    width = dr.sqrt(dr.maximum(dr.norm(dx) * dr.norm(dy), 0.0))
+    valid = np.array(si.is_valid() & dr.isfinite(width) & (width > 0))
+    widths = np.array(width)[valid]
+    if widths.size == 0:
+        return bbox_radius(scene, sensor)
+    return float(np.median(widths))
