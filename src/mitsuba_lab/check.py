@@ -5,7 +5,8 @@ far_clip, emitters that emit nothing, participating media), then every strategy 
 applies to it (``scene.strategy_applicability``; the others are listed with the
 reason), each class of provably identical strategies rendered once
 (``scene.equivalent_strategies``), and Mitsuba's `path` as the reference at more
-samples per pixel. Each strategy is rendered as ``--splits`` independent renders
+samples per pixel (``volpathmis`` on a scene with participating media, which `path` ignores:
+``features.default_reference``). Each strategy is rendered as ``--splits`` independent renders
 (seeds 0..), whose spread gives the standard error of its image mean. The reference
 comes from the sweep runner's content-addressed reference cache (``--cache``, shared
 with ``mitsuba-lab reference`` and sweeps): rendered once in ``--splits`` independent
@@ -99,7 +100,6 @@ STRATEGIES = {**PATH_STRATEGIES, **BIDIRECTIONAL_STRATEGIES}
 #: Ray kinds with a column of their own (the path tracers'); the bidirectional integrators'
 #: other kinds are summed in ``other_rays_per_pixel``.
 RAY_COLUMNS = ("camera", "extension", "shadow")
-REFERENCE = "path"
 #: Luminance weights (Rec. 709 primaries) of R, G, B.
 FIREFLY_WINDOW = 5
 FIREFLY_FLOOR = 0.01
@@ -132,7 +132,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--spp", type=positive_int, default=64,
                         help="samples per pixel of each lab strategy, over all splits (default: 64)")
     parser.add_argument("--ref-spp", type=positive_int, default=256,
-                        help="samples per pixel of the path reference, over all splits (default: 256)")
+                        help="samples per pixel of the reference, over all splits (default: 256)")
     parser.add_argument("--splits", type=positive_int, default=8,
                         help="independent renders per strategy (seeds 0..) and chunks of the reference, "
                              ">= 2; their spread gives the standard error of the mean; --spp and "
@@ -289,14 +289,14 @@ def cache_folder(option: str | None) -> str:
     return os.path.abspath(os.path.expanduser(option or os.environ.get("MITSUBA_LAB_CACHE") or DEFAULT_CACHE))
 
 
-def check_reference(path: str, args, defines: dict):
-    """(Reference, was_cached): Mitsuba's path at ``--ref-spp`` in ``--splits`` chunks, from
-    the reference cache or rendered into it."""
+def check_reference(path: str, args, defines: dict, integrator: str):
+    """(Reference, was_cached): ``integrator`` (Mitsuba's path, or volpathmis for a scene with
+    media) at ``--ref-spp`` in ``--splits`` chunks, from the reference cache or rendered into it."""
     from .experiment.config import PluginSpec
     from .experiment.reference import get_reference
 
     resolution, defaults = scene_settings(path, args.res, defines)
-    spec = PluginSpec("reference", REFERENCE, {"max_depth": args.max_depth})
+    spec = PluginSpec("reference", integrator, {"max_depth": args.max_depth})
     return get_reference(os.path.abspath(path), resolution, defaults, spec, args.ref_spp, args.splits,
                          cache_folder(args.cache))
 
@@ -307,12 +307,16 @@ def _origin(reference, cached: bool, args) -> str:
 
 def references(path, name, args, defines, traits):
     """(reference rows, summary the strategies are judged against, path's summary, Twin or None,
-    scene warnings): Mitsuba's path on the scene, and on its unscaled twin when it declares one."""
-    reference, cached = check_reference(path, args, defines)
+    scene warnings): the scene's reference integrator (``features.default_reference``: Mitsuba's
+    path unless the scene has media) on the scene, and on its unscaled twin when it declares one."""
+    from .features import default_reference
+
+    integrator = default_reference(traits)
+    reference, cached = check_reference(path, args, defines, integrator)
     ref, ref_row = reference_summary(reference, args.firefly_k)
-    rows = [{"scene": name, "strategy": f"{REFERENCE} (reference)", "status": "reference", **ref_row,
+    rows = [{"scene": name, "strategy": f"{integrator} (reference)", "status": "reference", **ref_row,
              "ref_mean": ref["mean"], "z": 0.0, "note": _origin(reference, cached, args)}]
-    warnings = [] if ref["finite"] else ["the path reference has non-finite pixels: no z-scores"]
+    warnings = [] if ref["finite"] else [f"the {integrator} reference has non-finite pixels: no z-scores"]
     found = twin_of(path, defines)
     if found is not None and traits.far_clip_problems:   # no longer the same scene at another scale
         warnings.append(f"not compared with its unscaled twin {found[0]}: it loses geometry beyond far_clip")
@@ -320,12 +324,12 @@ def references(path, name, args, defines, traits):
     if found is None:
         return rows, ref, ref, None, warnings
     twin_name, twin_path, twin_defines = found
-    twin_reference, twin_cached = check_reference(twin_path, args, twin_defines)
+    twin_reference, twin_cached = check_reference(twin_path, args, twin_defines, integrator)
     twin_ref, twin_row = reference_summary(twin_reference, args.firefly_k)
     twin = Twin.compare(twin_name, twin_ref["mean"], twin_ref["mean_variance"], ref["mean"], ref["mean_variance"])
     rows[0].update(ref_mean=twin.mean, z=twin.z_path, z_twin=twin.z_path)
-    rows.append({"scene": name, "strategy": f"{REFERENCE} (twin)", "status": "twin reference", **twin_row,
-                 "ref_mean": twin.mean, "note": f"Mitsuba's path on the unscaled twin {twin_name}: "
+    rows.append({"scene": name, "strategy": f"{integrator} (twin)", "status": "twin reference", **twin_row,
+                 "ref_mean": twin.mean, "note": f"{integrator} on the unscaled twin {twin_name}: "
                                                 f"{_origin(twin_reference, twin_cached, args)}"})
     if twin.path_off(args.z_max) and twin_ref["finite"] and ref["finite"]:
         note = path_off_note(twin, traits.bbox_min, traits.bbox_max)

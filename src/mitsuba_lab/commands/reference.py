@@ -8,7 +8,9 @@ def add_arguments(parser) -> None:
     parser.description = ("Render SCENE's reference in independent chunks, cache it (content-addressed) "
                           "and print its key and noise floor.")
     parser.add_argument("scene", help="Mitsuba XML scene file")
-    parser.add_argument("--integrator", default="path", help="reference integrator (default: path)")
+    parser.add_argument("--integrator",
+                        help="reference integrator; it must render every feature of the scene (default: "
+                             "path, or volpathmis where the scene has participating media)")
     parser.add_argument("--max-depth", type=int, help="max_depth of the integrator")
     parser.add_argument("--param", action="append", metavar="KEY=VALUE",
                         help="other integrator parameter (repeatable)")
