@@ -13,9 +13,10 @@ with ``mitsuba-lab reference`` and sweeps): rendered once in ``--splits`` indepe
 chunks, it keeps its mean image and the per-pixel variance of that mean, and is reused
 by every later check with the same scene, settings and versions.
 
-Resolution: ``--res N`` renders N x N. A scene that declares ``<default name="res" .../>``
-(the shipped ones do) gets it as its ``res`` parameter; any other scene gets its first
-sensor's film width and height set to N by editing the XML (``scene_xml.load_scene_variant``).
+Resolution: ``--res N`` is given to a scene that declares ``<default name="res" .../>`` (the
+shipped ones do, for a square film) as its ``res`` parameter; any other scene gets its first
+sensor's film edited (``scene_xml.load_scene_variant``): N sets the larger side and keeps the
+aspect ratio. ``--res WxH`` sets the film's width and height on every scene.
 
 Strategies: lab_naive, lab_nee, lab_mis (power and balance), lab_bdpt, lab_vcm in modes bpt,
 vcm and ppm, and lab_photon (its sample count is its passes).
@@ -75,8 +76,9 @@ from .check_report import format_table, format_verdicts, verdict_kind, write_csv
 from .check_verdicts import (LADDER_SPLITS, Rung, Twin, Verdict, empty_pixels, judge, judge_consistent, path_off_note,
                              twin_status)
 from .check_render import bias_ladder, is_consistent, render_ladder, render_splits
-from .commands.args import positive_int
+from .commands.args import positive_int, resolution_arg
 from .errors import LabError
+from .film import as_resolution, resolution_text
 
 #: name -> (integrator type, parameters); max_depth comes from --max-depth.
 PATH_STRATEGIES = {
@@ -125,10 +127,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "unscaled twin (<default name=\"twin\" .../>) is also compared with path on the twin.")
     parser.add_argument("scenes", nargs="*", metavar="SCENE",
                         help="Mitsuba XML scene files (default: every scenes/stiff/*.xml)")
-    parser.add_argument("--res", type=positive_int, default=32,
-                        help="image width and height (default: 32): passed as the scene's 'res' "
-                             "parameter when the scene declares <default name=\"res\" .../>, otherwise "
-                             "set as the first sensor's film width and height (the XML is edited)")
+    parser.add_argument("--res", type=resolution_arg, default=32,
+                        help="film size (default: 32): N is passed as the scene's 'res' parameter when "
+                             "the scene declares <default name=\"res\" .../>, otherwise it sets the first "
+                             "sensor's film's larger side, keeping its aspect ratio (the XML is edited); "
+                             "WxH sets width and height")
     parser.add_argument("--spp", type=positive_int, default=64,
                         help="samples per pixel of each lab strategy, over all splits (default: 64)")
     parser.add_argument("--ref-spp", type=positive_int, default=256,
@@ -241,22 +244,27 @@ def default_scenes() -> list[str]:
     return sorted(glob.glob(os.path.join(project_root(), "scenes", "stiff", "*.xml")))
 
 
-def scene_settings(path: str, res: int, defines: dict) -> tuple[int | None, dict]:
-    """(film size to set in the XML or None, <default> values) that make the scene
-    ``res`` x ``res``: its ``res`` parameter when it declares one (``<default name="res"
-    .../>``, as the shipped scenes do), else the first sensor's film width and height, so any
-    scene works. ``defines`` (-D) fill the scene's other <default> parameters."""
+def scene_settings(path: str, res, defines: dict) -> tuple[object, dict]:
+    """(film override to edit into the XML or None, <default> values) for ``--res``: a scalar is
+    the scene's ``res`` parameter when it declares one (``<default name="res" .../>``, as the
+    shipped scenes do), else the film's larger side (``film``: aspect ratio kept), so any scene
+    works; (W, H) sets the film's width and height. ``defines`` (-D) fill the scene's other
+    <default> parameters."""
     from .scene_xml import scene_defaults
 
-    if "res" in scene_defaults(path):
+    if isinstance(res, int) and "res" in scene_defaults(path):
         return None, {"res": res, **defines}
     defines = dict(defines)
-    res = int(defines.pop("res", res))        # -D res=N means the film size here too
+    if "res" in defines:                      # -D res=N means the film size here too
+        try:
+            res = as_resolution(defines.pop("res"))
+        except ValueError as err:
+            raise LabError(f"-D res: {err}") from None
     return res, defines
 
 
-def load_check_scene(path: str, res: int, defines: dict):
-    """The scene at ``res`` x ``res`` (``scene_settings``)."""
+def load_check_scene(path: str, res, defines: dict):
+    """The scene at the film size ``--res`` gives it (``scene_settings``)."""
     from .scene import load_scene
     from .scene_xml import load_scene_variant
 
@@ -451,7 +459,7 @@ def run(args, out) -> int:
     if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
         raise LabError(f"output folder does not exist or is not writable: {folder}")
 
-    settings = (f"{args.res}x{args.res}, {args.spp} spp per strategy, path reference {args.ref_spp} spp, "
+    settings = (f"--res {resolution_text(args.res)}, {args.spp} spp per strategy, reference {args.ref_spp} spp, "
                 f"{args.splits} splits, max_depth {args.max_depth}, |z| <= {args.z_max:g}, "
                 f"escalate x{args.escalate}, firefly k = {args.firefly_k:g}")
     print(f"mitsuba-lab check: {len(scenes)} scene(s); {settings}", file=out)

@@ -84,7 +84,8 @@ class ReferenceSpec:
 class SceneSpec:
     name: str
     path: str                       # absolute
-    resolution: int | None          # square film override, or None to keep the scene's
+    resolution: int | tuple[int, int] | None    # film override (``film``): the larger side, or
+                                                # (width, height); None keeps the scene's
     defaults: dict                  # values for the scene's <default> parameters
     regions: dict                   # name -> (x0, y0, x1, y1): pixels (ints) or fractions (floats)
     reference: ReferenceSpec | None = None      # [scenes.X.reference]; None: the experiment's
@@ -98,7 +99,7 @@ class StrategyGridSpec:
     strategy: str                   # a [strategies] name of type lab_bdpt
     max_length: int                 # K: rows k = 1..K; the grid renders with max_depth = K
     spp: int
-    resolution: int | None          # square film override, or None for the scene's
+    resolution: int | tuple[int, int] | None    # film override (``film``), or None for the scene's
 
 
 @dataclass(frozen=True)
@@ -244,6 +245,13 @@ def _regions(reader: TableReader, base_dir: str) -> dict:
     return regions
 
 
+def read_resolution(reader: TableReader, default=None):
+    """A table's ``resolution`` key: the film's larger side (aspect ratio kept) or [width, height]
+    (``film``); ``default`` when absent."""
+    return as_resolution(reader.get("resolution", object, default, check=is_resolution,
+                                    expected=RESOLUTION_EXPECTED))
+
+
 def _scenes(reader: TableReader, base_dir: str, reference: ReferenceSpec) -> tuple[SceneSpec, ...]:
     """``[scenes]``; a scene's own ``reference`` table (integrator, spp, chunks) replaces what it
     names of ``reference`` (``[reference]``), for a hard region that needs a lower noise floor."""
@@ -255,7 +263,7 @@ def _scenes(reader: TableReader, base_dir: str, reference: ReferenceSpec) -> tup
         path = os.path.normpath(os.path.join(base_dir, rel))
         if not os.path.isfile(path):
             item.fail("path", f"an existing scene file, but {path} does not exist")
-        resolution = item.get("resolution", int, None, check=lambda v: v > 0, expected="a positive integer")
+        resolution = read_resolution(item)
         defaults = item.sub("defaults", {}).table
         own = None
         if "reference" in item.table:
@@ -294,7 +302,7 @@ def _strategy_grid(reader: TableReader, scenes, strategies) -> StrategyGridSpec 
     max_length = grid.get("max_length", int, check=lambda v: 1 <= v <= GRID_MAX_LENGTH,
                           expected=f"an integer in [1, {GRID_MAX_LENGTH}] (rows k = 1..max_length)")
     spp = grid.get("spp", int, 64, check=lambda v: v > 0, expected="a positive integer")
-    resolution = grid.get("resolution", int, None, check=lambda v: v > 0, expected="a positive integer")
+    resolution = read_resolution(grid)
     return StrategyGridSpec(scene, strategy, max_length, spp, resolution)
 
 
