@@ -172,8 +172,8 @@ USER_SCENE = """<scene version="3.0.0">
 
 
 def test_a_user_scene_without_a_res_default(tmp_path):
-    # No <default name="res">: --res sets the film's width and height instead of failing with
-    # "unused parameters: $res".
+    # No <default name="res">: --res sets the film's larger side, keeping its aspect ratio (300x200
+    # -> 8x5), instead of failing with "unused parameters: $res".
     scene = tmp_path / "my_scene.xml"
     scene.write_text(USER_SCENE)
     assert set(scene_defaults(str(scene))) == set()
@@ -184,10 +184,10 @@ def test_a_user_scene_without_a_res_default(tmp_path):
     assert status == 0, text
     rows = {r["strategy"]: r for r in read_rows(prefix)}
     assert {"lab_naive", "lab_nee", "lab_mis_power", "lab_mis_balance"} <= set(rows)
-    assert float(rows["lab_nee"]["camera_rays_per_pixel"]) == 16      # rays / (8 x 8 pixels): the film is 8x8
+    assert float(rows["lab_nee"]["camera_rays_per_pixel"]) == 16      # rays / (8 x 5 pixels): the film is 8x5
     assert float(rows["lab_nee"]["mean"]) > 0
     film = check.load_check_scene(str(scene), 8, {}).sensors()[0].film().size()
-    assert (film[0], film[1]) == (8, 8)
+    assert (film[0], film[1]) == (8, 5)
 
 
 def test_firefly_rule():

@@ -5,16 +5,18 @@ far_clip, emitters that emit nothing, participating media), then every strategy 
 applies to it (``scene.strategy_applicability``; the others are listed with the
 reason), each class of provably identical strategies rendered once
 (``scene.equivalent_strategies``), and Mitsuba's `path` as the reference at more
-samples per pixel. Each strategy is rendered as ``--splits`` independent renders
+samples per pixel (``volpathmis`` on a scene with participating media, which `path` ignores:
+``features.default_reference``). Each strategy is rendered as ``--splits`` independent renders
 (seeds 0..), whose spread gives the standard error of its image mean. The reference
 comes from the sweep runner's content-addressed reference cache (``--cache``, shared
 with ``mitsuba-lab reference`` and sweeps): rendered once in ``--splits`` independent
 chunks, it keeps its mean image and the per-pixel variance of that mean, and is reused
 by every later check with the same scene, settings and versions.
 
-Resolution: ``--res N`` renders N x N. A scene that declares ``<default name="res" .../>``
-(the shipped ones do) gets it as its ``res`` parameter; any other scene gets its first
-sensor's film width and height set to N by editing the XML (``scene_xml.load_scene_variant``).
+Resolution: ``--res N`` is given to a scene that declares ``<default name="res" .../>`` (the
+shipped ones do, for a square film) as its ``res`` parameter; any other scene gets its first
+sensor's film edited (``scene_xml.load_scene_variant``): N sets the larger side and keeps the
+aspect ratio. ``--res WxH`` sets the film's width and height on every scene.
 
 Strategies: lab_naive, lab_nee, lab_mis (power and balance), lab_bdpt, lab_vcm in modes bpt,
 vcm and ppm, and lab_photon (its sample count is its passes).
@@ -74,8 +76,9 @@ from .check_report import format_table, format_verdicts, verdict_kind, write_csv
 from .check_verdicts import (LADDER_SPLITS, Rung, Twin, Verdict, empty_pixels, judge, judge_consistent, path_off_note,
                              twin_status)
 from .check_render import bias_ladder, is_consistent, render_ladder, render_splits
-from .commands.args import positive_int
+from .commands.args import positive_int, resolution_arg
 from .errors import LabError
+from .film import as_resolution, resolution_text
 
 #: name -> (integrator type, parameters); max_depth comes from --max-depth.
 PATH_STRATEGIES = {
@@ -99,7 +102,6 @@ STRATEGIES = {**PATH_STRATEGIES, **BIDIRECTIONAL_STRATEGIES}
 #: Ray kinds with a column of their own (the path tracers'); the bidirectional integrators'
 #: other kinds are summed in ``other_rays_per_pixel``.
 RAY_COLUMNS = ("camera", "extension", "shadow")
-REFERENCE = "path"
 #: Luminance weights (Rec. 709 primaries) of R, G, B.
 FIREFLY_WINDOW = 5
 FIREFLY_FLOOR = 0.01
@@ -125,14 +127,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "unscaled twin (<default name=\"twin\" .../>) is also compared with path on the twin.")
     parser.add_argument("scenes", nargs="*", metavar="SCENE",
                         help="Mitsuba XML scene files (default: every scenes/stiff/*.xml)")
-    parser.add_argument("--res", type=positive_int, default=32,
-                        help="image width and height (default: 32): passed as the scene's 'res' "
-                             "parameter when the scene declares <default name=\"res\" .../>, otherwise "
-                             "set as the first sensor's film width and height (the XML is edited)")
+    parser.add_argument("--res", type=resolution_arg, default=32,
+                        help="film size (default: 32): N is passed as the scene's 'res' parameter when "
+                             "the scene declares <default name=\"res\" .../>, otherwise it sets the first "
+                             "sensor's film's larger side, keeping its aspect ratio (the XML is edited); "
+                             "WxH sets width and height")
     parser.add_argument("--spp", type=positive_int, default=64,
                         help="samples per pixel of each lab strategy, over all splits (default: 64)")
     parser.add_argument("--ref-spp", type=positive_int, default=256,
-                        help="samples per pixel of the path reference, over all splits (default: 256)")
+                        help="samples per pixel of the reference, over all splits (default: 256)")
     parser.add_argument("--splits", type=positive_int, default=8,
                         help="independent renders per strategy (seeds 0..) and chunks of the reference, "
                              ">= 2; their spread gives the standard error of the mean; --spp and "
@@ -241,22 +244,27 @@ def default_scenes() -> list[str]:
     return sorted(glob.glob(os.path.join(project_root(), "scenes", "stiff", "*.xml")))
 
 
-def scene_settings(path: str, res: int, defines: dict) -> tuple[int | None, dict]:
-    """(film size to set in the XML or None, <default> values) that make the scene
-    ``res`` x ``res``: its ``res`` parameter when it declares one (``<default name="res"
-    .../>``, as the shipped scenes do), else the first sensor's film width and height, so any
-    scene works. ``defines`` (-D) fill the scene's other <default> parameters."""
+def scene_settings(path: str, res, defines: dict) -> tuple[object, dict]:
+    """(film override to edit into the XML or None, <default> values) for ``--res``: a scalar is
+    the scene's ``res`` parameter when it declares one (``<default name="res" .../>``, as the
+    shipped scenes do), else the film's larger side (``film``: aspect ratio kept), so any scene
+    works; (W, H) sets the film's width and height. ``defines`` (-D) fill the scene's other
+    <default> parameters."""
     from .scene_xml import scene_defaults
 
-    if "res" in scene_defaults(path):
+    if isinstance(res, int) and "res" in scene_defaults(path):
         return None, {"res": res, **defines}
     defines = dict(defines)
-    res = int(defines.pop("res", res))        # -D res=N means the film size here too
+    if "res" in defines:                      # -D res=N means the film size here too
+        try:
+            res = as_resolution(defines.pop("res"))
+        except ValueError as err:
+            raise LabError(f"-D res: {err}") from None
     return res, defines
 
 
-def load_check_scene(path: str, res: int, defines: dict):
-    """The scene at ``res`` x ``res`` (``scene_settings``)."""
+def load_check_scene(path: str, res, defines: dict):
+    """The scene at the film size ``--res`` gives it (``scene_settings``)."""
     from .scene import load_scene
     from .scene_xml import load_scene_variant
 
@@ -289,14 +297,14 @@ def cache_folder(option: str | None) -> str:
     return os.path.abspath(os.path.expanduser(option or os.environ.get("MITSUBA_LAB_CACHE") or DEFAULT_CACHE))
 
 
-def check_reference(path: str, args, defines: dict):
-    """(Reference, was_cached): Mitsuba's path at ``--ref-spp`` in ``--splits`` chunks, from
-    the reference cache or rendered into it."""
+def check_reference(path: str, args, defines: dict, integrator: str):
+    """(Reference, was_cached): ``integrator`` (Mitsuba's path, or volpathmis for a scene with
+    media) at ``--ref-spp`` in ``--splits`` chunks, from the reference cache or rendered into it."""
     from .experiment.config import PluginSpec
     from .experiment.reference import get_reference
 
     resolution, defaults = scene_settings(path, args.res, defines)
-    spec = PluginSpec("reference", REFERENCE, {"max_depth": args.max_depth})
+    spec = PluginSpec("reference", integrator, {"max_depth": args.max_depth})
     return get_reference(os.path.abspath(path), resolution, defaults, spec, args.ref_spp, args.splits,
                          cache_folder(args.cache))
 
@@ -307,12 +315,16 @@ def _origin(reference, cached: bool, args) -> str:
 
 def references(path, name, args, defines, traits):
     """(reference rows, summary the strategies are judged against, path's summary, Twin or None,
-    scene warnings): Mitsuba's path on the scene, and on its unscaled twin when it declares one."""
-    reference, cached = check_reference(path, args, defines)
+    scene warnings): the scene's reference integrator (``features.default_reference``: Mitsuba's
+    path unless the scene has media) on the scene, and on its unscaled twin when it declares one."""
+    from .features import default_reference
+
+    integrator = default_reference(traits)
+    reference, cached = check_reference(path, args, defines, integrator)
     ref, ref_row = reference_summary(reference, args.firefly_k)
-    rows = [{"scene": name, "strategy": f"{REFERENCE} (reference)", "status": "reference", **ref_row,
+    rows = [{"scene": name, "strategy": f"{integrator} (reference)", "status": "reference", **ref_row,
              "ref_mean": ref["mean"], "z": 0.0, "note": _origin(reference, cached, args)}]
-    warnings = [] if ref["finite"] else ["the path reference has non-finite pixels: no z-scores"]
+    warnings = [] if ref["finite"] else [f"the {integrator} reference has non-finite pixels: no z-scores"]
     found = twin_of(path, defines)
     if found is not None and traits.far_clip_problems:   # no longer the same scene at another scale
         warnings.append(f"not compared with its unscaled twin {found[0]}: it loses geometry beyond far_clip")
@@ -320,12 +332,12 @@ def references(path, name, args, defines, traits):
     if found is None:
         return rows, ref, ref, None, warnings
     twin_name, twin_path, twin_defines = found
-    twin_reference, twin_cached = check_reference(twin_path, args, twin_defines)
+    twin_reference, twin_cached = check_reference(twin_path, args, twin_defines, integrator)
     twin_ref, twin_row = reference_summary(twin_reference, args.firefly_k)
     twin = Twin.compare(twin_name, twin_ref["mean"], twin_ref["mean_variance"], ref["mean"], ref["mean_variance"])
     rows[0].update(ref_mean=twin.mean, z=twin.z_path, z_twin=twin.z_path)
-    rows.append({"scene": name, "strategy": f"{REFERENCE} (twin)", "status": "twin reference", **twin_row,
-                 "ref_mean": twin.mean, "note": f"Mitsuba's path on the unscaled twin {twin_name}: "
+    rows.append({"scene": name, "strategy": f"{integrator} (twin)", "status": "twin reference", **twin_row,
+                 "ref_mean": twin.mean, "note": f"{integrator} on the unscaled twin {twin_name}: "
                                                 f"{_origin(twin_reference, twin_cached, args)}"})
     if twin.path_off(args.z_max) and twin_ref["finite"] and ref["finite"]:
         note = path_off_note(twin, traits.bbox_min, traits.bbox_max)
@@ -447,7 +459,7 @@ def run(args, out) -> int:
     if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
         raise LabError(f"output folder does not exist or is not writable: {folder}")
 
-    settings = (f"{args.res}x{args.res}, {args.spp} spp per strategy, path reference {args.ref_spp} spp, "
+    settings = (f"--res {resolution_text(args.res)}, {args.spp} spp per strategy, reference {args.ref_spp} spp, "
                 f"{args.splits} splits, max_depth {args.max_depth}, |z| <= {args.z_max:g}, "
                 f"escalate x{args.escalate}, firefly k = {args.firefly_k:g}")
     print(f"mitsuba-lab check: {len(scenes)} scene(s); {settings}", file=out)

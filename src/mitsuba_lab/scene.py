@@ -367,12 +367,15 @@ def _estimator(integrator_type: str):
 
 
 def strategy_applicability(traits: SceneTraits, integrator_type: str, params: dict) -> tuple[bool, str]:
-    """(True, '') when the strategy renders the scene correctly, else (False, one-line reason),
-    as its estimator says (``Estimator.applicability``). Integrators other than the lab's are
-    always applicable (their own limits are Mitsuba's business)."""
+    """(True, '') when the integrator renders the scene correctly, else (False, one-line reason):
+    a lab integrator as its estimator says (``Estimator.applicability``), Mitsuba's own as the
+    table of what they ignore says (``features.MITSUBA_IGNORES``: ``path`` ignores participating
+    media). Integrators known to neither are taken as applicable."""
     estimator = _estimator(integrator_type)
     if estimator is None:
-        return True, ""
+        from .features import mitsuba_applicability
+
+        return mitsuba_applicability(traits, integrator_type, params)
     from .plugins.params import resolve
 
     return estimator.applicability(traits, resolve(integrator_type, params or {}))

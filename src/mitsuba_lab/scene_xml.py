@@ -1,4 +1,4 @@
-"""Scene variants made by editing the XML: another sampler, another film size.
+"""Scene variants made by editing the XML: another sampler, another film size (``film``).
 
 A Mitsuba scene fixes its sampler and film inside the sensor, and a loaded
 scene cannot swap its sampler's type. A sweep needs both as axes, so the XML
@@ -27,23 +27,68 @@ def _param_element(name: str, value) -> ET.Element:
     return ET.Element(tag, {"name": name, "value": text})
 
 
-def edited_xml(path: str, resolution: int | None = None, sampler: dict | None = None) -> str:
-    """The scene's XML with the first sensor's film and/or sampler replaced."""
-    try:
-        tree = ET.parse(path)
-    except ET.ParseError as err:
-        raise LabError(f"cannot load scene {path}: {err}") from err
+#: hdrfilm's width and height when the scene gives none (Mitsuba's defaults).
+MITSUBA_FILM_SIZE = (768, 576)
+
+
+def _native_film_size(path: str, root: ET.Element, defaults: dict | None) -> tuple[int, int]:
+    """(width, height) of the first sensor's film as written, ``$name`` values resolved from the
+    scene's <default>s and ``defaults``; Mitsuba's 768x576 where the scene gives none."""
+    values = {**_defaults(root), **{k: str(v) for k, v in (defaults or {}).items()}}
+    sensor = root.find("sensor")
+    film = sensor.find("film") if sensor is not None else None
+    size = list(MITSUBA_FILM_SIZE)
+    for index, dim in enumerate(("width", "height")):
+        element = next((e for e in (film if film is not None else []) if e.get("name") == dim), None)
+        if element is None:
+            continue
+        text = _substitute(element.get("value", ""), values)
+        try:
+            size[index] = int(text)
+        except ValueError:
+            raise LabError(f"scene {path}: cannot read the film's {dim} ('{text}'), so a resolution "
+                           f"that keeps its aspect ratio cannot be worked out: give [width, height]") from None
+    return size[0], size[1]
+
+
+def film_size(path: str, resolution=None, defaults: dict | None = None) -> tuple[int, int]:
+    """(width, height) the scene's first film has when loaded with the film override
+    ``resolution`` (``film.film_shape``: a scalar sets the larger side, the aspect ratio kept)
+    and ``defaults`` for its <default> values."""
+    from .film import film_shape
+
+    if resolution is not None and not isinstance(resolution, int):
+        return film_shape((1, 1), resolution)             # [width, height]: nothing to read
+    return film_shape(_native_film_size(path, _parse(path).getroot(), defaults), resolution)
+
+
+def film_override_key(path: str, resolution=None, defaults: dict | None = None):
+    """The override as reference keys and run identities record it (``film.film_key``)."""
+    from .film import film_key
+
+    if resolution is None:
+        return None
+    return film_key(film_size(path, None, defaults), resolution)
+
+
+def edited_xml(path: str, resolution=None, sampler: dict | None = None, defaults: dict | None = None) -> str:
+    """The scene's XML with the first sensor's film size (``film.film_shape`` of ``resolution``,
+    with ``defaults`` for the scene's <default> values) and/or sampler replaced."""
+    from .film import film_shape
+
+    tree = _parse(path)
     sensor = tree.getroot().find("sensor")
     if sensor is None and (resolution or sampler):
         raise LabError(f"scene {path} has no <sensor> whose film or sampler could be set")
     if resolution:
+        size = film_shape(_native_film_size(path, tree.getroot(), defaults), resolution)
         film = sensor.find("film")
         if film is None:
             film = ET.SubElement(sensor, "film", {"type": "hdrfilm"})
-        for dim in ("width", "height"):
+        for dim, value in zip(("width", "height"), size):
             for old in [e for e in film if e.get("name") == dim]:
                 film.remove(old)
-            film.append(ET.Element("integer", {"name": dim, "value": str(resolution)}))
+            film.append(ET.Element("integer", {"name": dim, "value": str(value)}))
     if sampler:
         old = sensor.find("sampler")
         count = None
@@ -59,12 +104,13 @@ def edited_xml(path: str, resolution: int | None = None, sampler: dict | None = 
     return ET.tostring(tree.getroot(), encoding="unicode")
 
 
-def load_scene_variant(path: str, resolution: int | None = None, sampler: dict | None = None,
+def load_scene_variant(path: str, resolution=None, sampler: dict | None = None,
                        defaults: dict | None = None) -> mi.Scene:
-    """Load ``path`` with an optional square film size and sampler (type + parameters)."""
+    """Load ``path`` with an optional film size override (``film``: N sets the larger side and
+    keeps the aspect ratio, (W, H) sets both) and sampler (type + parameters)."""
     if not os.path.isfile(path):
         raise LabError(f"scene file not found: {path}")
-    text = edited_xml(path, resolution, sampler)
+    text = edited_xml(path, resolution, sampler, defaults)
     resolver = mi.file_resolver()
     folder = os.path.dirname(os.path.abspath(path))
     if not any(str(resolver[i]) == folder for i in range(len(resolver))):

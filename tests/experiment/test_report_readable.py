@@ -70,6 +70,7 @@ def test_settings_table_echoes_strategies_and_samplers(report):
     start = lines.index("## Settings")
     table = [line for line in lines[start:start + 12] if line.startswith("| ")]
     assert table == ["| kind | name | plugin | parameters | scenes |",
+                     f"| film | s |  | {synth.WIDTH}x{synth.HEIGHT} pixels (width x height) | all |",
                      "| sampler | independent | independent | (defaults) | all |",
                      "| strategy | good | lab_nee | max_depth = 5, rr_depth = 5 | all |",
                      "| strategy | noisy | lab_nee | max_depth = 3, rr_depth = 5 | all |"]

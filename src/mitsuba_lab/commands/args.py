@@ -40,6 +40,17 @@ def positive_int(text: str) -> int:
     return value
 
 
+def resolution_arg(text: str):
+    """--res: "N" sets the film's larger side and keeps the scene's aspect ratio, "WxH" both sides
+    (``mitsuba_lab.film``)."""
+    from ..film import parse_resolution_text
+
+    try:
+        return parse_resolution_text(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
 def seed_int(text: str) -> int:
     try:
         value = int(text)

@@ -1,14 +1,16 @@
 """``mitsuba-lab reference SCENE``: build (or find) one cached high-spp reference."""
 from __future__ import annotations
 
-from .args import parse_assignments, positive_int
+from .args import parse_assignments, positive_int, resolution_arg
 
 
 def add_arguments(parser) -> None:
     parser.description = ("Render SCENE's reference in independent chunks, cache it (content-addressed) "
                           "and print its key and noise floor.")
     parser.add_argument("scene", help="Mitsuba XML scene file")
-    parser.add_argument("--integrator", default="path", help="reference integrator (default: path)")
+    parser.add_argument("--integrator",
+                        help="reference integrator; it must render every feature of the scene (default: "
+                             "path, or volpathmis where the scene has participating media)")
     parser.add_argument("--max-depth", type=int, help="max_depth of the integrator")
     parser.add_argument("--param", action="append", metavar="KEY=VALUE",
                         help="other integrator parameter (repeatable)")
@@ -16,7 +18,9 @@ def add_arguments(parser) -> None:
                                                                         "(default: 4096)")
     parser.add_argument("--chunks", type=positive_int, default=8,
                         help="independent chunks (>= 2, dividing --spp) for the noise floor (default: 8)")
-    parser.add_argument("--res", type=positive_int, help="square film resolution override")
+    parser.add_argument("--res", type=resolution_arg,
+                        help="film size: N sets the larger side and keeps the scene's aspect ratio, WxH "
+                             "sets both (default: the scene's)")
     parser.add_argument("--define", "-D", action="append", metavar="KEY=VALUE",
                         help="scene <default> value (repeatable)")
     parser.add_argument("--cache", help="cache folder (default: $MITSUBA_LAB_CACHE or "

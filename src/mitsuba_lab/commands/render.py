@@ -181,11 +181,13 @@ def run(args, out) -> int:
 def render_warnings(scene, kind: str, params: dict) -> tuple[list[str], str]:
     """(warnings, reason): what the user should know before trusting this render (the scene's
     own problems), and the reason a lab integrator cannot render the scene's light correctly
-    ('' when it can; the planner's answer, ``strategy_applicability``)."""
+    ('' when it can; the planner's answer, ``strategy_applicability``). Mitsuba's own integrators
+    are not refused here: what they ignore (media for `path`) is among the scene's warnings."""
+    from ..plugins.integrators.estimator import lookup
     from ..scene import SceneTraits, strategy_applicability
 
     traits = SceneTraits.from_scene(scene)
-    ok, reason = strategy_applicability(traits, kind, params)
+    ok, reason = strategy_applicability(traits, kind, params) if lookup(kind) is not None else (True, "")
     notes = traits.warnings(media=ok)           # an unsupported lab integrator names the media itself
     return notes, "" if ok else reason
 

@@ -13,8 +13,9 @@ def add_arguments(parser) -> None:
                         help="run the points on a Dask distributed cluster, e.g. tcp://host:8786 "
                              "(needs the 'distributed' extra; overrides the config's [executor] cluster)")
     parser.add_argument("--dry-run", action="store_true",
-                        help="print the plan, left-out strategies and an estimated cost (from a short "
-                             "pilot render per scene), and render nothing else")
+                        help="print the plan, left-out strategies and why, and an estimated cost (from a "
+                             "short pilot render per scene), and render nothing else; exit status 2 when "
+                             "nothing would run")
 
 
 def run(args, out) -> int:

@@ -101,8 +101,10 @@ def sweep(config, output=None, *, progress: bool = True, cluster: str | None = N
     Raises
     ------
     LabError
-        For a bad config (missing file, unknown key, bad value, unknown plugin, missing scene),
-        with the message ``mitsuba-lab sweep`` prints (several problems: one line each).
+        For a bad config (missing file, unknown key, bad value, unknown plugin, missing scene, a
+        reference integrator that ignores part of a scene) or a plan with nothing to run (every
+        strategy left out), with the message ``mitsuba-lab sweep`` prints (several problems: one
+        line each); nothing is rendered then.
     """
     from ..progress import NoProgress, ProgressBar
     from .sweep import done_line, prepare_sweep, run_sweep

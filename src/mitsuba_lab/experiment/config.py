@@ -12,6 +12,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from ..errors import LabError
+from ..features import DEFAULT_REFERENCES
+from ..film import RESOLUTION_EXPECTED, as_resolution, is_resolution
 
 OPTIONAL_METRICS = ("flip", "ciede2000")
 
@@ -74,13 +76,16 @@ class ReferenceSpec:
     spp: int
     chunks: int
     cache: str                      # folder, absolute
+    named: bool = True              # False: no config table names the integrator; the sweep picks one
+                                    # that renders every feature of the scene (reference_choice.py)
 
 
 @dataclass(frozen=True)
 class SceneSpec:
     name: str
     path: str                       # absolute
-    resolution: int | None          # square film override, or None to keep the scene's
+    resolution: int | tuple[int, int] | None    # film override (``film``): the larger side, or
+                                                # (width, height); None keeps the scene's
     defaults: dict                  # values for the scene's <default> parameters
     regions: dict                   # name -> (x0, y0, x1, y1): pixels (ints) or fractions (floats)
     reference: ReferenceSpec | None = None      # [scenes.X.reference]; None: the experiment's
@@ -94,7 +99,7 @@ class StrategyGridSpec:
     strategy: str                   # a [strategies] name of type lab_bdpt
     max_length: int                 # K: rows k = 1..K; the grid renders with max_depth = K
     spp: int
-    resolution: int | None          # square film override, or None for the scene's
+    resolution: int | tuple[int, int] | None    # film override (``film``), or None for the scene's
 
 
 @dataclass(frozen=True)
@@ -116,6 +121,8 @@ class Config:
     strategy_grid: StrategyGridSpec | None = None
     progressive: bool = DEFAULT_PROGRESSIVE     # one accumulating render per seed (experiment.progressive)
     checkpoints: str = "doubling"   # progressive passes: "doubling" or "ladder" (plan.ladder_passes)
+    allow_unsupported: tuple[str, ...] = ()     # strategies that run (marked) where they ignore
+                                                # part of a scene, instead of being left out
 
     def reference_for(self, scene: SceneSpec) -> ReferenceSpec:
         """The reference ``scene`` is measured against: its own table, else the experiment's."""
@@ -238,6 +245,13 @@ def _regions(reader: TableReader, base_dir: str) -> dict:
     return regions
 
 
+def read_resolution(reader: TableReader, default=None):
+    """A table's ``resolution`` key: the film's larger side (aspect ratio kept) or [width, height]
+    (``film``); ``default`` when absent."""
+    return as_resolution(reader.get("resolution", object, default, check=is_resolution,
+                                    expected=RESOLUTION_EXPECTED))
+
+
 def _scenes(reader: TableReader, base_dir: str, reference: ReferenceSpec) -> tuple[SceneSpec, ...]:
     """``[scenes]``; a scene's own ``reference`` table (integrator, spp, chunks) replaces what it
     names of ``reference`` (``[reference]``), for a hard region that needs a lower noise floor."""
@@ -249,7 +263,7 @@ def _scenes(reader: TableReader, base_dir: str, reference: ReferenceSpec) -> tup
         path = os.path.normpath(os.path.join(base_dir, rel))
         if not os.path.isfile(path):
             item.fail("path", f"an existing scene file, but {path} does not exist")
-        resolution = item.get("resolution", int, None, check=lambda v: v > 0, expected="a positive integer")
+        resolution = read_resolution(item)
         defaults = item.sub("defaults", {}).table
         own = None
         if "reference" in item.table:
@@ -288,7 +302,7 @@ def _strategy_grid(reader: TableReader, scenes, strategies) -> StrategyGridSpec 
     max_length = grid.get("max_length", int, check=lambda v: 1 <= v <= GRID_MAX_LENGTH,
                           expected=f"an integer in [1, {GRID_MAX_LENGTH}] (rows k = 1..max_length)")
     spp = grid.get("spp", int, 64, check=lambda v: v > 0, expected="a positive integer")
-    resolution = grid.get("resolution", int, None, check=lambda v: v > 0, expected="a positive integer")
+    resolution = read_resolution(grid)
     return StrategyGridSpec(scene, strategy, max_length, spp, resolution)
 
 
@@ -347,7 +361,7 @@ def parse_config(data: dict, source: str, base_dir: str | None = None) -> Config
     top.unknown({"experiment", "reference", "scenes", "strategies", "samplers", "executor", "report"})
     exp = top.sub("experiment", {})
     exp.unknown({"name", "output", "spp", "time_budgets", "repetitions", "seed", "max_depth", "metrics",
-                 "progressive", "checkpoints"})
+                 "progressive", "checkpoints", "allow_unsupported"})
     name = exp.get("name", str, os.path.splitext(os.path.basename(source))[0] if from_file else "sweep")
     output = exp.get("output", str, os.path.join("out", name))
     spp = _positive_ints(exp, "spp", [])
@@ -376,7 +390,7 @@ def parse_config(data: dict, source: str, base_dir: str | None = None) -> Config
     ref.unknown({"integrator", "spp", "chunks", "cache"})
     cache = os.path.abspath(os.path.expanduser(os.environ.get("MITSUBA_LAB_CACHE") or
                                                ref.get("cache", str, DEFAULT_CACHE)))
-    reference = _reference(ref, ReferenceSpec(PluginSpec("integrator", "path"), 4096, 8, cache))
+    reference = _reference(ref, ReferenceSpec(PluginSpec("integrator", DEFAULT_REFERENCES[0]), 4096, 8, cache, False))
 
     executor = top.sub("executor", {})
     executor.unknown({"cluster"})
@@ -391,13 +405,26 @@ def parse_config(data: dict, source: str, base_dir: str | None = None) -> Config
     report = top.sub("report", {})
     report.unknown({"strategy_grid"})
     grid = _strategy_grid(report, scenes, strategies)
+    allowed = _allowed(exp, strategies)
     return Config(name=name, source=os.path.abspath(source) if from_file else source, output=output, scenes=scenes,
                   strategies=strategies, samplers=samplers, spp=spp,
                   time_budgets=tuple(sorted(set(float(b) for b in budgets))), repetitions=repetitions,
                   seed=seed, max_depth=max_depth,
                   reference=reference, metrics=tuple(metrics),
                   cluster=cluster, strategy_grid=grid, progressive=progressive,
-                  checkpoints=checkpoints)
+                  checkpoints=checkpoints, allow_unsupported=allowed)
+
+
+def _allowed(exp: TableReader, strategies: tuple[PluginSpec, ...]) -> tuple[str, ...]:
+    """``experiment.allow_unsupported``: names of [strategies] that run, marked in the report, on
+    a scene they cannot render correctly (as ``render --allow-unsupported``), instead of being left
+    out."""
+    names = [s.name for s in strategies]
+    expected = f"a list of [strategies] names ({', '.join(names)})"
+    value = exp.get("allow_unsupported", list, [], expected=expected)
+    if not all(isinstance(v, str) and v in names for v in value):
+        exp.fail("allow_unsupported", f"{expected}, got {value!r}")
+    return tuple(dict.fromkeys(value))
 
 
 def _reference(ref: TableReader, default: ReferenceSpec) -> ReferenceSpec:
@@ -410,7 +437,7 @@ def _reference(ref: TableReader, default: ReferenceSpec) -> ReferenceSpec:
     chunks = ref.get("chunks", int, default.chunks, check=lambda v: v >= 2 and spp % v == 0,
                      expected=f"an integer >= 2 that divides {ref.key('spp')} = {spp} (the noise "
                               "floor needs two equal chunks)")
-    return ReferenceSpec(plugin, spp, chunks, default.cache)
+    return ReferenceSpec(plugin, spp, chunks, default.cache, default.named or integrator is not None)
 
 
 def with_depth(spec: PluginSpec, max_depth: int | None) -> PluginSpec:

@@ -74,7 +74,10 @@ def point_identity(scene, strategy: PluginSpec, sampler: PluginSpec, point, refe
     progressive point adds its pass sizes (a budget's are fitted by its first run: "fitted");
     a point of separate renders has no such key, so its identity is what it was before
     progressive runs existed."""
-    ident = {"scene": {"digest": scene_digest, "resolution": scene.resolution,
+    from ..scene_xml import film_override_key
+
+    ident = {"scene": {"digest": scene_digest,
+                       "resolution": film_override_key(scene.path, scene.resolution, scene.defaults),
                        "defaults": dict(scene.defaults)},
              "integrator": integrator_identity(strategy),
              "sampler": sampler_identity(sampler),

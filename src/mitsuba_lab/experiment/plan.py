@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .config import Config, PluginSpec, SceneSpec
+from .config import Config, PluginSpec
 
 #: Seeds: point seeds are seed * SEED_STRIDE + 1 .. R; the untimed warm-up uses seed * SEED_STRIDE.
 SEED_STRIDE = 1000
@@ -44,6 +44,9 @@ class Plan:
     points: list[Point]
     left_out: list[dict] = field(default_factory=list)   # {scene, strategy, reason}
     aliases: list[dict] = field(default_factory=list)    # {scene, strategy, same_as, reason}
+    unsupported: list[dict] = field(default_factory=list)  # run though they cannot render the scene
+                                                           # correctly (experiment.allow_unsupported):
+                                                           # {scene, strategy, reason, mark}
     separate: list[dict] = field(default_factory=list)   # progressive sweeps: what kept a scene on
                                                          # separate renders {scene, strategy, sampler, reason}
 
@@ -110,14 +113,18 @@ def warmup_sizes(passes) -> tuple[int, ...]:
 
 def build_plan(config: Config, assess=None) -> Plan:
     """Expand the configuration. ``assess(scene_spec, strategies)`` returns
-    ``(left_out: {name: reason}, aliases: {name: (canonical, reason)})``."""
+    ``(left_out: {name: reason}, aliases: {name: (canonical, reason)})``, and optionally third
+    the strategies that run though they cannot render the scene correctly, as the config allows:
+    ``{name: (mark, reason)}``."""
     plan = Plan(points=[])
     base = config.seed * SEED_STRIDE
     seeds = tuple(base + 1 + r for r in range(config.repetitions))
     for scene in config.scenes:
-        left_out, aliases = assess(scene, config.strategies) if assess else ({}, {})
+        left_out, aliases, unsupported = (*assess(scene, config.strategies), {})[:3] if assess else ({}, {}, {})
         for name, reason in left_out.items():
             plan.left_out.append({"scene": scene.name, "strategy": name, "reason": reason})
+        for name, (mark, reason) in unsupported.items():
+            plan.unsupported.append({"scene": scene.name, "strategy": name, "reason": reason, "mark": mark})
         for name, (canonical, reason) in aliases.items():
             plan.aliases.append({"scene": scene.name, "strategy": name, "same_as": canonical,
                                  "reason": reason})
@@ -153,10 +160,15 @@ def _points(config: Config, scene: str, strategy: str, sampler: str, seeds, base
     return points
 
 
-def scene_pixels(scene: SceneSpec, default_resolution: tuple[int, int]) -> int:
-    if scene.resolution:
-        return scene.resolution ** 2
-    return default_resolution[0] * default_resolution[1]
+def nothing_to_run(config: Config, plan: Plan) -> str:
+    """Why the plan has no point at all (every strategy left out on every scene), in one line;
+    '' when it has points."""
+    if plan.points:
+        return ""
+    why = "; ".join(f"{x['scene']} / {x['strategy']}: {x['reason']}" for x in plan.left_out)
+    return (f"{config.source}: nothing to run: every strategy is left out on every scene ({why}); add a "
+            f"strategy that renders these scenes, or name the strategies to run anyway (marked in the "
+            f"report) in experiment.allow_unsupported")
 
 
 def estimated_seconds(plan: Plan, config: Config, rates: dict[str, float], pixels: dict[str, int],

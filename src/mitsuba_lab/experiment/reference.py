@@ -1,7 +1,7 @@
 """High-spp references in a content-addressed cache, with their own noise floor.
 
-Key = SHA-256 of: the scene file and the files it references (bytes), film
-resolution, scene defaults, the reference integrator and its parameters, spp,
+Key = SHA-256 of: the scene file and the files it references (bytes), the film
+size override as rendered (``scene_xml.film_override_key``), scene defaults, the reference integrator and its parameters, spp,
 chunk count, the Mitsuba / Dr.Jit versions and variant, and, when a lab plugin
 renders the reference, the lab plugins' code version. The reference is
 rendered in K independent chunks (disjoint seeds); their mean is the image and
@@ -23,7 +23,7 @@ from .. import images
 from ..render import render
 from ..runtime import versions
 from ..scene import make_integrator
-from ..scene_xml import load_scene_variant, scene_digest
+from ..scene_xml import film_override_key, load_scene_variant, scene_digest
 from ..plugins.params import declared
 from .config import PluginSpec
 from .identity import plugin_code_version
@@ -50,7 +50,8 @@ class Reference:
 
 def reference_key(scene_path, resolution, defaults, integrator: PluginSpec, spp, chunks) -> str:
     info = versions()
-    payload = {"scene": scene_digest(scene_path), "resolution": resolution, "defaults": defaults,
+    payload = {"scene": scene_digest(scene_path), "resolution": film_override_key(scene_path, resolution, defaults),
+               "defaults": defaults,
                "integrator": integrator.type, "params": integrator.params, "spp": spp, "chunks": chunks,
                "mitsuba": info["mitsuba"], "drjit": info["drjit"], "variant": info["variant"]}
     if declared(integrator.type) is not None:      # a lab plugin renders it: its code is part of it
@@ -72,7 +73,7 @@ def load_cached(cache: str, key: str) -> Reference | None:
     return Reference(key, images.read_exr(mean_path)[0], images.read_exr(var_path)[0], meta)
 
 
-def get_reference(scene_path: str, resolution: int | None, defaults: dict, integrator: PluginSpec,
+def get_reference(scene_path: str, resolution, defaults: dict, integrator: PluginSpec,
                   spp: int, chunks: int, cache: str, progress=None) -> tuple[Reference, bool]:
     """(reference, was_cached). ``progress(done_chunks, chunks)`` is called while rendering."""
     key = reference_key(scene_path, resolution, defaults, integrator, spp, chunks)

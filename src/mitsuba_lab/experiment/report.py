@@ -49,6 +49,9 @@ class Report(SectionTables):
                            f"run or resume the sweep with `mitsuba-lab sweep {config} -o {folder}` first")
         self.out = os.path.join(folder, "report")
         os.makedirs(self.out, exist_ok=True)
+        #: {(scene, strategy): mark} of strategies run though they ignore part of the scene
+        #: (experiment.allow_unsupported): every table names them with it, "path (ignores media)"
+        self.marks = {(u["scene"], u["strategy"]): u["mark"] for u in self.meta.get("unsupported", [])}
         self.references = self._references()
         self.stats = self._stats()
         self.blocks: dict[str, str] = {}             # HTML blocks of the page (the viewers)
@@ -113,6 +116,13 @@ class Report(SectionTables):
             lines_md += ["", "## Left out and aliased strategies", "",
                          *markdown_table(["scene", "strategy", "reason"],
                                          [[x["scene"], x["strategy"], x["reason"]] for x in left])]
+        marked = self.meta.get("unsupported", [])
+        if marked:
+            lines_md += ["", "## Strategies run on scenes they cannot render correctly", "",
+                         "Named in experiment.allow_unsupported: they ran, and every table marks them; their "
+                         "errors include what they leave out, so their ranking says nothing about their noise.", "",
+                         *markdown_table(["scene", "strategy", "mark", "reason"],
+                                         [[x["scene"], x["strategy"], x["mark"], x["reason"]] for x in marked])]
         lines_md += self.settings_table()
         return "\n".join(lines_md)
 
@@ -122,7 +132,8 @@ class Report(SectionTables):
         groups = defaultdict(list)
         for s in stats:
             groups[(s.strategy, s.sampler)].append(s)
-        label = lambda key: key[0] if len({k[1] for k in groups}) == 1 else f"{key[0]} / {key[1]}"
+        plain = lambda key: key[0] if len({k[1] for k in groups}) == 1 else f"{key[0]} / {key[1]}"
+        label = lambda key: self.shown(scene, key[0], plain(key))
         md = [f"## Scene `{scene}`", "",
               f"Reference: {ref.meta.get('integrator')} {json.dumps(ref.meta.get('params', {}))}, "
               f"{ref.meta.get('spp')} spp in {ref.meta.get('chunks')} chunks; noise floor: MSE "

@@ -57,6 +57,16 @@ def budget_cell(c: dict) -> str:
 
 
 class SectionTables:
+    #: {(scene, strategy): mark}: ``Report`` sets its own (``shown``); none by default.
+    marks: dict = {}
+
+    def shown(self, scene: str, strategy: str, text: str | None = None) -> str:
+        """How the tables name a strategy (or ``text``, a label or point id of it) on a scene:
+        with its mark where it ran though it ignores part of the scene, "path (ignores media)"."""
+        mark = self.marks.get((scene, strategy))
+        text = strategy if text is None else text
+        return f"{text} ({mark})" if mark else text
+
     def efficiency_table(self, groups, label) -> list[str]:
         """Each group's longest point, ranked by efficiency; a group whose longest render is
         shorter than MIN_TRUSTED_TIME_S is not ranked (listed last, marked) and the MSE-time
@@ -133,7 +143,7 @@ class SectionTables:
     def bias_table(self, stats) -> list[str]:
         header = ["point", "seeds", "variance", "bias^2 (+- se)", "relative variance", "relative bias^2 (+- se)",
                   "relMSE floor-corrected"]
-        body = [[s.point, s.seeds, fmt(s.variance), _bias_cell(s.bias2, s.bias2_se), fmt(s.rel_variance),
+        body = [[self.shown(s.scene, s.strategy, s.point), s.seeds, fmt(s.variance), _bias_cell(s.bias2, s.bias2_se), fmt(s.rel_variance),
                  _bias_cell(s.rel_bias2, s.rel_bias2_se), fmt(s.rel_mse_corrected)] for s in stats]
         return ["", "### Bias and variance per point", "",
                 "Relative: the same in relMSE's units (pixels weighted by 1 / (ref^2 + 0.01)). bias^2 is an "
@@ -335,7 +345,8 @@ class SectionTables:
                             b = region_stack_stats(bp, self.folder, ref, rect)
                             o = region_stack_stats(op, self.folder, ref, rect)
                             v = veach_bound(b, o, n_l, bp.spp)
-                            rows.append([sampler, n_l, bname, oname, weighting, bp.spp, name, fmt(v["lhs"]),
+                            rows.append([sampler, n_l, self.shown(scene, bname), self.shown(scene, oname),
+                                         weighting, bp.spp, name, fmt(v["lhs"]),
                                          fmt(v["rhs"]), fmt(v["se"], 2), v["verdict"]])
         md = ["", "### Veach's bound: Var[balance] <= Var[other] + (1/min n_i - 1/sum n_i) I^2", "",
               "Each weighting against the balance heuristic on the same sampler with the same emitter_samples "
@@ -356,10 +367,11 @@ class SectionTables:
         return md
 
     def settings_table(self) -> list[str]:
-        """The strategies' and samplers' parameters as the runs used them: from each run's
-        identity (defaults filled in; a progressive pass count and ``count_rays``, which change
-        no image, left out), else the row's own params (older rows). One row per distinct
-        setting, with the scenes it was used on when it differs between scenes."""
+        """Each scene's film size as rendered (its reference's image), and the strategies' and
+        samplers' parameters as the runs used them: from each run's identity (defaults filled in;
+        a progressive pass count and ``count_rays``, which change no image, left out), else the
+        row's own params (older rows). One row per distinct setting, with the scenes it was used
+        on when it differs between scenes."""
         settings = defaultdict(set)         # (kind, name, type, params as JSON) -> scenes
         for row in self.store.current_runs():
             ident = row.get("identity") or {}
@@ -371,11 +383,16 @@ class SectionTables:
         if not settings:
             return []
         scenes = {row["scene"] for row in self.store.current_runs()}
-        body = [[kind, name, plugin, params, "all" if found == scenes else ", ".join(sorted(found))]
+        for scene in scenes & set(self.references):        # the film as rendered: the reference's image
+            height, width = self.references[scene].image.shape[:2]
+            settings[("film", scene, "", f"{width}x{height} pixels (width x height)")].add(scene)
+        marks = lambda name, found: sorted({self.marks[(scene, name)] for scene in found if (scene, name) in self.marks})
+        body = [[kind, name + "".join(f" ({m})" for m in marks(name, found)) if kind == "strategy" else name, plugin,
+                 params, "all" if found == scenes else ", ".join(sorted(found))]
                 for (kind, name, plugin, params), found in sorted(settings.items())]
         return ["", "## Settings", "",
-                "Parameters as rendered, defaults filled in (the sample count is each point's own; a "
-                "progressive pass count and count_rays are left out).", "",
+                "Film sizes and parameters as rendered, defaults filled in (the sample count is each point's "
+                "own; a progressive pass count and count_rays are left out).", "",
                 *markdown_table(["kind", "name", "plugin", "parameters", "scenes"], body)]
 
     def _run_row(self, stats: PointStats) -> dict:

@@ -66,6 +66,7 @@ class SweepRunner:
         self.store.append({"kind": "meta", "config": self.config.source, "name": self.config.name,
                            "started": time.time(), "machine": machine_info(),
                            "left_out": self.plan.left_out, "aliases": self.plan.aliases,
+                           "unsupported": self.plan.unsupported,
                            "progressive": self.config.progressive, "separate": self.plan.separate})
         for scene in self.config.scenes:
             self.references[scene.name] = self.reference(scene)

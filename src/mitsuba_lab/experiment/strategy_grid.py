@@ -50,13 +50,14 @@ def grid_seed(config: Config) -> int:
 
 def grid_setup(config: Config):
     """(scene spec, lab_bdpt plugin spec with max_depth = K, identity, its hash)."""
-    from ..scene_xml import scene_digest
+    from ..scene_xml import film_override_key, scene_digest
 
     spec = config.strategy_grid
     scene = next(s for s in config.scenes if s.name == spec.scene)
     strategy = next(s for s in config.strategies if s.name == spec.strategy)
     plugin = PluginSpec(strategy.name, strategy.type, {**strategy.params, "max_depth": spec.max_length})
-    identity = {"scene": {"digest": scene_digest(scene.path), "resolution": spec.resolution or scene.resolution,
+    resolution = film_override_key(scene.path, grid_resolution(config), scene.defaults)
+    identity = {"scene": {"digest": scene_digest(scene.path), "resolution": resolution,
                           "defaults": dict(scene.defaults)},
                 "integrator": integrator_identity(plugin), "spp": spec.spp, "seed": grid_seed(config),
                 "max_length": spec.max_length, "versions": versions_identity()}
@@ -81,13 +82,25 @@ def grid_renders(config: Config) -> int:
     return 0 if spec is None else len(grid_cells(spec.max_length)) + 1
 
 
+def grid_resolution(config: Config):
+    """The grid's film override: its own ``resolution``, else its scene's (None: the scene's film)."""
+    spec = config.strategy_grid
+    scene = next(s for s in config.scenes if s.name == spec.scene)
+    return spec.resolution or scene.resolution
+
+
 def estimated_grid_seconds(config: Config, rate: float, pixels: int) -> float:
-    """--dry-run's estimate: ``rate`` is the reference integrator's samples per second."""
+    """--dry-run's estimate: ``rate`` is the reference integrator's samples per second, ``pixels``
+    the scene's at its own resolution."""
+    from ..scene_xml import film_size
+
     spec = config.strategy_grid
     if spec is None:
         return 0.0
     if spec.resolution:
-        pixels = spec.resolution ** 2
+        scene = next(s for s in config.scenes if s.name == spec.scene)
+        width, height = film_size(scene.path, spec.resolution, scene.defaults)
+        pixels = width * height
     return grid_renders(config) * pixels * spec.spp / rate * BDPT_COST
 
 
@@ -112,8 +125,7 @@ def render_strategy_grid(config: Config, store: ResultStore, progress=None) -> i
         todo.append((None, None, None))
     if not todo:
         return 0
-    scene = load_scene_variant(scene_spec.path, spec.resolution or scene_spec.resolution, None,
-                               scene_spec.defaults)
+    scene = load_scene_variant(scene_spec.path, grid_resolution(config), None, scene_spec.defaults)
     folder = os.path.join(store.folder, GRID_FOLDER)
     os.makedirs(folder, exist_ok=True)
     for i, (k, s, t) in enumerate(todo, 1):

@@ -11,31 +11,49 @@ import time
 from ..errors import LabError
 from ..progress import ProgressBar, duration
 from .config import PASS_PARAMETER, Config, PluginSpec, load_config, with_depth
-from .plan import Plan, build_plan, estimated_seconds
+from .plan import Plan, build_plan, estimated_seconds, nothing_to_run
 from .reference import get_reference, load_cached, reference_key
+from .reference_choice import choose_references
 from .store import ResultStore
 from .strategy_grid import check_grid, estimated_grid_seconds, grid_renders, render_strategy_grid
 from .validate import validate
 
 
-def assess_scene(scene_spec, strategies):
-    """Left-out strategies and aliases for one scene, from its traits (mitsuba_lab.scene)."""
-    from ..scene import SceneTraits, equivalence_reason, equivalent_strategies, strategy_applicability
+def scene_traits(scene_spec):
+    """The ``SceneTraits`` of a config's scene, loaded at its resolution with its defaults."""
+    from ..scene import SceneTraits
     from ..scene_xml import load_scene_variant
 
-    traits = SceneTraits.from_scene(load_scene_variant(scene_spec.path, scene_spec.resolution, None,
-                                                       scene_spec.defaults))
-    left_out = {}
+    return SceneTraits.from_scene(load_scene_variant(scene_spec.path, scene_spec.resolution, None,
+                                                     scene_spec.defaults))
+
+
+def assess_scene(scene_spec, strategies, traits=None, allowed=()):
+    """Left-out strategies, aliases and the strategies that run though they cannot render the
+    scene correctly (those named in ``allowed``, ``experiment.allow_unsupported``: {name: (mark,
+    reason)}) for one scene, from its traits (mitsuba_lab.scene; loaded when not given)."""
+    from ..features import ignored_features, ignores_text
+    from ..plugins.integrators.estimator import lookup
+    from ..scene import equivalence_reason, equivalent_strategies, strategy_applicability
+
+    traits = traits if traits is not None else scene_traits(scene_spec)
+    left_out, unsupported = {}, {}
     for s in strategies:
         ok, reason = strategy_applicability(traits, s.type, s.params)
-        if not ok:
+        if ok:
+            continue
+        estimator = lookup(s.type)
+        renders_at_all = estimator is None or not estimator.unsupported(traits)     # (as render's refusal)
+        if s.name in allowed and renders_at_all:
+            unsupported[s.name] = (ignores_text(ignored_features(traits, s.type, s.params)), reason)
+        else:
             left_out[s.name] = reason
     usable = {s.name: (s.type, s.params) for s in strategies if s.name not in left_out}
     aliases = {}
     for name, canonical in equivalent_strategies(traits, usable).items():
         if canonical != name:
             aliases[name] = (canonical, equivalence_reason(traits, *usable[name]))
-    return left_out, aliases
+    return left_out, aliases, unsupported
 
 
 def pilot_rates(config) -> tuple[dict, dict]:
@@ -65,8 +83,8 @@ def print_plan(config, plan, out) -> None:
     strategies = {s.name: s for s in config.strategies}
     for scene in config.scenes:
         points = plan.for_scene(scene.name)
-        print(f"  {scene.name}: {len(points)} points x ({config.repetitions} timed + 1 warm-up) renders",
-              file=out)
+        print(f"  {scene.name}: {len(points)} points x ({config.repetitions} timed + 1 warm-up) renders; "
+              f"reference {config.reference_for(scene).integrator.type}", file=out)
         for point in points:
             unit = PASS_PARAMETER.get(strategies[point.strategy].type)
             count = f"{point.spp} {unit} of 1 spp" if unit else f"{point.spp} spp"
@@ -81,6 +99,9 @@ def print_plan(config, plan, out) -> None:
               file=out)
     for item in plan.left_out:
         print(f"  left out: {item['scene']} / {item['strategy']}: {item['reason']}", file=out)
+    for item in plan.unsupported:
+        print(f"  runs, marked \"{item['mark']}\" (experiment.allow_unsupported): {item['scene']} / "
+              f"{item['strategy']}: {item['reason']}", file=out)
     for item in plan.aliases:
         print(f"  alias: {item['scene']} / {item['strategy']} = {item['same_as']}: {item['reason']}", file=out)
 
@@ -90,14 +111,27 @@ def prepare_sweep(source) -> tuple[Config, Plan]:
     its plugins and its scenes is raised here, as a LabError, before anything renders."""
     config = load_config(source)
     validate(config)                  # every plugin and scene x sampler, before anything renders
-    plan = build_plan(config, assess_scene)
+    traits = {scene.name: scene_traits(scene) for scene in config.scenes}
+    config = choose_references(config, traits)      # each scene's reference renders all of it
+    plan = build_plan(config, lambda scene, strategies: assess_scene(scene, strategies, traits[scene.name],
+                                                                     config.allow_unsupported))
     check_grid(config, plan)
     return config, plan
 
 
+def require_points(config, plan) -> None:
+    """LabError (exit 2) saying why when the plan has nothing to run: then nothing renders,
+    not even a reference."""
+    reason = nothing_to_run(config, plan)
+    if reason:
+        raise LabError(reason)
+
+
 def print_dry_run(config, plan, out) -> None:
-    """The plan and its estimated cost, from a short pilot render per scene (``--dry-run``)."""
+    """The plan and its estimated cost, from a short pilot render per scene (``--dry-run``); a
+    plan with nothing to run is printed, then refused (``require_points``) before any pilot."""
     print_plan(config, plan, out)
+    require_points(config, plan)
     rates, pixels = pilot_rates(config)
     cached = set()
     for scene in config.scenes:
@@ -151,6 +185,7 @@ def run_sweep(config, plan, folder: str, bar, cluster: str | None = None, in_pro
     ``cluster``, else in this process or, ``in_process`` False, in a worker process of the
     sweep's own: ``executors``), the strategy grid, then the report. Returns the report's
     paths (csv, html, md)."""
+    require_points(config, plan)
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise LabError(f"output path is not a folder: {folder}")
     from .report import build_report
@@ -194,8 +229,14 @@ def sweep_command(config_path: str, output: str | None, dry_run: bool, out, clus
 
 
 def reference_command(scene_path, integrator, params, spp, chunks, resolution, defaults, cache, output, out):
+    """``mitsuba-lab reference``. ``integrator`` None: the default for the scene's features
+    (``features.default_reference``); a named one that ignores a feature of the scene is refused."""
     from .. import images
+    from ..features import default_reference
+    from ..scene import SceneTraits
+    from ..scene_xml import load_scene_variant
     from .config import DEFAULT_CACHE
+    from .reference_choice import reference_problem
 
     if spp % chunks or chunks < 2:
         raise LabError(f"--chunks must be >= 2 and divide --spp ({spp}), got {chunks}")
@@ -203,6 +244,12 @@ def reference_command(scene_path, integrator, params, spp, chunks, resolution, d
         raise LabError(f"scene file not found: {scene_path}")
     if output:
         images.check_writable(output)
+    traits = SceneTraits.from_scene(load_scene_variant(scene_path, resolution, None, defaults))
+    if integrator is None:
+        integrator = default_reference(traits)
+    reason = reference_problem(traits, PluginSpec("reference", integrator, params))
+    if reason:
+        raise LabError(f"scene {scene_path}: the reference must render every feature of the scene, but {reason}")
     cache = os.path.abspath(os.path.expanduser(cache or os.environ.get("MITSUBA_LAB_CACHE") or DEFAULT_CACHE))
     bar = ProgressBar()
     bar.begin(chunks, unit="chunk")
@@ -210,8 +257,9 @@ def reference_command(scene_path, integrator, params, spp, chunks, resolution, d
                                 PluginSpec("reference", integrator, params), spp, chunks, cache,
                                 progress=lambda k, n: bar.step())
     origin = "found in the cache" if cached else f"rendered in {ref.meta.get('seconds', 0):.1f} s"
-    print(f"reference {ref.key} {origin}: {cache}/{ref.key}.exr; noise floor MSE {ref.mse_floor:.4g}, "
-          f"relMSE {ref.rel_mse_floor():.4g}", file=out)
+    height, width = ref.image.shape[:2]
+    print(f"reference {ref.key} ({integrator}, {width}x{height}) {origin}: {cache}/{ref.key}.exr; noise floor "
+          f"MSE {ref.mse_floor:.4g}, relMSE {ref.rel_mse_floor():.4g}", file=out)
     if output:
         images.write_exr(output, ref.image, {"mitsuba_lab.reference": ref.key})
         images.write_png(os.path.splitext(output)[0] + ".png", ref.image)

@@ -130,10 +130,21 @@ def _cached(slot: str, key: str, make):
     return _loaded[slot][1]
 
 
+def _integrator(spec: PluginSpec):
+    """The strategy's integrator. A lab integrator is told that the sweep has said what it cannot
+    render on the scene (a strategy runs there only when experiment.allow_unsupported names it,
+    and the report marks it), so it does not log that again at every render."""
+    from ..scene import make_integrator
+
+    integrator = make_integrator(spec.type, spec.params)
+    if hasattr(integrator, "ESTIMATOR"):
+        integrator.unsupported_acknowledged = True
+    return integrator
+
+
 def execute(task: PointTask) -> PointResult:
     from ..runtime import activate
     from ..render import render
-    from ..scene import make_integrator
     from ..scene_xml import load_scene_variant
 
     activate(task.variant)                   # a fresh worker process selects the sweep's variant
@@ -146,7 +157,7 @@ def execute(task: PointTask) -> PointResult:
         """Render with ``count`` camera samples per pixel (spp, or passes: sample_count_plugin)."""
         spec, spp = sample_count_plugin(task.strategy, count)
         integrator = _cached("integrator", scene_key + json.dumps(spec.as_dict(), sort_keys=True),
-                             lambda: make_integrator(spec.type, spec.params))
+                             lambda: _integrator(spec))
         return render(scene, integrator, spp=spp, seed=seed)
 
     if task.point.progressive:

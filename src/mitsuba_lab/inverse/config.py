@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-from ..experiment.config import TableReader, read_toml
+from ..experiment.config import TableReader, read_resolution, read_toml
 
 LOSSES = ("l2", "relative_l2")
 BUILTIN_SCENES = ("cornell_texture",)
@@ -48,7 +48,7 @@ class InverseConfig:
     output: str
     scene_path: str | None
     builtin: str | None
-    resolution: int
+    resolution: int | tuple[int, int]      # film override (``film``): the larger side, or (width, height)
     texture_size: int
     defaults: dict
     max_depth: int
@@ -110,7 +110,7 @@ def parse_config(data: dict, source: str) -> InverseConfig:
         scene_path = os.path.normpath(os.path.join(base_dir, rel))
         if not os.path.isfile(scene_path):
             sc.fail("path", f"an existing scene file, but {scene_path} does not exist")
-    resolution = sc.get("resolution", int, 32, check=_positive, expected="a positive integer")
+    resolution = read_resolution(sc, 32)
     texture_size = sc.get("texture_size", int, 16, check=_positive, expected="a positive integer")
     defaults = dict(sc.sub("defaults", {}).table)
 

@@ -18,6 +18,7 @@ from ..reporting import dict_rows, fmt, markdown_table, pyplot, save_figure, sav
 from .config import InverseConfig
 from .gradients import GRAD_COLUMNS, GradientSweep, best_sampler
 from .optimise import OptimisationResult
+from .scenes import film_of
 
 OPT_COLUMNS = ("iteration", "loss", "param_error", "time_s", "iteration_s", "loss_eval")
 
@@ -116,7 +117,7 @@ def gradients_markdown(cfg: InverseConfig, sweep: GradientSweep, plot: str) -> s
     ref_norm2 = max(float(np.sum(sweep.reference ** 2)), 1e-300)
     lines = [f"## Gradient variance against time: `{sweep.key}`", "",
              f"At the start point, loss `{sweep.loss}` against a {cfg.target_spp}-spp target; prb, max_depth "
-             f"{cfg.max_depth}, {cfg.resolution}x{cfg.resolution}. Reference gradient: mean of "
+             f"{cfg.max_depth}, {'x'.join(map(str, film_of(cfg)))}. Reference gradient: mean of "
              f"{spec.reference_seeds} gradients at {spec.reference_spp} spp (Mitsuba independent), "
              f"|g_ref| = {fmt(float(np.linalg.norm(sweep.reference)), 4)} (standard error "
              f"{fmt(sweep.reference_sem)}). Per point: {spec.seeds} seeds after one warm-up; "

@@ -1,6 +1,7 @@
 """The scenes of an inversion and their parameters as numpy.
 
-``scene.path`` names a Mitsuba XML scene (``scene.resolution`` sets its square film;
+``scene.path`` names a Mitsuba XML scene (``scene.resolution`` sets its film: N the larger side,
+keeping the aspect ratio, or [width, height], as everywhere: ``mitsuba_lab.film``;
 ``scene.defaults`` its ``<default>`` values). ``scene.builtin = "cornell_texture"`` is
 the scene built in code by ``cornell_texture_scene``: Mitsuba's ``mi.cornell_box()``
 whose back wall has a diffuse BSDF with an RGB ``bitmap`` reflectance of
@@ -32,10 +33,25 @@ def truth_texture(size: int) -> np.ndarray:
     return np.clip((checker * warm + (1 - checker) * cool) * ramp + 0.05, 0.1, 0.8).astype(np.float32)
 
 
-def cornell_texture_scene(resolution: int, texture_size: int, sampler: dict | None = None,
+#: The film of ``mi.cornell_box()`` (width, height): what a ``resolution`` override scales.
+CORNELL_FILM = (256, 256)
+
+
+def film_of(cfg: InverseConfig) -> tuple[int, int]:
+    """(width, height) of the config's film: its ``resolution`` applied to the scene's own."""
+    from ..film import film_shape
+    from ..scene_xml import film_size
+
+    if cfg.builtin is not None:
+        return film_shape(CORNELL_FILM, cfg.resolution)
+    return film_size(cfg.scene_path, cfg.resolution, cfg.defaults)
+
+
+def cornell_texture_scene(resolution, texture_size: int, sampler: dict | None = None,
                           spp: int = 16) -> dict:
     """``mi.cornell_box()`` with a textured back wall (see the module docstring); the film
-    is ``resolution`` squared with a box filter, the sampler ``sampler`` (default independent).
+    is ``resolution`` (``film``: N the larger side, or (width, height)) with a box filter, the
+    sampler ``sampler`` (default independent).
 
     The two boxes are removed: with them, the texels behind the tall box receive
     only a weak, noisy gradient through indirect light, and Adam (which normalises
@@ -46,9 +62,12 @@ def cornell_texture_scene(resolution: int, texture_size: int, sampler: dict | No
     """
     import mitsuba as mi
 
+    from ..film import film_shape
+
     scene = mi.cornell_box()
     del scene["large-box"], scene["small-box"]      # they would hide texels (see the docstring)
-    scene["sensor"]["film"].update({"width": resolution, "height": resolution, "rfilter": {"type": "box"}})
+    width, height = film_shape(CORNELL_FILM, resolution)
+    scene["sensor"]["film"].update({"width": width, "height": height, "rfilter": {"type": "box"}})
     scene["sensor"]["sampler"] = {"sample_count": spp, **(sampler or {"type": "independent"})}
     scene["back"]["bsdf"] = {
         "type": "diffuse",
