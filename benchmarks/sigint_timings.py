@@ -13,7 +13,8 @@ stopped.
 
     .venv/bin/python benchmarks/sigint_timings.py [--only render,sweep,...]
 
-``tests/test_sigint.py`` uses ``interrupt``, ``leftovers`` and ``sweep_config`` from this file.
+``tests/test_sigint.py`` runs the same commands at the same moments with this file's helpers
+and checks what this table shows.
 """
 from __future__ import annotations
 

@@ -35,6 +35,7 @@ BOUND_S = 20.0
 
 def assert_interrupted(outcome):
     assert outcome.signalled, f"the moment never came:\n{outcome.stderr[-3000:]}"
+    # (Mitsuba's own "Received interrupt signal, winding down.." goes to stdout; skipped if not)
     lines = [line for line in outcome.stderr.splitlines()
              if not line.startswith("sigint-cli:") and "Received interrupt signal" not in line]
     assert outcome.returncode == timings.EXIT_INTERRUPTED, outcome.stderr[-3000:]
