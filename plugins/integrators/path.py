@@ -28,7 +28,7 @@ from mitsuba_lab.plugins.integrators.mis import MIS
 from mitsuba_lab.plugins.integrators.naive import Naive
 from mitsuba_lab.plugins.integrators.nee import NEE
 from mitsuba_lab.plugins.integrators.roulette import russian_roulette
-from mitsuba_lab.plugins.integrators.support import warn_if_unsupported
+from mitsuba_lab.plugins.integrators.support import base_render, warn_if_unsupported
 from mitsuba_lab.plugins.params import UNBOUNDED
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
@@ -123,7 +123,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                evaluate: bool = True):
         if self._plan is not None and self._plan[0] is scene:
             # Mitsuba's render(sensor index) calls render(sensor object) back: planned already
-            return mi.SamplingIntegrator.render(self, scene, sensor, seed, spp, develop, evaluate)
+            return base_render(self, scene, sensor, seed, spp, develop, evaluate)
         # The plan is made here, before the kernel is traced: reading the scene's traits
         # evaluates scene data (emitter areas, sensor transforms), which inside the trace
         # would split the render into several kernels.
@@ -132,7 +132,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         bind_film_layout(scene, sensor)           # samplers that order pixels learn the film's shape
         self._plan = (scene, KernelPlan.of(traits, self.estimator))
         try:
-            return mi.SamplingIntegrator.render(self, scene, sensor, seed, spp, develop, evaluate)
+            return base_render(self, scene, sensor, seed, spp, develop, evaluate)
         finally:
             self._plan = None
 

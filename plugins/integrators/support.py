@@ -1,5 +1,5 @@
-"""What a lab integrator says when it is given a scene it cannot render correctly, and how its
-own ``render`` reads Mitsuba's arguments.
+"""What a lab integrator says when it is given a scene it cannot render correctly, how its
+own ``render`` reads Mitsuba's arguments, and how it calls Mitsuba's.
 
 Used as a plugin inside a user's scene, it renders anyway (a scene may be right apart from
 one object) and logs one warning per render through Mitsuba's logger, naming the plugin and
@@ -9,6 +9,8 @@ the reason (``Estimator.applicability``: participating media, delta lights for l
 from __future__ import annotations
 
 import mitsuba as mi
+
+from mitsuba_lab import interrupts
 
 
 def warn_if_unsupported(integrator, traits) -> str:
@@ -32,3 +34,14 @@ def render_arguments(scene: mi.Scene, sensor, seed, spp: int):
         sensor = scene.sensors()[sensor]
     seed = int(seed[0]) if hasattr(seed, "__len__") and not isinstance(seed, int) else int(seed)
     return sensor, seed, spp or sensor.sampler().sample_count()
+
+
+def base_render(integrator, scene: mi.Scene, sensor, seed, spp: int, develop: bool = True,
+                evaluate: bool = True):
+    """Mitsuba's own ``SamplingIntegrator.render`` for ``integrator``, a lab integrator that
+    overrides ``render``. Python's SIGINT handler is installed first (``interrupts.restore``).
+    Mitsuba then calls the Python ``render`` back, and a call made there records the handler
+    it finds as the one to pass Ctrl-C on to. Without this it would find Mitsuba's own, and
+    Ctrl-C would be lost."""
+    interrupts.restore()
+    return mi.SamplingIntegrator.render(integrator, scene, sensor, seed, spp, develop, evaluate)

@@ -8,6 +8,9 @@ execution; the rest of the wall time is tracing Python and Mitsuba's set-up.
 Before the clock starts the sensor's film is bound to its sampler
 (``bind_film_layout``): a sampler whose points depend on the pixel's position
 (``lab_zsobol``) then knows the film's shape under any integrator, Mitsuba's too.
+
+Ctrl-C during a render raises KeyboardInterrupt once the running kernel (a multi-pass
+integrator's pass) has finished (``interrupts``).
 """
 from __future__ import annotations
 
@@ -18,6 +21,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mitsuba_lab import interrupts
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 
 
@@ -110,8 +114,9 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, spp: int = 
     bind_film_layout(scene, sensor)
     sampler = scene.sensors()[sensor].sampler()
     spp_used = spp or sampler.sample_count()
-    image, wall, history = timed_kernels(
-        lambda: mi.render(scene, integrator=integrator, spp=spp, seed=seed, sensor=sensor))
+    with interrupts.rendering():          # Ctrl-C: KeyboardInterrupt, and Python's handler kept
+        image, wall, history = timed_kernels(
+            lambda: mi.render(scene, integrator=integrator, spp=spp, seed=seed, sensor=sensor))
     compile_s, kernel_s, kernels, misses = _kernel_times(history)
     rays = integrator.ray_counts() if hasattr(integrator, "ray_counts") else {}
     pixels = np.array(image, dtype=np.float32)

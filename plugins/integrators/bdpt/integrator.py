@@ -8,10 +8,11 @@ from dataclasses import asdict, dataclass, field
 import drjit as dr
 import mitsuba as mi
 
+from mitsuba_lab import interrupts
 from mitsuba_lab.plugins.integrators import spawn, spectral
 from mitsuba_lab.plugins.integrators.aim import AimedEmission
 from mitsuba_lab.plugins.integrators.counters import RayCounters
-from mitsuba_lab.plugins.integrators.support import render_arguments, warn_if_unsupported
+from mitsuba_lab.plugins.integrators.support import base_render, render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.params import UNBOUNDED, bdpt_only_strategy
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
@@ -201,7 +202,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                evaluate: bool = True):
         if self._pass is not None:
             # Mitsuba's render(sensor index) calls render(sensor object) back: the pass is set up
-            return mi.SamplingIntegrator.render(self, scene, sensor, seed, spp, develop, evaluate)
+            return base_render(self, scene, sensor, seed, spp, develop, evaluate)
         self.refuse_undeveloped(develop)
         traits = SceneTraits.from_scene(scene)
         problem = self.ESTIMATOR.unsupported(traits)
@@ -256,13 +257,13 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             start = time.perf_counter()
             try:
                 if u is None:
-                    image = mi.SamplingIntegrator.render(self, scene, sensor, pass_seed(seed, index), spp_pass,
-                                                         True, True)
+                    image = base_render(self, scene, sensor, pass_seed(seed, index), spp_pass)
                 else:                              # every camera ray at the pass's wavelengths
                     image = spectral.render_pass(self, scene, sensor, dr.opaque(mi.UInt32, pass_seed(seed, index)),
                                                  spp_pass, u)
             finally:
                 self._pass = None
+            interrupts.checkpoint(self)                # Ctrl-C stops the render here, between passes
             dr.eval(image)
             dr.sync_thread()
             stats.camera_s += time.perf_counter() - start

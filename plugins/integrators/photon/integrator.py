@@ -8,6 +8,7 @@ from dataclasses import asdict, dataclass, field
 import drjit as dr
 import mitsuba as mi
 
+from mitsuba_lab import interrupts
 from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.integrators import spawn
 from mitsuba_lab.plugins.integrators.aim import AimedEmission
@@ -274,6 +275,7 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
                     self._camera.grid, self._camera.with_direct = grid, batch_index == 0
                     t0 = time.perf_counter()
                     img = self._camera_pass(scene, sensor, camera_seed, spp, u)
+                    interrupts.checkpoint(self._camera)    # Ctrl-C stops the render here, between passes
                     dr.eval(img)
                     dr.sync_thread()
                     stats.gather_s += time.perf_counter() - t0

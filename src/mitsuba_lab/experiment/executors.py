@@ -18,6 +18,7 @@ instead of writing them, a retried task cannot leave a duplicate row.
 """
 from __future__ import annotations
 
+from .. import interrupts
 from ..errors import LabError
 from .worker import PointResult, PointTask, execute
 
@@ -56,6 +57,7 @@ class ProcessExecutor:
         relay = threading.Thread(target=pass_on, args=(process.stdout,), daemon=True)
         relay.start()
         connection = Connection(ours.detach())
+        interrupts.restore()                   # Ctrl-C interrupts recv(): not left restarting by Mitsuba
         try:
             for task in tasks:
                 connection.send(task)

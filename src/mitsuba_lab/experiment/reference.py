@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import images
+from .. import images, interrupts
 from ..render import render
 from ..runtime import versions
 from ..scene import make_integrator
@@ -97,9 +97,10 @@ def get_reference(scene_path: str, resolution, defaults: dict, integrator: Plugi
             "integrator": integrator.type, "params": integrator.params, "spp": spp, "chunks": chunks,
             "seconds": time.perf_counter() - start, "mse_floor": float(variance.mean()), **versions()}
     mean_path, var_path, meta_path = _paths(cache, key)
-    images.write_exr(var_path, variance, {"mitsuba_lab.reference": json.dumps(meta)})
-    images.write_exr(mean_path, mean, {"mitsuba_lab.reference": json.dumps(meta)})
-    with images.atomic_path(meta_path) as tmp:
-        with open(tmp, "w") as f:
-            json.dump(meta, f, indent=1)
+    with interrupts.deferred():                    # the three files, or (Ctrl-C before) none
+        images.write_exr(var_path, variance, {"mitsuba_lab.reference": json.dumps(meta)})
+        images.write_exr(mean_path, mean, {"mitsuba_lab.reference": json.dumps(meta)})
+        with images.atomic_path(meta_path) as tmp:
+            with open(tmp, "w") as f:
+                json.dump(meta, f, indent=1)
     return Reference(key, mean.astype(np.float32), variance.astype(np.float32), meta), False

@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from .. import images, metrics
+from .. import images, interrupts, metrics
 from ..errors import LabError
 from ..runtime import versions
 from ..scene_xml import scene_digest
@@ -171,16 +171,18 @@ class SweepRunner:
                             passes=point.passes or tuple(calibrated.get(point.id, {}).get("passes", ())))
 
     def record(self, result: PointResult) -> None:
-        """Store one finished point: calibration, then each image before the row naming it."""
-        if result.calibration:
-            self.store.append(result.calibration)
-        for row, image in result.runs:
-            if "checkpoints" in row:                # a progressive run: every checkpoint's image first
-                row = {**row, "checkpoints": [{**cp, "image": self.write_image(row, pass_image, cp["spp"])}
-                                              for cp, pass_image in zip(row["checkpoints"], image)]}
-                self.store.append({**row, "image": row["checkpoints"][-1]["image"]})
-            else:
-                self.store.append({**row, "image": self.write_image(row, image)})
+        """Store one finished point: calibration, then each image before the row naming it. A
+        Ctrl-C meanwhile waits until the point is stored whole (``interrupts.deferred``)."""
+        with interrupts.deferred():
+            if result.calibration:
+                self.store.append(result.calibration)
+            for row, image in result.runs:
+                if "checkpoints" in row:            # a progressive run: every checkpoint's image first
+                    row = {**row, "checkpoints": [{**cp, "image": self.write_image(row, pass_image, cp["spp"])}
+                                                  for cp, pass_image in zip(row["checkpoints"], image)]}
+                    self.store.append({**row, "image": row["checkpoints"][-1]["image"]})
+                else:
+                    self.store.append({**row, "image": self.write_image(row, image)})
         self.progress("point_done", point=result.task.point.id)
 
     def write_image(self, row: dict, image, checkpoint_spp: int | None = None) -> str:

@@ -253,9 +253,12 @@ def reference_command(scene_path, integrator, params, spp, chunks, resolution, d
     cache = os.path.abspath(os.path.expanduser(cache or os.environ.get("MITSUBA_LAB_CACHE") or DEFAULT_CACHE))
     bar = ProgressBar()
     bar.begin(chunks, unit="chunk")
-    ref, cached = get_reference(os.path.abspath(scene_path), resolution, defaults,
-                                PluginSpec("reference", integrator, params), spp, chunks, cache,
-                                progress=lambda k, n: bar.step())
+    try:
+        ref, cached = get_reference(os.path.abspath(scene_path), resolution, defaults,
+                                    PluginSpec("reference", integrator, params), spp, chunks, cache,
+                                    progress=lambda k, n: bar.step())
+    finally:
+        bar.close()                                        # (Ctrl-C: no live bar left mid-line)
     origin = "found in the cache" if cached else f"rendered in {ref.meta.get('seconds', 0):.1f} s"
     height, width = ref.image.shape[:2]
     print(f"reference {ref.key} ({integrator}, {width}x{height}) {origin}: {cache}/{ref.key}.exr; noise floor "

@@ -51,24 +51,30 @@ def run(args, out) -> int:
     if not (run_opt or run_grad):
         raise LabError(f"{cfg.source}: nothing to run (no [optimise] or [gradients] table, or both skipped)")
     bar = ProgressBar()
-    sections, files = [], []
+    try:
+        sections = run_parts(cfg, folder, run_opt, run_grad, bar, out)
+    finally:
+        bar.close()                                        # (Ctrl-C: no live bar left mid-line)
+    paths = write_report(folder, f"Inverse rendering: {cfg.name}", sections)
+    print(f"wrote {paths['html']}, {paths['md']} and the CSVs in {folder}", file=out)
+    return 0
+
+
+def run_parts(cfg, folder: str, run_opt: bool, run_grad: bool, bar, out) -> list[str]:
+    """The optimisation and the gradient sweep, as asked, their results written; their
+    report sections (Markdown)."""
+    sections = []
     if run_opt:
         bar.begin(cfg.iterations, f"optimising {', '.join(cfg.keys)} ({cfg.iterations} iterations)")
         result = optimise(cfg, lambda i, n, row: bar.step(f"loss {row['loss']:.4g} error {row['param_error']:.4g}"))
-        md, written = write_optimisation(cfg, result, folder)
-        sections.append(md)
-        files += written
+        sections.append(write_optimisation(cfg, result, folder)[0])
         print(f"{cfg.name}: parameter RMS error {result.error_start:.4g} -> {result.error_end:.4g} "
               f"({result.error_start / max(result.error_end, 1e-30):.3g}x) in {cfg.iterations} iterations, "
               f"{result.rows[-1]['time_s']:.3g} s", file=out)
     if run_grad:
         sweep = gradient_sweep(cfg, lambda i, n, label: (bar.begin(n, "gradient sweep") if i == 1 else None,
                                                          bar.step(label)))
-        md, written = write_gradients(cfg, sweep, folder)
-        sections.append(md)
-        files += written
+        sections.append(write_gradients(cfg, sweep, folder)[0])
         print(format_gradient_table(sweep), file=out)
-    paths = write_report(folder, f"Inverse rendering: {cfg.name}", sections)
-    print(f"wrote {paths['html']}, {paths['md']} and the CSVs in {folder}", file=out)
-    return 0
+    return sections
 
