@@ -51,8 +51,9 @@ def render(scene, integrator, spp=4, seed=3):
 def test_modes_without_merging_are_lab_bdpt_and_lab_mis(name):
     scene = load_scene(scene_path(name), res=RES)
     bdpt = {"max_depth": MAX_DEPTH}
-    pairs = (("bpt", make_integrator("lab_bdpt", bdpt)),
-             ("lt", make_integrator("lab_bdpt", {**bdpt, "strategies": "light"})),
+    same_aim = {**bdpt, "aim": 0.0}                # (lab_vcm's default; lab_bdpt aims by default)
+    pairs = (("bpt", make_integrator("lab_bdpt", same_aim)),
+             ("lt", make_integrator("lab_bdpt", {**same_aim, "strategies": "light"})),
              ("pt", make_integrator("lab_mis", bdpt)))
     for mode, other in pairs:
         np.testing.assert_allclose(render(scene, vcm(mode=mode)), render(scene, other), rtol=2e-4, atol=1e-5,
@@ -72,6 +73,18 @@ def test_merging_agrees_with_mitsuba_path(name, mode, merge_first):
     scene = load_scene(scene_path(name), res=RES)
     lab = renders(scene, vcm(mode=mode, radius=SMALL_RADIUS, merge_first=merge_first), LAB_SPP, SEEDS_LAB)
     assert_blocks_agree(lab, path_stack(scene), f"lab_vcm mode={mode}, merge_first={merge_first} on {name}")
+
+
+@pytest.mark.xfail(strict=True, reason="known fault: merging aimed light vertices loses light in modes ppm and bpm")
+def test_merging_aimed_light_vertices_is_biased():
+    """A known fault, kept visible: ppm with ``aim`` 0.9 on the caustic renders blocks on the
+    image's right side at 3-9% of `path` (max |z| 88), while ppm without aim, lab_photon with the
+    same aim and lab_vcm's vcm mode with it agree (max |z| 2.1, 1.7, 2.0). The cause is not found;
+    lab_vcm's default is therefore aim = 0. When it is fixed this test passes, and strict xfail
+    fails it: then make it a plain agreement test."""
+    scene = load_scene(scene_path("caustic.xml"), res=RES)
+    lab = renders(scene, vcm(mode="ppm", radius=SMALL_RADIUS, merge_first=True, aim=0.9), LAB_SPP, SEEDS_LAB)
+    assert_blocks_agree(lab, path_stack(scene), "lab_vcm ppm aim=0.9 on caustic.xml")
 
 
 CORNELL_RADIUS = 0.3
@@ -180,7 +193,7 @@ def test_merging_has_lab_photons_variance_at_equal_light_vertices(monkeypatch):
 
     scene = load_scene(scene_path("sds.xml"), res=64)
     wall = (slice(2, 12), slice(4, 20))
-    photon = renders(scene, make_integrator("lab_photon", {"max_depth": MAX_DEPTH, "direct": "photons", "radius": 0.03,
+    photon = renders(scene, make_integrator("lab_photon", {"max_depth": MAX_DEPTH, "direct": "photons", "radius": 0.03, "aim": 0.0,
                                                            "alpha": 0.999, "photons_per_pass": 65536, "passes": 16}),
                      1, range(24))[:, wall[0], wall[1], :3]
 
