@@ -49,7 +49,7 @@ PATH_KINDS = ("renders", "path_rays", "shadow")
 
 def lab_vcm_row(scene, mode, spp, seed, depth, radius):
     """(light + grid seconds, camera seconds, counts) of one lab_vcm render with work counting."""
-    integrator = make_integrator("lab_vcm", {"mode": mode, "max_depth": depth, "radius": radius})
+    integrator = make_integrator("lab_vcm", {"mode": mode, "max_depth": depth, "radius": radius, "pilot": False})
     mi.render(scene, integrator=integrator, spp=spp, seed=seed)
     stats = integrator.bdpt_stats()
     return stats["light_s"] + stats["grid_s"], stats["camera_s"], integrator.work_counts()

@@ -56,7 +56,7 @@ def measure(name, res, spp, depth, radius, rounds, merge_first=False, light_path
             merge_vertices="all"):
     scene = load_scene(os.path.join(ROOT, "scenes", name), res=res)
     methods = {
-        "vcm": make_integrator("lab_vcm", {"mode": "vcm", "max_depth": depth, "radius": radius,
+        "vcm": make_integrator("lab_vcm", {"mode": "vcm", "max_depth": depth, "radius": radius, "pilot": False,
                                            "merge_first": merge_first, "light_paths": light_paths, "aim": aim,
                                            "merge_vertices": merge_vertices}),
         "bpt": make_integrator("lab_vcm", {"mode": "bpt", "max_depth": depth, "light_paths": light_paths,
@@ -96,7 +96,7 @@ def pass_sizes(name, res, spp, depth, radius, rounds):
     PASS_LIGHT_VERTICES stored vertices per pass) and with every pass fixed at 2^14, 2^16 and 2^18
     light subpaths, in alternating rounds (medians), and the passes each took."""
     scene = load_scene(os.path.join(ROOT, "scenes", name), res=res)
-    integrator = make_integrator("lab_vcm", {"mode": "vcm", "max_depth": depth, "radius": radius})
+    integrator = make_integrator("lab_vcm", {"mode": "vcm", "max_depth": depth, "radius": radius, "pilot": False})
     module = sys.modules[type(integrator).__module__]
     own = {k: getattr(module, k) for k in ("FIRST_PASS_LIGHT_SUBPATHS", "MIN_PASS_LIGHT_SUBPATHS",
                                            "MAX_PASS_LIGHT_SUBPATHS")}

@@ -35,7 +35,7 @@ USER_SCENES = ["textured_mesh_room", "principled_and_blend", "spot_and_direction
 ESTIMATORS = {
     "bdpt": ("lab_bdpt", {}, True),
     "vcm_bpt": ("lab_vcm", {"mode": "bpt"}, True),
-    "vcm": ("lab_vcm", {"mode": "vcm"}, False),
+    "vcm": ("lab_vcm", {"mode": "vcm", "pilot": False}, False),   # (the estimator, not the pilot's choice)
     "ppm": ("lab_vcm", {"mode": "ppm"}, False),
     "photon": ("lab_photon", {"photons_per_pass": 20000}, False),
 }

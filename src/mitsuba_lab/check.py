@@ -94,7 +94,7 @@ PATH_STRATEGIES = {
 BIDIRECTIONAL_STRATEGIES = {
     "lab_bdpt": ("lab_bdpt", {}),
     "lab_vcm_bpt": ("lab_vcm", {"mode": "bpt"}),
-    "lab_vcm": ("lab_vcm", {"mode": "vcm"}),
+    "lab_vcm": ("lab_vcm", {"mode": "vcm", "pilot": False}),   # (merging itself, not the pilot's choice)
     "lab_vcm_ppm": ("lab_vcm", {"mode": "ppm"}),
     "lab_photon": ("lab_photon", {"photons_per_pass": 10_000}),
 }
