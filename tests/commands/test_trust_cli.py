@@ -222,10 +222,15 @@ def test_ctrl_c_during_lab_photon_is_interrupted_with_nothing_written(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "mitsuba_lab", "render", CORNELL, "-D", "res=64",
                              "--integrator", "lab_photon", "--spp", "4096", "-o", str(target)],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    time.sleep(6)                                        # imported, compiled, in the passes loop
-    assert proc.poll() is None, "the render finished before it could be interrupted"
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
+    try:
+        time.sleep(6)                                    # imported, compiled, in the passes loop
+        assert proc.poll() is None, "the render finished before it could be interrupted"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:                          # (a failed test leaves no render running)
+            proc.kill()
+            proc.wait()
     assert proc.returncode == cli.EXIT_INTERRUPTED, err
     assert err.decode().strip().endswith("mitsuba-lab: interrupted")
     assert list(tmp_path.iterdir()) == []

@@ -2,7 +2,7 @@
 
 * ``connections = one``: each camera vertex connects to one vertex of its light subpath, picked
   uniformly from the n it may use and counted n times, so the estimate stays unbiased; with
-  mode ``bpt`` it agrees with Mitsuba's ``path`` by the block test (tests/agreement.py),
+  mode ``bpt`` it agrees with Mitsuba's ``path`` by the z-test of test_vcm (|z| <= Z_BOUND = 5),
   and counting the picked connection once fails it (power). The weights' count is checked
   against the brute force in test_bdpt_weights.
 * ``pilot``: the render is every technique's or path tracing's alone, with the pilot's path
@@ -13,10 +13,10 @@
 import numpy as np
 import pytest
 
-from agreement import assert_blocks_agree, block_test, renders
+from agreement import renders, z_scores
 from mitsuba_lab.plugins.integrators.vcm import selection
 from mitsuba_lab.scene import load_scene, make_integrator
-from test_vcm import LAB_SPP, MAX_DEPTH, RES, SEEDS_LAB, path_stack, render, scene_path, vcm
+from test_vcm import MAX_DEPTH, RES, SEEDS_LAB, Z_BOUND, assert_agrees, path_stack, render, scene_path, vcm
 
 #: experiments/vcm.toml's vcm_auto: one setting for every scene, the pilot choosing.
 AUTO = {"radius": 0.022, "light_paths": 1, "light_paths_max": 16, "aim": 0.9, "pilot": True}
@@ -28,22 +28,22 @@ def test_one_connection_per_camera_vertex_agrees_with_mitsuba_path(name, monkeyp
 
     scene = load_scene(scene_path(name), res=RES)
     ref = path_stack(scene)
-    assert_blocks_agree(renders(scene, vcm(mode="bpt", connections="one"), LAB_SPP, SEEDS_LAB), ref,
+    assert_agrees(renders(scene, vcm(mode="bpt", connections="one"), 16, SEEDS_LAB), ref,
                   f"one connection per camera vertex on {name}")
     if name != "cornell_box.xml":      # (the caustic's light subpaths hold about one vertex: n is 1)
         return
     right = camera_subpath.pick_light_vertex
     monkeypatch.setattr(camera_subpath, "pick_light_vertex", lambda *a: (lambda r: (r[0], r[1] * 0 + 1))(right(*a)))
-    result = block_test(renders(scene, vcm(mode="bpt", connections="one"), LAB_SPP, SEEDS_LAB), ref)
-    print(f"the picked connection counted once on {name}: {result.summary()}")
-    assert result.max_abs_z > result.bound
+    z = z_scores(renders(scene, vcm(mode="bpt", connections="one"), 16, SEEDS_LAB), ref).max_abs_z
+    print(f"the picked connection counted once on {name}: max |z| {z:.2f}")
+    assert z > Z_BOUND
 
 
 def test_the_pilots_own_choice_agrees_with_mitsuba_path():
     """Mode bpt on the Cornell box, each seed's pilot choosing for itself."""
     scene = load_scene(scene_path("cornell_box.xml"), res=RES)
     integrator = vcm(mode="bpt", light_paths=0.25, pilot=True)
-    assert_blocks_agree(renders(scene, integrator, 4 * LAB_SPP, SEEDS_LAB), path_stack(scene), "the pilot's own choice")
+    assert_agrees(renders(scene, integrator, 64, SEEDS_LAB), path_stack(scene), "the pilot's own choice")
     assert integrator.bdpt_stats()["pilot_s"] > 0
 
 
