@@ -37,8 +37,7 @@ def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor) -> float:
     px, py = np.meshgrid(axes[0] + offset[0], axes[1] + offset[1], indexing="xy")
     pos = mi.Point2f(mi.Float(px.ravel() / full[0]), mi.Float(py.ravel() / full[1]))
     n = dr.width(pos)
-    wavelength = mi.Float(0.5) if not mi.is_spectral else mi.Float(0.5) + dr.zeros(mi.Float, n)
-    ray, _ = sensor.sample_ray_differential(mi.Float(0.0) + dr.zeros(mi.Float, n), wavelength, pos,
+    ray, _ = sensor.sample_ray_differential(dr.zeros(mi.Float, n), dr.full(mi.Float, 0.5, n), pos,
                                             mi.Point2f(0.5, 0.5))
     si = scene.ray_intersect(mi.Ray3f(ray))
     t = si.t
