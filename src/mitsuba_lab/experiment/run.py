@@ -15,6 +15,7 @@ import os
 import platform
 import socket
 import time
+from collections import Counter
 
 import numpy as np
 
@@ -28,6 +29,7 @@ from .plan import Plan, Point
 from .reference import Reference, get_reference
 from .identity import describe_changes, identity_hash, point_identity
 from .store import ResultStore
+from .budget import BUDGET_RETRIES, within_budget
 from .worker import PointResult, PointTask
 
 
@@ -157,10 +159,17 @@ class SweepRunner:
         strategies = {s.name: s for s in self.config.strategies}
         calibrated = {row["point"]: row for row in self.store.of_kind("calibration")
                       if row.get("identity_hash") == self.identities.get(row["point"], (None, "-"))[1]}
+        in_force = self.store.stored_runs()
         for point in todo:
             identity, ident_hash = self.identities[point.id]
             ref = self.references[point.scene]
             height, width = ref.image.shape[:2]
+            calibration = calibrated.get(point.id)
+            # a budget point's seeds already stored at its calibrated count count in its measured time
+            stored_times = tuple(r["wall_s"] for r in in_force if r["point"] == point.id and r["seed"] in point.seeds
+                                 and r.get("identity_hash") == ident_hash and calibration is not None
+                                 and r["spp"] == calibration.get("spp") and not r.get("checkpoints")) \
+                if point.budget_s is not None and not point.progressive else ()
             yield PointTask(point=point, scene=scenes[point.scene], sampler=samplers[point.sampler],
                             strategy=with_depth(strategies[point.strategy], self.config.max_depth),
                             seeds=tuple(s for s in point.seeds if done.get((point.id, s)) != ident_hash),
@@ -168,26 +177,61 @@ class SweepRunner:
                             regions=pixel_regions(scenes[point.scene], width, height),
                             metrics=self.config.metrics, variant=mi.variant(),
                             identity=identity, identity_hash=ident_hash,
-                            passes=point.passes or tuple(calibrated.get(point.id, {}).get("passes", ())))
+                            passes=point.passes or tuple(calibrated.get(point.id, {}).get("passes", ())),
+                            stored_times=stored_times, calibration=calibration)
 
     def record(self, result: PointResult) -> None:
         """Store one finished point: calibration, then each image before the row naming it. A
-        Ctrl-C meanwhile waits until the point is stored whole (``interrupts.deferred``)."""
+        Ctrl-C meanwhile waits until the point is stored whole (``interrupts.deferred``). A run
+        that replaces a stored one of the same identity (a budget point rendered again) gets an
+        image of its own; the replaced image is removed once the new row is stored, so a row in
+        force never names a missing or another render's image."""
+        self.report_budget_tries(result)
         with interrupts.deferred():
             if result.calibration:
                 self.store.append(result.calibration)
+            point = result.task.point.id
+            held = {r["seed"]: r for r in self.store.stored_runs() if r["point"] == point}
+            earlier = Counter((r["seed"], r.get("identity_hash")) for r in self.store.of_kind("run")
+                              if r["point"] == point)
             for row, image in result.runs:
+                attempt = 1 + earlier[(row["seed"], row.get("identity_hash"))]
                 if "checkpoints" in row:            # a progressive run: every checkpoint's image first
-                    row = {**row, "checkpoints": [{**cp, "image": self.write_image(row, pass_image, cp["spp"])}
+                    row = {**row, "checkpoints": [{**cp, "image": self.write_image(row, pass_image, cp["spp"], attempt)}
                                                   for cp, pass_image in zip(row["checkpoints"], image)]}
-                    self.store.append({**row, "image": row["checkpoints"][-1]["image"]})
+                    row = {**row, "image": row["checkpoints"][-1]["image"]}
                 else:
-                    self.store.append({**row, "image": self.write_image(row, image)})
+                    row = {**row, "image": self.write_image(row, image, attempt=attempt)}
+                self.store.append(row)
+                self.remove_replaced(held.get(row["seed"]), row)
         self.progress("point_done", point=result.task.point.id)
 
-    def write_image(self, row: dict, image, checkpoint_spp: int | None = None) -> str:
+    def report_budget_tries(self, result: PointResult) -> None:
+        """One progress event per render of a budget point's seeds again (``worker.keep_to_budget``),
+        and one when its last renders still missed the budget."""
+        tries = (result.calibration or {}).get("budget_tries", [])
+        point = result.task.point
+        for number, (missed, then) in enumerate(zip(tries, tries[1:]), 1):
+            self.progress("budget_retry", point=point.id, budget=point.budget_s, measured=missed["measured_s"],
+                          spp=missed["spp"], new_spp=then["spp"], retry=number, retries=BUDGET_RETRIES)
+        if tries and not within_budget(tries[-1]["measured_s"], point.budget_s):
+            self.progress("budget_missed", point=point.id, budget=point.budget_s, measured=tries[-1]["measured_s"],
+                          spp=tries[-1]["spp"], retries=len(tries) - 1)
+
+    def remove_replaced(self, old: dict | None, new: dict) -> None:
+        """Remove the images of ``old``, a run row of the same identity that ``new`` (stored) replaced."""
+        if old is None or old.get("identity_hash") != new.get("identity_hash"):
+            return                                  # (a superseded run's images are kept with its row)
+        kept = {new.get("image")} | {cp.get("image") for cp in new.get("checkpoints", [])}
+        for relative in [old.get("image")] + [cp.get("image") for cp in old.get("checkpoints", [])]:
+            if relative and relative not in kept:
+                path = os.path.join(self.store.folder, relative)
+                if os.path.exists(path):
+                    os.unlink(path)
+
+    def write_image(self, row: dict, image, checkpoint_spp: int | None = None, attempt: int = 1) -> str:
         """Write a run's image (or a progressive run's checkpoint image); its path in the folder."""
-        path = self.store.image_path(row["point"], row["seed"], row.get("identity_hash"), checkpoint_spp)
+        path = self.store.image_path(row["point"], row["seed"], row.get("identity_hash"), checkpoint_spp, attempt)
         os.makedirs(os.path.dirname(path), exist_ok=True)
         tags = {"mitsuba_lab.point": row["point"], "mitsuba_lab.seed": str(row["seed"])}
         if checkpoint_spp is not None:

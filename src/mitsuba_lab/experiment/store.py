@@ -100,12 +100,16 @@ class ResultStore:
         return {(r["point"], r["seed"]): r.get("identity_hash") for r in self.stored_runs()}
 
     def image_path(self, point_id: str, seed: int, identity_hash: str | None = None,
-                   checkpoint_spp: int | None = None) -> str:
+                   checkpoint_spp: int | None = None, attempt: int = 1) -> str:
         """Where a run's image goes; runs of another identity get their own file, so the image
-        of a superseded run is never overwritten. A progressive run's checkpoints add their spp."""
+        of a superseded run is never overwritten. A progressive run's checkpoints add their spp;
+        a render that replaces stored ones of its identity (``attempt`` > 1: a budget point
+        rendered again) adds its attempt, so the row in force keeps its file until replaced."""
         tag = f"__{identity_hash[:8]}" if identity_hash else ""
         at = f"__at{checkpoint_spp}" if checkpoint_spp is not None else ""
-        return os.path.join(self.folder, "images", point_id.replace("/", "__") + f"__seed{seed}{tag}{at}.exr")
+        again = f"__try{attempt}" if attempt > 1 else ""
+        return os.path.join(self.folder, "images",
+                            point_id.replace("/", "__") + f"__seed{seed}{tag}{again}{at}.exr")
 
 
 def checkpoint_rows(row: dict) -> list[dict]:

@@ -10,6 +10,7 @@ import time
 
 from ..errors import LabError
 from ..progress import ProgressBar, duration
+from .budget import tolerance_text
 from .config import PASS_PARAMETER, Config, PluginSpec, load_config, with_depth
 from .plan import Plan, build_plan, estimated_seconds, nothing_to_run
 from .reference import get_reference, load_cached, reference_key
@@ -174,10 +175,23 @@ def progress_printer(bar):
                       unit="point")
         elif event == "point_done":
             bar.step(info["point"])
+        elif event in ("budget_retry", "budget_missed"):
+            bar.message(budget_message(event, info))
         elif event == "grid_cell":
             bar.message(f"strategy grid: ({info['cell']}), {info['done']}/{info['total']}")
 
     return progress
+
+
+def budget_message(event: str, info: dict) -> str:
+    """The log line of a budget point rendered again (``budget_retry``) or still off its budget
+    after its retries (``budget_missed``): ``SweepRunner.report_budget_tries``."""
+    off = (f"{info['point']}: median render time {info['measured']:.3g} s at {info['spp']} spp is outside "
+           f"{tolerance_text()} of its {info['budget']:g} s budget")
+    if event == "budget_retry":
+        return f"{off}; recalibrated to {info['new_spp']} spp, rendering its seeds again (retry {info['retry']} of {info['retries']})"
+    tried = f"after {info['retries']} retr{'y' if info['retries'] == 1 else 'ies'}" if info["retries"] else "(no retry)"
+    return f"{off} {tried}; the report marks it as off budget"
 
 
 def run_sweep(config, plan, folder: str, bar, cluster: str | None = None, in_process: bool = True) -> dict[str, str]:

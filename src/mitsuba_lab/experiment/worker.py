@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import metrics
+from .budget import BUDGET_RETRIES, measured_time, rescaled_count, within_budget
 from .config import PluginSpec, SceneSpec, sample_count_plugin
 from .plan import Point, point_id, warmup_sizes
 from .progressive import Checkpoint, run_passes
@@ -34,12 +35,12 @@ PILOT_BUDGET_FRACTION = 0.05
 #: At most this many growth steps (each compiles a kernel for a new spp).
 PILOT_MAX_GROWTH = 6
 #: After calibrating, the untimed compile render at the fitted count is checked too: when its time
-#: less compilation is off the budget by more than SETTLE_RATIO either way, the count is scaled by
-#: (budget - fixed) / (that time - fixed) and rendered again, at most SETTLE_TRIES times. An
+#: less compilation is off the budget by more than budget.BUDGET_TOLERANCE either way, the count is
+#: scaled by (budget - fixed) / (that time - fixed) and rendered again, at most SETTLE_TRIES times. An
 #: integrator whose cost per sample depends on the count (lab_vcm's ``pilot`` chooses path tracing
 #: alone at some counts and every technique at others) is not linear in it, and a fit from small
-#: pilots rendered its 16 s point of the Cornell box in 3.3 s.
-SETTLE_RATIO = 1.25
+#: pilots rendered its 16 s point of the Cornell box in 3.3 s. The timed renders are checked
+#: again afterwards (``keep_to_budget``).
 SETTLE_TRIES = 3
 #: A progressive run whose passes compiled a kernel after the warm-up is rendered again, at most
 #: this often (the run that compiled served as a warm-up).
@@ -61,6 +62,10 @@ class PointTask:
     identity: dict = field(default_factory=dict)    # what determines the runs (experiment.identity)
     identity_hash: str = ""
     passes: tuple[int, ...] = ()    # progressive: pass sizes (the point's, or a budget's fitted ones)
+    # a resumed budget point: the wall times of its seeds already stored at ``spp`` (they count
+    # in its measured time) and the calibration row that chose ``spp`` (its fixed cost rescales)
+    stored_times: tuple[float, ...] = ()
+    calibration: dict | None = None
 
 
 @dataclass
@@ -162,6 +167,12 @@ def execute(task: PointTask) -> PointResult:
 
     if task.point.progressive:
         return execute_progressive(task, render_at)
+    return execute_counted(task, render_at)
+
+
+def execute_counted(task: PointTask, render_at) -> PointResult:
+    """A point of one render per seed at one sample count: the point's, or one calibrated to its
+    time budget and kept there (``keep_to_budget``). ``render_at(count, seed)`` -> (image, stats)."""
     result = PointResult(task, task.spp or 0)
     if not task.spp:
         result.spp, result.calibration = calibrate(task.point, render_at)
@@ -169,13 +180,51 @@ def execute(task: PointTask) -> PointResult:
     _, stats = render_at(result.spp, task.point.warmup_seed)                 # compile, untimed
     if result.calibration:
         result.spp = settle(task.point, render_at, result.spp, stats, result.calibration)
-    for seed in task.seeds:
-        image, stats = render_at(result.spp, seed)
-        row = {**run_row(task, seed, result.spp), "wall_s": stats.wall_s, "kernel_s": stats.kernel_s,
+    result.runs = render_seeds(task, render_at, result.spp, task.seeds)
+    if task.point.budget_s is not None:
+        keep_to_budget(task, render_at, result)
+    return result
+
+
+def render_seeds(task: PointTask, render_at, spp: int, seeds) -> list:
+    """The timed render of each seed at ``spp``: [(row without the image path, image)]."""
+    runs = []
+    for seed in seeds:
+        image, stats = render_at(spp, seed)
+        row = {**run_row(task, seed, spp), "wall_s": stats.wall_s, "kernel_s": stats.kernel_s,
                "compile_s": stats.compile_s, "rays": stats.rays, "integrator_stats": stats.integrator,
                **measure(image, task.reference_image, task.regions, task.metrics)}
-        result.runs.append((row, image))
-    return result
+        runs.append((row, image))
+    return runs
+
+
+def keep_to_budget(task: PointTask, render_at, result: PointResult) -> None:
+    """Check a budget point's measured time (the median over its seeds, those already stored
+    included) against its budget; while it is off by more than budget.BUDGET_TOLERANCE, rescale
+    the count by the measured time and render every seed of the point again (BUDGET_RETRIES at
+    most). Only the last renders stay in ``result``; the calibration row records each try
+    (``budget_tries``: count, measured seconds) and the count kept. Deterministic given the
+    render times: the clock is read only by ``render_at``."""
+    point = task.point
+    base = result.calibration or dict(task.calibration or {})
+    fixed = base.get("fixed_s", 0.0)
+    stored = list(task.stored_times)
+    tries = []
+    for retry in range(BUDGET_RETRIES + 1):
+        times = stored + [row["wall_s"] for row, _ in result.runs]
+        tries.append({"spp": result.spp, "measured_s": measured_time(times), "times": times})
+        if within_budget(tries[-1]["measured_s"], point.budget_s) or retry == BUDGET_RETRIES:
+            break
+        result.spp = rescaled_count(result.spp, tries[-1]["measured_s"], point.budget_s, fixed)
+        render_at(result.spp, point.warmup_seed)                            # compile, untimed
+        # all the point's seeds, the stored ones too: one point, one count
+        result.runs = render_seeds(task, render_at, result.spp, point.seeds if stored else task.seeds)
+        stored = []
+    if result.calibration is None and len(tries) == 1:
+        return                               # a resumed point at its budget: its calibration stands
+    result.calibration = {**base, "kind": "calibration", "point": point.id, "budget_s": point.budget_s,
+                          "identity_hash": task.identity_hash, "spp": result.spp, "budget_tries": tries,
+                          "within_budget": within_budget(tries[-1]["measured_s"], point.budget_s)}
 
 
 def run_row(task: PointTask, seed: int, spp: int) -> dict:
@@ -238,16 +287,13 @@ def progressive_row(task: PointTask, seed: int, sizes, checkpoints: list[Checkpo
 
 def settle(point: Point, render_at, spp: int, stats, calibration: dict) -> int:
     """The calibrated ``spp`` checked against the budget by the compile render at it (``stats``)
-    and rescaled while its time less compilation is off by more than SETTLE_RATIO (SETTLE_TRIES
+    and rescaled while its time less compilation is off by more than budget.BUDGET_TOLERANCE (SETTLE_TRIES
     at most); ``calibration`` records the count kept and the rescalings."""
     for _ in range(SETTLE_TRIES):
         seconds = max(stats.wall_s - stats.compile_s, 1e-6)
-        if point.budget_s / SETTLE_RATIO <= seconds <= point.budget_s * SETTLE_RATIO:
+        if within_budget(seconds, point.budget_s):
             break
-        # (the fit's fixed cost stays; the rest scales with the count)
-        fixed = calibration["fixed_s"]
-        scale = point.budget_s / seconds if seconds <= fixed else (point.budget_s - fixed) / (seconds - fixed)
-        spp = max(1, int(round(spp * max(scale, 0.0))))
+        spp = rescaled_count(spp, seconds, point.budget_s, calibration["fixed_s"])
         calibration.setdefault("rescaled", []).append({"seconds": seconds, "spp": spp})
         _, stats = render_at(spp, point.warmup_seed)
     calibration["spp"] = spp

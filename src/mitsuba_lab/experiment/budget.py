@@ -1,0 +1,52 @@
+"""Whether a time-budget point was rendered at its budget, and the count that should be.
+
+A budget point's sample count is calibrated from pilot renders (``worker.calibrate``), but a
+calibration taken under another load, or of an integrator whose cost per sample changes with
+the count, can miss by 2x: a "2 s" point rendered in 1.06 and 1.18 s beside another
+strategy's 2.3-2.6 s, and the report called them equal time. So the measured time (the median
+over the point's seeds) is checked against the budget: the runner rescales and renders again
+up to ``BUDGET_RETRIES`` times (``worker.keep_to_budget``), and the report marks a point that
+still misses everywhere it shows it (``missed_budget``).
+"""
+from __future__ import annotations
+
+import math
+import statistics
+
+#: A budget point is at its budget when its median render time is within this fraction of it
+#: either way (0.25: a 2 s point rendered in 1.5 to 2.5 s).
+BUDGET_TOLERANCE = 0.25
+#: Renders of a point's seeds again, at a rescaled count, after the first renders missed.
+BUDGET_RETRIES = 2
+
+
+def within_budget(seconds: float, budget_s: float) -> bool:
+    """Whether ``seconds`` lies within BUDGET_TOLERANCE of ``budget_s`` either way."""
+    return abs(seconds - budget_s) <= BUDGET_TOLERANCE * budget_s
+
+
+def measured_time(times) -> float:
+    """A point's measured time: the median of its seeds' render times (NaN without any)."""
+    times = list(times)
+    return float(statistics.median(times)) if times else math.nan
+
+
+def missed_budget(point) -> bool:
+    """Whether a point (anything with ``budget_s`` and ``time_s``, e.g. ``analysis.PointStats``)
+    has a time budget and its median time is outside BUDGET_TOLERANCE of it."""
+    budget = getattr(point, "budget_s", None)
+    return budget is not None and not within_budget(point.time_s, budget)
+
+
+def rescaled_count(count: int, seconds: float, budget_s: float, fixed_s: float = 0.0) -> int:
+    """The sample count that fills ``budget_s``, from a render of ``count`` that took ``seconds``:
+    the part above the calibration's fixed cost ``fixed_s`` scales with the count (all of it
+    when the render was no slower than that fixed cost). At least 1."""
+    seconds = max(seconds, 1e-6)
+    scale = budget_s / seconds if seconds <= fixed_s else (budget_s - fixed_s) / (seconds - fixed_s)
+    return max(1, int(round(count * max(scale, 0.0))))
+
+
+def tolerance_text() -> str:
+    """The tolerance as the report and the log state it, "+-25%"."""
+    return f"+-{BUDGET_TOLERANCE * 100:g}%"
