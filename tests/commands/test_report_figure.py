@@ -47,7 +47,7 @@ def test_the_figure_shows_each_image_and_crop_with_its_relmse(sweep):
     report = Report(str(sweep))
     fig = build_figure(report, "s", budget=0.1)
     texts = [t.get_text() for t in fig.findobj(lambda a: hasattr(a, "get_text"))]
-    assert any("equal time 0.1 s" in t for t in texts)
+    assert any("equal time 0.1 s (0.1 s measured)" in t for t in texts)
     assert sum("spp, " in t and "\nrelMSE " in t for t in texts) == 2      # under "good" and "noisy"
     crop_labels = [t for t in texts if t.startswith("floor ") or re.fullmatch(r"[0-9.]+(e[+-][0-9]+)?", t)]
     assert len(crop_labels) == 3 * len(synth.REGIONS)                  # every image, every region
@@ -62,9 +62,9 @@ def test_the_figure_shows_each_image_and_crop_with_its_relmse(sweep):
 def test_budget_picks_the_nearest_equal_time_comparison(sweep):
     groups, label = group_points(Report(str(sweep)).stats["s"])
     sets = comparison_sets(groups, label)
-    assert pick_set(sets, 0.12).name == "equal time 0.1 s"
-    assert pick_set(sets, 0.5).name == "equal time 0.2 s"
-    assert pick_set(sets, None).name == "equal time 0.2 s"                 # the middle one of two
+    assert pick_set(sets, 0.12).name == "equal time 0.1 s (0.1 s measured)"
+    assert pick_set(sets, 0.5).name == "equal time 0.2 s (0.2 s measured)"
+    assert pick_set(sets, None).name == "equal time 0.2 s (0.2 s measured)"              # the middle one of two
 
 
 @pytest.mark.parametrize("value", ["-1", "0", "abc", "inf"])

@@ -65,7 +65,8 @@ def test_block_markers_and_the_page_script():
 def test_comparison_sets_pair_equal_time_and_equal_spp(sweep):
     groups, label = group_points(Report(str(sweep)).stats["s"])
     sets = comparison_sets(groups, label)
-    assert [s.name for s in sets] == ["equal time 0.1 s", "equal time 0.2 s", "equal spp 4", "equal spp 16"]
+    assert [s.name for s in sets] == ["equal time 0.1 s (0.1 s measured)", "equal time 0.2 s (0.2 s measured)",
+                                       "equal spp 4", "equal spp 16"]
     for s in sets:
         assert [name for name, _ in s.entries] == ["good", "noisy"]
     assert {p.budget_s for _, p in sets[1].entries} == {0.2}
@@ -91,7 +92,7 @@ def test_report_page_embeds_one_viewer_per_scene_offline(sweep):
     assert not re.search(r'(src|href)="(https?:)?//', html) and "<link" not in html    # nothing fetched
     (data,) = page_data(html)
     assert (data["width"], data["height"]) == (synth.WIDTH, synth.HEIGHT)
-    assert data["regions"] == synth.REGIONS and data["sets"][data["start"]]["name"] == "equal time 0.2 s"
+    assert data["regions"] == synth.REGIONS and data["sets"][data["start"]]["name"] == "equal time 0.2 s (0.2 s measured)"
     ref = decode(data["images"]["ref"]).reshape(synth.HEIGHT, synth.WIDTH, 3)
     np.testing.assert_allclose(ref, synth.reference_image(), rtol=2 ** -11)   # HDR: 4.0 stays 4.0
     assert ref.max() == synth.BRIGHT
@@ -143,7 +144,7 @@ def test_keys_labels_and_sets_switch_the_image(sweep, tmp_path):
         initial = page.shot(canvas_only=True)
         page.press("2")
         assert page.text(".vw-labels .vw-on") == "2 good"
-        assert page.text(".vw-status").startswith("equal time 0.2 s \u2014 good:")
+        assert page.text(".vw-status").startswith("equal time 0.2 s (0.2 s measured) \u2014 good:")
         after_2 = page.shot(canvas_only=True)
         assert after_2 != initial
         page.press("1")

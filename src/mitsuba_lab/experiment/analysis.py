@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import images, metrics
+from .budget import missed_budget
 
 #: A measured MSE closer than this factor to the reference floor is flagged.
 FLOOR_WARNING_FACTOR = 10.0
@@ -273,8 +274,12 @@ def region_at_budgets(points: list[PointStats], label, region: str, rel_floor: f
     without the errors). A few seeds of a heavy-tailed region swing the ratio far, so a target
     read from one sweep needs it.
 
+    A point whose median time is off its budget (``budget.missed_budget``) is not an equal-time
+    render: its cell is kept, marked (``off_budget``), and left out of the ratios (NaN), neither
+    best nor compared.
+
     Returns {budget: {label: {rel_mse, rel_mse_corrected, rel_mse_se, time_s, time_spread, cost,
-    cost_se, x_best, x_best_range}}}."""
+    cost_se, x_best, x_best_range, budget_s, off_budget}}}."""
     table = {}
     for p in points:
         if p.budget_s is None or region not in p.regions:
@@ -283,15 +288,30 @@ def region_at_budgets(points: list[PointStats], label, region: str, rel_floor: f
         cost, cost_se = seed_cost(p.regions[region]["rel_mse_seeds"], p.times, rel_floor)
         cell = {"rel_mse": raw, "rel_mse_corrected": raw - rel_floor, "time_s": p.time_s,
                 "time_spread": max(p.times) / min(p.times) if min(p.times) > 0 else math.nan,
-                "rel_mse_se": p.regions[region].get("rel_mse_se", math.nan), "cost": cost, "cost_se": cost_se}
+                "rel_mse_se": p.regions[region].get("rel_mse_se", math.nan), "cost": cost, "cost_se": cost_se,
+                "budget_s": p.budget_s, "off_budget": missed_budget(p)}
         table.setdefault(p.budget_s, {})[label(p)] = cell
     for cells in table.values():
-        measured = [c for c in cells.values() if not math.isnan(c["cost"])]     # (NaN: at the floor)
+        # (NaN cost: at the floor; off budget: not an equal-time render)
+        measured = [c for c in cells.values() if not math.isnan(c["cost"]) and not c["off_budget"]]
         best = min(measured, key=lambda c: c["cost"], default=None)
         for c in cells.values():
-            c["x_best"] = c["cost"] / best["cost"] if best else math.nan
-            c["x_best_range"] = ratio_range(c, best) if best else (math.nan, math.nan)
+            compared = best is not None and not c["off_budget"]
+            c["x_best"] = c["cost"] / best["cost"] if compared else math.nan
+            c["x_best_range"] = ratio_range(c, best) if compared else (math.nan, math.nan)
     return dict(sorted(table.items()))
+
+
+def budget_columns(points: list[PointStats]) -> dict[float, dict]:
+    """Per time budget (ascending), the measured times of its points: {budget: {"low", "high":
+    the smallest and largest median time of a point at it, "off": how many of them are off
+    the budget (``budget.missed_budget``)}}: what an equal-time column's header states."""
+    columns: dict[float, list] = {}
+    for p in points:
+        if p.budget_s is not None:
+            columns.setdefault(p.budget_s, []).append(p)
+    return {b: {"low": min(p.time_s for p in ps), "high": max(p.time_s for p in ps),
+                "off": sum(missed_budget(p) for p in ps)} for b, ps in sorted(columns.items())}
 
 
 def ratio_range(cell: dict, best: dict) -> tuple[float, float]:

@@ -50,3 +50,21 @@ def rescaled_count(count: int, seconds: float, budget_s: float, fixed_s: float =
 def tolerance_text() -> str:
     """The tolerance as the report and the log state it, "+-25%"."""
     return f"+-{BUDGET_TOLERANCE * 100:g}%"
+
+
+def measured_range(low: float, high: float) -> str:
+    """The range of a budget's measured times, "1.9-2.3 s measured" ("2 s measured" when equal
+    at two digits)."""
+    low_text, high_text = f"{low:.2g}", f"{high:.2g}"
+    return (low_text if low_text == high_text else f"{low_text}-{high_text}") + " s measured"
+
+
+def budget_label(budget_s: float, low: float, high: float) -> str:
+    """An equal-time column's header: the budget and the measured range of its points' median
+    times, "2 s (1.9-2.3 s measured)"."""
+    return f"{budget_s:g} s ({measured_range(low, high)})"
+
+
+def off_budget_text(point) -> str:
+    """How a point off its budget is marked: "off its 2 s budget: 1.1 s" ("" when it is not)."""
+    return f"off its {point.budget_s:g} s budget: {point.time_s:.2g} s" if missed_budget(point) else ""

@@ -4,7 +4,8 @@ Shared by the report's comparison viewer (``viewer``) and the publication figure
 (``figure``). A set holds one point per strategy (a (strategy, sampler) group):
 
 * equal time: with ``time_budgets``, the points of one budget (each calibrated to about that
-  wall time); with an spp ladder only, each strategy's point nearest in log time to a budget
+  wall time; named by the budget and the measured range, and not called equal time when a point
+  is off its budget, ``budget_set_name``); with an spp ladder only, each strategy's point nearest in log time to a budget
   that every curve covers (``analysis.equal_time_budgets``), so the times differ somewhat and
   are always shown;
 * equal spp: the ladder points of one sample count.
@@ -21,13 +22,16 @@ import numpy as np
 
 from .. import metrics
 from .analysis import PointStats, curve, equal_time_budgets, run_image
+from .budget import measured_range, missed_budget
 
 
 @dataclass
 class ComparisonSet:
-    name: str                       # "equal time 0.5 s", "about equal time 0.31 s", "equal spp 16"
+    name: str                       # "equal time 0.5 s (0.48-0.55 s measured)", "budget 2 s, not equal
+                                    # time (...; off budget: ...)", "about equal time 0.31 s", "equal spp 16"
     kind: str                       # "time" or "spp"
     entries: list = field(default_factory=list)      # [(label, PointStats)], in the groups' order
+    budget_s: float | None = None   # the time budget of a budget's set
 
 
 def group_points(stats: list[PointStats]) -> tuple[dict, callable]:
@@ -47,7 +51,7 @@ def comparison_sets(groups: dict, label) -> list[ComparisonSet]:
     budgets = sorted({p.budget_s for points in groups.values() for p in points if p.budget_s is not None})
     for b in budgets:
         entries = [(label(k), p) for k, points in groups.items() for p in points if p.budget_s == b]
-        sets.append(ComparisonSet(f"equal time {b:g} s", "time", entries))
+        sets.append(ComparisonSet(budget_set_name(b, entries), "time", entries, b))
     ladder = {k: [p for p in points if p.budget_s is None] for k, points in groups.items()}
     if not budgets:
         targets = equal_time_budgets({k: curve(points) for k, points in ladder.items() if points})
@@ -63,6 +67,18 @@ def comparison_sets(groups: dict, label) -> list[ComparisonSet]:
         entries = [(label(k), p) for k, points in ladder.items() for p in points if p.spp == spp]
         sets.append(ComparisonSet(f"equal spp {spp}", "spp", entries))
     return [s for s in sets if s.entries]
+
+
+def budget_set_name(budget_s: float, entries) -> str:
+    """A budget's set name: "equal time 2 s (1.9-2.3 s measured)" when every point is at the budget
+    (``budget.missed_budget``), else "budget 2 s, not equal time (1.1-2.3 s measured; off budget:
+    lab_vcm 1.1 s)": a set with a point off its budget is not an equal-time comparison."""
+    times = [p.time_s for _, p in entries] or [math.nan]
+    measured = measured_range(min(times), max(times))
+    off = [f"{name} {p.time_s:.2g} s" for name, p in entries if missed_budget(p)]
+    if not off:
+        return f"equal time {budget_s:g} s ({measured})"
+    return f"budget {budget_s:g} s, not equal time ({measured}; off budget: {', '.join(off)})"
 
 
 def default_set(sets: list[ComparisonSet]) -> int:

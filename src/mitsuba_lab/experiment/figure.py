@@ -18,6 +18,7 @@ from ..errors import LabError
 from ..images import atomic_path
 from ..reporting import fmt, pyplot
 from ..reporting.figures import legend_outside, series_styles
+from .budget import missed_budget
 from .comparisons import comparison_sets, default_set, group_points, region_rel_mse, relative_error, shown_image
 from .viewer import crop_exposure
 
@@ -30,14 +31,15 @@ STYLE = {"font.size": 6.5, "axes.titlesize": 6.5, "axes.labelsize": 6.5, "legend
 
 
 def pick_set(sets, budget: float | None):
-    """The comparison set shown: the equal-time set nearest ``budget`` (log scale), or the
-    default one (``comparisons.default_set``)."""
+    """The comparison set shown: the equal-time set nearest ``budget`` (log scale; a budget's set
+    by its budget, not by the times its points took), or the default one
+    (``comparisons.default_set``)."""
     if budget is None:
         return sets[default_set(sets)]
     timed = [s for s in sets if s.kind == "time"]
     if not timed:
         return sets[default_set(sets)]
-    times = lambda s: float(np.median([p.time_s for _, p in s.entries]))   # noqa: E731
+    times = lambda s: s.budget_s or float(np.median([p.time_s for _, p in s.entries]))   # noqa: E731
     return min(timed, key=lambda s: abs(math.log(times(s) / budget)))
 
 
@@ -86,7 +88,8 @@ def build_figure(report, scene: str, budget: float | None = None):
                 ax.set_xlabel(f"{ref.meta.get('spp')} spp", labelpad=2)
             else:
                 own = float(np.mean(relative_error(image, ref.image) ** 2))
-                ax.set_xlabel(f"{point.spp} spp, {point.time_s:.2g} s\nrelMSE {fmt(own, 2)}", labelpad=2)
+                off = f"\noff its {point.budget_s:g} s budget" if missed_budget(point) else ""
+                ax.set_xlabel(f"{point.spp} spp, {point.time_s:.2g} s{off}\nrelMSE {fmt(own, 2)}", labelpad=2)
             for row, ((rname, rect), c) in enumerate(zip(regions.items(), REGION_COLOURS * 4), 1):
                 x0, y0, x1, y1 = rect
                 offset = crop_exposure(ref.image, rect)

@@ -22,6 +22,7 @@ from ..reporting.figures import loglog_axes, pyplot, save_figure, series_styles
 from . import viewer
 from .analysis import (FLOOR_WARNING_FACTOR, PointStats, curve, equal_time_budgets, pilot_light_paths, point_stats,
                        run_image)
+from .budget import missed_budget
 from .reference import Reference
 from .report_sections import OTHER_RAY_KINDS, SectionTables
 from .spectrum import plot_error_spectra, slope_table
@@ -213,7 +214,8 @@ class Report(SectionTables):
         chosen = []
         for key, points in groups.items():
             pick = min(points, key=lambda p: abs(math.log(p.time_s / target)) if target else -p.time_s)
-            chosen.append((strip_title(label(key), pick.spp, pick.time_s), run_image(self.folder, pick.images[0])))
+            title = strip_title(label(key), pick.spp, pick.time_s) + ("\n(off budget)" if missed_budget(pick) else "")
+            chosen.append((title, run_image(self.folder, pick.images[0])))
         height, width = ref.image.shape[:2]
         fig = strip_figure(ref.image, ref.variance, chosen, self._regions(scene, width, height))
         return save_figure(fig, os.path.join(self.out, f"{scene}_images.png"))

@@ -17,9 +17,10 @@ from .. import metrics
 from ..plugins.params import resolve as resolve_params
 from ..reporting import fmt, markdown_table
 from ..reporting.figures import series_styles
-from .analysis import (MIN_TRUSTED_TIME_S, PointStats, bias_by_passes, curve, efficiency_of, equal_time_budgets,
-                       region_at_budgets,
+from .analysis import (MIN_TRUSTED_TIME_S, PointStats, bias_by_passes, budget_columns, curve, efficiency_of,
+                       equal_time_budgets, region_at_budgets,
                        region_bias_variance, region_floor, region_stack_stats, timing_trusted, veach_bound)
+from .budget import BUDGET_RETRIES, budget_label, missed_budget, off_budget_text, tolerance_text
 from .config import PASS_PARAMETER
 from .spectrum import fit_slope, slope_cell, slope_note
 
@@ -53,7 +54,18 @@ def budget_cell(c: dict) -> str:
         f"{fmt(c['x_best'], 3)}x, {fmt(lo, 3)} to {fmt(hi, 3)}"
     se = "" if math.isnan(c["rel_mse_se"]) else f" +- {fmt(c['rel_mse_se'], 2)}"
     spread = f", times {fmt(c['time_spread'], 2)}x apart" if c["time_spread"] > TIME_SPREAD_NOTED else ""
+    if c.get("off_budget"):
+        ratio = f"**off the {c['budget_s']:g} s budget**: not compared"
     return f"{fmt(c['rel_mse_corrected'])}{se} ({fmt(c['time_s'], 2)} s{spread}, {ratio})"
+
+
+def budget_rule() -> str:
+    """The report's statement of when a budget point counts as rendered at its budget."""
+    return (f"A point counts as rendered at its time budget when its median render time is within "
+            f"{tolerance_text()} of it (budget.BUDGET_TOLERANCE); the runner renders a point outside it again "
+            f"at a rescaled sample count (at most {BUDGET_RETRIES} times), and a point that still misses is "
+            f"marked **off budget** wherever it is shown and is left out of every comparison at its budget "
+            f"(the efficiency ranking uses its measured time, as for every point).")
 
 
 class SectionTables:
@@ -87,7 +99,8 @@ class SectionTables:
         header = ["rank", "strategy", "spp", "time s", "MSE", "corrected MSE", "relMSE (+- seed std)", "efficiency",
                   "slope log MSE / log t", "FLIP", "CIEDE2000", "rays / sample (ext, shadow; others)"]
         body = [[rank if ranked else "not ranked", label(key), p.spp,
-                 fmt(p.time_s) + ("" if timing_trusted(p) else f" (< {short})"), fmt(p.mse), fmt(p.mse_corrected),
+                 fmt(p.time_s) + ("" if timing_trusted(p) else f" (< {short})") +
+                 (f" (**{off_budget_text(p)}**)" if missed_budget(p) else ""), fmt(p.mse), fmt(p.mse_corrected),
                  f"{fmt(p.rel_mse)} +- {fmt(p.rel_mse_std, 2)}", fmt(p.efficiency), slope_cell(s), fmt(p.flip),
                  fmt(p.ciede2000),
                  rays_cell(p.rays_per_sample)]
@@ -104,6 +117,10 @@ class SectionTables:
             caption += (f" **Not ranked, at the reference's noise floor:** {', '.join(floored)} (the MSE minus the "
                         f"reference's floor is not above zero, so no efficiency can be told: render the "
                         f"reference with more spp).")
+        off = [label(key) for _, key, p, _ in rows if missed_budget(p)]
+        if off:
+            caption += (f" **Off budget:** {', '.join(off)} (median time outside {tolerance_text()} of its time "
+                        f"budget): ranked by the time it took, not as a render at its budget.")
         return ["", "### Efficiency (largest sample count), ranked", "", caption, "", *markdown_table(header, body),
                 *slope_note([(label(key), fit) for _, key, _, fit in rows], "slope column"),
                 *self.progressive_note(groups, label)]
@@ -127,6 +144,11 @@ class SectionTables:
                     "base) because " + "; ".join(blocking) + "."]
 
     def equal_time_table(self, groups, label) -> list[str]:
+        """With time budgets, each strategy's point at each budget (``budget_table``); else each
+        curve interpolated (log-log) at times every curve covers."""
+        columns = budget_columns([p for points in groups.values() for p in points])
+        if columns:
+            return self.budget_table(groups, label, columns)
         curves = {key: curve(points) for key, points in groups.items()}
         budgets = equal_time_budgets(curves)
         if not budgets:
@@ -139,6 +161,24 @@ class SectionTables:
             body.append([label(key), *(fmt(v) for v in values)])
         return ["", "### Corrected relMSE at equal time (log-log interpolation)", "",
                 *markdown_table(["strategy", *(f"{b:.3g} s" for b in budgets)], body)]
+
+    def budget_table(self, groups, label, columns: dict) -> list[str]:
+        """Corrected relMSE of each strategy's point at each time budget and its median time,
+        columns headed by the budget and the measured range of its points' times
+        (``analysis.budget_columns``), points off their budget marked."""
+        body = []
+        for key, points in groups.items():
+            cells = []
+            for budget in columns:
+                p = next((p for p in points if p.budget_s == budget), None)
+                mark = ", **off budget**" if p is not None and missed_budget(p) else ""
+                cells.append("n/a" if p is None else f"{fmt(p.rel_mse_corrected)} ({fmt(p.time_s, 2)} s{mark})")
+            body.append([label(key), *cells])
+        header = ["strategy", *(budget_label(b, c["low"], c["high"]) for b, c in columns.items())]
+        return ["", "### Corrected relMSE at each time budget", "",
+                "Cells: relMSE minus the reference floor, mean over the seeds, and the median time of one render. "
+                "Column headers: the budget and the range of its points' median times. " + budget_rule(), "",
+                *markdown_table(header, body)]
 
     def bias_table(self, stats) -> list[str]:
         header = ["point", "seeds", "variance", "bias^2 (+- se)", "relative variance", "relative bias^2 (+- se)",
@@ -195,7 +235,9 @@ class SectionTables:
             if not table:
                 continue
             names = sorted({n for cells in table.values() for n in cells})
-            body = [[f"{budget:g} s", *(budget_cell(c) if (c := cells.get(n)) else "n/a" for n in names)]
+            columns = budget_columns(stats)
+            body = [[budget_label(budget, columns[budget]["low"], columns[budget]["high"]),
+                     *(budget_cell(c) if (c := cells.get(n)) else "n/a" for n in names)]
                     for budget, cells in table.items()]
             md += ["", f"### Region `{name}` at each time budget", "",
                    f"Cells: relMSE minus the region's reference floor ({fmt(floor['rel_mse'])}) +- one "
@@ -203,7 +245,9 @@ class SectionTables:
                    f"over the fastest's where above {TIME_SPREAD_NOTED:g}x), and the cost, the mean over "
                    f"seeds of corrected relMSE x that seed's time, over the best strategy's at that budget: "
                    f"the equal-time relMSE ratio to the best, with its range at one standard error of both "
-                   f"(a ratio whose range includes a target has not shown it either way).", "", *markdown_table(["budget", *names], body)]
+                   f"(a ratio whose range includes a target has not shown it either way). Rows: the budget and "
+                   f"the range of its points' median times. " + budget_rule(), "",
+                   *markdown_table(["budget", *names], body)]
             md += self._region_bias_table(name, rect, ref, stats, label)
         return md
 
@@ -219,6 +263,7 @@ class SectionTables:
                 chosen = ", ".join("-" if c is None else c[0] for c in p.pilots)
                 seconds = [c[1] for c in p.pilots if c is not None]
                 at = f"{p.budget_s:g} s" if p.budget_s else f"{p.spp} spp"
+                at += f" (**{off_budget_text(p)}**)" if missed_budget(p) else ""
                 body.append([label(key), at, str(p.spp), chosen, ", ".join(fmt(t, 3) for t in p.times),
                              fmt(statistics.median(seconds), 3)])
         if not body:

@@ -142,9 +142,9 @@
 
     // -- state changes ----------------------------------------------------------------
     selectSet(i) {
-      const n = this.data.sets.length, label = this.entries()[this.entry]?.label;
+      const n = this.data.sets.length, key = this.entries()[this.entry]?.key;
       this.set = ((i % n) + n) % n;
-      const same = this.entries().findIndex(e => e.label === label);   // keep the strategy shown
+      const same = this.entries().findIndex(e => e.key === key);   // keep the strategy shown (its label may carry a mark)
       this.entry = same >= 0 ? same : Math.min(this.entry, this.entries().length - 1);
       [...this.setRow.querySelectorAll("button")].forEach((b, k) => b.classList.toggle("vw-on", k === this.set));
       this.labelRow.replaceChildren(...this.entries().map((e, k) => el("button", {

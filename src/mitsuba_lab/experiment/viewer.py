@@ -17,6 +17,7 @@ from importlib import resources
 
 import numpy as np
 
+from .budget import missed_budget, off_budget_text
 from .comparisons import (comparison_sets, default_set, group_points, region_rel_mse, relative_error,
                           relative_variance, shown_image)
 
@@ -99,7 +100,7 @@ def scene_data(folder: str, scene: str, stats: list, reference, regions: dict) -
     ref_var = np.mean(reference.variance / (ref.astype(np.float64) ** 2 + 1e-2), axis=-1)
     blobs = {"ref": encode_half(ref)}
     err_maps, var_maps = [np.sqrt(ref_var)], [ref_var]
-    ref_entry = {"label": "reference", "rgb": "ref", "err": "ref:err", "var": "ref:var",
+    ref_entry = {"label": "reference", "key": "reference", "rgb": "ref", "err": "ref:err", "var": "ref:var",
                  "detail": f"reference: {reference.meta.get('integrator')}, {reference.meta.get('spp')} spp in "
                            f"{reference.meta.get('chunks')} chunks; error map: its own standard error, "
                            f"variance map: the variance of its mean",
@@ -124,8 +125,10 @@ def scene_data(folder: str, scene: str, stats: list, reference, regions: dict) -
                 mean = p.regions.get(n, {}).get("rel_mse")
                 crops[n] = {"text": f"relMSE {_fmt(region_rel_mse(image, ref, rect))}" +
                             (f" (mean {_fmt(mean)})" if mean is not None else "")}
-            entries.append({"label": name, "rgb": key, "err": key + ":err", "var": key + ":var", "crops": crops,
-                            "detail": f"{name}: {p.spp} spp, {p.time_s:.3g} s (median of {p.seeds} seeds); "
+            off = f" ({off_budget_text(p)})" if missed_budget(p) else ""
+            entries.append({"label": name + (" (off budget)" if off else ""), "key": name, "rgb": key,
+                            "err": key + ":err", "var": key + ":var", "crops": crops,
+                            "detail": f"{name}: {p.spp} spp, {p.time_s:.3g} s (median of {p.seeds} seeds){off}; "
                                       f"relMSE of this image {_fmt(own)}, mean over seeds {_fmt(p.rel_mse)}"})
         out_sets.append({"name": cset.name, "entries": entries})
     blobs["ref:err"] = encode_half(log_map(np.sqrt(ref_var)))

@@ -1,0 +1,223 @@
+"""Time budgets kept or flagged (issue 42, item 2): a budget point whose median render time is
+off its budget by more than budget.BUDGET_TOLERANCE is recalibrated and rendered again (at most
+BUDGET_RETRIES times), and one that still misses is marked wherever the report shows it.
+
+Nothing reads a clock here: the worker runs on a fake ``render_at`` whose times are given, and
+the report on a synthetic stored sweep (tests/synthetic_sweep.py) whose times are edited.
+"""
+import math
+import os
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import synthetic_sweep as synth
+
+from mitsuba_lab.experiment import budget
+from mitsuba_lab.experiment.analysis import region_at_budgets
+from mitsuba_lab.experiment.comparisons import comparison_sets, group_points
+from mitsuba_lab.experiment.config import PluginSpec, SceneSpec
+from mitsuba_lab.experiment.plan import Point
+from mitsuba_lab.experiment.run import SweepRunner
+from mitsuba_lab.experiment.store import ResultStore
+from mitsuba_lab.experiment.sweep import budget_message
+from mitsuba_lab.experiment.worker import PointResult, PointTask, execute_counted
+
+WARMUP = 99
+REFERENCE = np.full((4, 6, 3), 0.5, np.float32)
+
+
+def task(budget_s=1.0, seeds=(1, 2, 3), spp=None, stored_times=(), calibration=None, point_seeds=None):
+    point = Point("s/p/i/t1s", "s", "p", "i", None, budget_s, tuple(point_seeds or seeds), WARMUP)
+    return PointTask(point=point, scene=SceneSpec("s", "s.xml", None, {}, {}), sampler=PluginSpec("i", "independent", {}),
+                     strategy=PluginSpec("p", "path", {}), seeds=tuple(seeds), spp=spp,
+                     reference_image=REFERENCE, regions={}, metrics=(), variant="scalar_rgb",
+                     stored_times=tuple(stored_times), calibration=calibration)
+
+
+class FakeRenders:
+    """``render_at(count, seed)`` whose wall time is ``seconds(count, seed)``; it records every call."""
+
+    def __init__(self, seconds):
+        self.seconds, self.calls = seconds, []
+
+    def __call__(self, count, seed):
+        self.calls.append((count, seed))
+        stats = SimpleNamespace(wall_s=self.seconds(count, seed), kernel_s=0.0, compile_s=0.0, rays={},
+                                integrator={})
+        return REFERENCE + 0.01 * seed, stats
+
+    def timed(self):
+        """The timed renders (not the warm-ups and pilots, which render the warm-up seed)."""
+        return [c for c in self.calls if c[1] != WARMUP]
+
+
+# -- the tolerance ---------------------------------------------------------------------------
+
+def test_the_tolerance_is_25_percent_either_way():
+    assert budget.BUDGET_TOLERANCE == 0.25
+    assert budget.within_budget(1.25, 1.0) and budget.within_budget(0.75, 1.0)
+    assert not budget.within_budget(1.26, 1.0) and not budget.within_budget(0.74, 1.0)
+    assert budget.missed_budget(SimpleNamespace(budget_s=2.0, time_s=1.1))
+    assert not budget.missed_budget(SimpleNamespace(budget_s=None, time_s=1.1))      # an spp point
+    assert budget.budget_label(2.0, 1.93, 2.31) == "2 s (1.9-2.3 s measured)"
+    assert budget.budget_label(0.5, 0.51, 0.52) == "0.5 s (0.51-0.52 s measured)"
+    assert budget.rescaled_count(100, 2.0, 1.0) == 50
+    assert budget.rescaled_count(100, 2.0, 1.0, fixed_s=0.2) == 44              # (1 - 0.2) / (2 - 0.2)
+
+
+# -- the worker ------------------------------------------------------------------------------
+
+def test_a_point_whose_renders_take_twice_its_budget_is_recalibrated_and_rendered_once():
+    """The calibration's pilots (warm-up seed) see 10 ms per sample: 100 spp for 1 s; the timed
+    renders then run at half that speed (another load), 2.0 s each. The point is rescaled by the
+    measured 2.0 s to 50 spp and every seed rendered again, once: 1.0 s, within the budget."""
+    renders = FakeRenders(lambda count, seed: 0.01 * count * (1 if seed == WARMUP else 2))
+    result = execute_counted(task(), renders)
+    assert result.spp == 50 and [row["spp"] for row, _ in result.runs] == [50, 50, 50]
+    assert [row["wall_s"] for row, _ in result.runs] == [1.0, 1.0, 1.0]
+    assert renders.timed() == [(100, 1), (100, 2), (100, 3), (50, 1), (50, 2), (50, 3)]
+    assert (50, WARMUP) in renders.calls[renders.calls.index((100, 3)):]         # compiled before timing
+    tries = result.calibration["budget_tries"]
+    assert [(t["spp"], t["measured_s"]) for t in tries] == [(100, 2.0), (50, 1.0)]
+    assert result.calibration["spp"] == 50 and result.calibration["within_budget"] is True
+
+
+def test_a_point_within_tolerance_is_not_rendered_again():
+    """Timed renders 1.2x the budget (inside +-25%): one render per seed, as before."""
+    renders = FakeRenders(lambda count, seed: 0.01 * count * (1 if seed == WARMUP else 1.2))
+    result = execute_counted(task(), renders)
+    assert result.spp == 100 and renders.timed() == [(100, 1), (100, 2), (100, 3)]
+    assert len(result.calibration["budget_tries"]) == 1 and result.calibration["within_budget"] is True
+
+
+def test_a_point_that_misses_every_try_stops_after_the_retries_and_says_so():
+    """A cost the calibration never sees (3 s per timed render whatever the count): the first
+    renders and BUDGET_RETRIES more, then the point is kept, its calibration saying it missed."""
+    renders = FakeRenders(lambda count, seed: 0.01 * count if seed == WARMUP else 3.0)
+    result = execute_counted(task(), renders)
+    tries = result.calibration["budget_tries"]
+    assert len(tries) == 1 + budget.BUDGET_RETRIES == 3
+    assert all(t["measured_s"] == 3.0 for t in tries) and result.calibration["within_budget"] is False
+    assert len(renders.timed()) == 3 * len(tries) and len(result.runs) == 3       # only the last renders
+    assert [row["spp"] for row, _ in result.runs] == [tries[-1]["spp"]] * 3
+
+    events = []
+    SweepRunner(None, None, None, lambda event, **info: events.append((event, info))).report_budget_tries(result)
+    assert [e for e, _ in events] == ["budget_retry", "budget_retry", "budget_missed"]
+    lines = [budget_message(e, info) for e, info in events]
+    assert lines[0].startswith("s/p/i/t1s: median render time 3 s at 100 spp is outside +-25% of its 1 s budget")
+    assert "(retry 1 of 2)" in lines[0] and "(retry 2 of 2)" in lines[1]
+    assert "after 2 retries" in lines[2] and "the report marks it as off budget" in lines[2]
+
+
+def test_a_resumed_point_counts_its_stored_seeds_and_renders_all_of_them_again():
+    """Seeds 1 and 2 stored at 100 spp (2.0 s each, from a run under load), seed 3 missing: its
+    render (2.0 s) makes the median 2.0 s, so every seed of the point is rendered again at 50 spp
+    (one point, one count), rescaled with the stored calibration's fixed cost (0 here)."""
+    renders = FakeRenders(lambda count, seed: 0.02 * count)
+    stored = {"kind": "calibration", "point": "s/p/i/t1s", "spp": 100, "fixed_s": 0.0, "per_spp_s": 0.01}
+    result = execute_counted(task(seeds=(3,), point_seeds=(1, 2, 3), spp=100, stored_times=(2.0, 2.0),
+                                  calibration=stored), renders)
+    assert renders.timed() == [(100, 3), (50, 1), (50, 2), (50, 3)]
+    assert [row["seed"] for row, _ in result.runs] == [1, 2, 3] and result.spp == 50
+    assert result.calibration["spp"] == 50 and result.calibration["per_spp_s"] == 0.01     # (the stored fit kept)
+    # within its budget, a resumed point adds no calibration row
+    renders = FakeRenders(lambda count, seed: 0.01 * count)
+    result = execute_counted(task(seeds=(3,), point_seeds=(1, 2, 3), spp=100, stored_times=(1.0, 1.0),
+                                  calibration=stored), renders)
+    assert renders.timed() == [(100, 3)] and result.calibration is None
+
+
+# -- the store: a point rendered again replaces its images cleanly ---------------------------------
+
+def test_a_point_rendered_again_replaces_its_rows_and_images(tmp_path):
+    store = ResultStore(str(tmp_path))
+    runner = SweepRunner(None, None, store)
+    point_task = task(seeds=(1,), point_seeds=(1,))
+    row = lambda spp, wall: {"kind": "run", "point": point_task.point.id, "scene": "s", "strategy": "p",  # noqa: E731
+                             "sampler": "i", "spp": spp, "budget_s": 1.0, "seed": 1, "wall_s": wall,
+                             "identity_hash": "abcdef0123"}
+    runner.record(PointResult(point_task, 100, None, [(row(100, 2.0), REFERENCE)]))
+    first = store.stored_runs()[0]["image"]
+    assert os.path.exists(tmp_path / first)
+    runner.record(PointResult(point_task, 50, None, [(row(50, 1.0), REFERENCE + 1)]))
+    (kept,) = store.stored_runs()
+    assert kept["spp"] == 50 and kept["image"] != first and "__try2" in kept["image"]
+    assert os.path.exists(tmp_path / kept["image"]) and not os.path.exists(tmp_path / first)
+    reopened = ResultStore(str(tmp_path))                    # what a resume and the report read
+    assert [(r["spp"], r["image"]) for r in reopened.current_runs()] == [(50, kept["image"])]
+
+
+# -- the report ------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def off_budget_sweep(tmp_path_factory):
+    """The synthetic sweep with "noisy"'s 0.2 s point rendered in 0.13 s (0.65x: off budget)."""
+    folder = tmp_path_factory.mktemp("off_budget")
+    synth.write_sweep(folder)
+
+    def slow_down(row):
+        if row["point"] == "s/noisy/independent/t0.2s":
+            row["wall_s"] = 0.13 + 0.001 * row["seed"]
+    synth.edit_runs(folder, slow_down)
+    from mitsuba_lab.experiment.report import Report
+
+    return Report(str(folder))
+
+
+def test_the_equal_time_table_labels_budgets_by_measured_time_and_marks_the_point_off_budget(off_budget_sweep):
+    groups, label = group_points(off_budget_sweep.stats["s"])
+    md = "\n".join(off_budget_sweep.equal_time_table(groups, label))
+    assert "| strategy | 0.1 s (0.1 s measured) | 0.2 s (0.13-0.2 s measured) |" in md
+    noisy = next(line for line in md.splitlines() if line.startswith("| noisy"))
+    assert noisy.count("off budget") == 1 and "(0.13 s, **off budget**)" in noisy
+    good = next(line for line in md.splitlines() if line.startswith("| good"))
+    assert "off budget" not in good
+    assert "+-25%" in md                                   # the rule is stated where it is used
+
+
+def test_the_figure_does_not_call_an_off_budget_set_equal_time(off_budget_sweep):
+    import matplotlib.pyplot as plt
+
+    from mitsuba_lab.experiment.figure import build_figure
+
+    fig = build_figure(off_budget_sweep, "s", budget=0.2)
+    title = fig._suptitle.get_text()
+    assert "equal time 0.2 s" not in title
+    assert "budget 0.2 s, not equal time (0.13-0.2 s measured; off budget: noisy 0.13 s)" in title
+    texts = [t.get_text() for t in fig.findobj(lambda a: hasattr(a, "get_text"))]
+    assert sum("off its 0.2 s budget" in t for t in texts) == 1                # under noisy's image only
+    plt.close(fig)
+    fig = build_figure(off_budget_sweep, "s", budget=0.1)
+    assert "equal time 0.1 s (0.1 s measured)" in fig._suptitle.get_text()
+    plt.close(fig)
+
+
+def test_a_point_off_budget_is_left_out_of_the_ranking_at_its_budget(off_budget_sweep):
+    stats = off_budget_sweep.stats["s"]
+    table = region_at_budgets(stats, lambda p: p.strategy, "light", rel_floor=0.0)
+    noisy, good = table[0.2]["noisy"], table[0.2]["good"]
+    assert noisy["off_budget"] and math.isnan(noisy["x_best"]) and good["x_best"] == 1.0
+    assert not table[0.1]["noisy"]["off_budget"] and table[0.1]["noisy"]["x_best"] > 1.0
+    from mitsuba_lab.experiment.report_sections import budget_cell
+    assert "**off the 0.2 s budget**: not compared" in budget_cell(noisy)
+    # the efficiency table ranks by measured time and says which point is off its budget
+    groups, label = group_points(stats)
+    md = "\n".join(off_budget_sweep.efficiency_table(groups, label))
+    assert "off its 0.2 s budget: 0.13 s" in md and "**Off budget:** noisy" in md
+
+
+def test_the_viewer_labels_the_point_off_budget(off_budget_sweep):
+    from mitsuba_lab.experiment.viewer import scene_data
+
+    report = off_budget_sweep
+    ref = report.references["s"]
+    data = scene_data(report.folder, "s", report.stats["s"], ref, {})
+    by_name = {s["name"]: s for s in data["sets"]}
+    off_set = by_name["budget 0.2 s, not equal time (0.13-0.2 s measured; off budget: noisy 0.13 s)"]
+    assert [e["label"] for e in off_set["entries"]] == ["reference", "good", "noisy (off budget)"]
+    assert [e["key"] for e in off_set["entries"]] == ["reference", "good", "noisy"]     # the viewer keeps it shown
+    assert "off its 0.2 s budget: 0.13 s" in off_set["entries"][2]["detail"]
+    on_set = by_name["equal time 0.1 s (0.1 s measured)"]
+    assert [e["label"] for e in on_set["entries"]] == ["reference", "good", "noisy"]
