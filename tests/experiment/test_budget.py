@@ -15,13 +15,13 @@ import synthetic_sweep as synth
 
 from mitsuba_lab.experiment import budget
 from mitsuba_lab.experiment.analysis import region_at_budgets
-from mitsuba_lab.experiment.comparisons import comparison_sets, group_points
+from mitsuba_lab.experiment.comparisons import group_points
 from mitsuba_lab.experiment.config import PluginSpec, SceneSpec
 from mitsuba_lab.experiment.plan import Point
 from mitsuba_lab.experiment.run import SweepRunner
 from mitsuba_lab.experiment.store import ResultStore
 from mitsuba_lab.experiment.sweep import budget_message
-from mitsuba_lab.experiment.worker import PointResult, PointTask, execute_counted
+from mitsuba_lab.experiment.worker import PointResult, PointTask, execute_counted, execute_progressive
 
 WARMUP = 99
 REFERENCE = np.full((4, 6, 3), 0.5, np.float32)
@@ -43,8 +43,8 @@ class FakeRenders:
 
     def __call__(self, count, seed):
         self.calls.append((count, seed))
-        stats = SimpleNamespace(wall_s=self.seconds(count, seed), kernel_s=0.0, compile_s=0.0, rays={},
-                                integrator={})
+        stats = SimpleNamespace(wall_s=self.seconds(count, seed), kernel_s=0.0, compile_s=0.0, cache_misses=0,
+                                rays={}, integrator={})
         return REFERENCE + 0.01 * seed, stats
 
     def timed(self):
@@ -127,6 +127,24 @@ def test_a_resumed_point_counts_its_stored_seeds_and_renders_all_of_them_again()
     result = execute_counted(task(seeds=(3,), point_seeds=(1, 2, 3), spp=100, stored_times=(1.0, 1.0),
                                   calibration=stored), renders)
     assert renders.timed() == [(100, 3)] and result.calibration is None
+
+
+def test_a_progressive_budget_point_scales_its_passes_to_the_budget():
+    """Passes of 10, 10, 20 and 40 spp fitted earlier; the runs now take 25 ms per spp: 2.0 s
+    for a 1 s budget. Every pass is halved (5, 5, 10, 20: 1.0 s) and each seed run again, once."""
+    renders = FakeRenders(lambda count, seed: 0.025 * count)
+    point = Point("s/p/i/t1s", "s", "p", "i", None, 1.0, (1, 2), WARMUP, progressive=True)
+    progressive = PointTask(point=point, scene=SceneSpec("s", "s.xml", None, {}, {}),
+                            sampler=PluginSpec("i", "independent", {}), strategy=PluginSpec("p", "path", {}),
+                            seeds=(1, 2), spp=None, reference_image=REFERENCE, regions={}, metrics=(),
+                            variant="scalar_rgb", passes=(10, 10, 20, 40))
+    result = execute_progressive(progressive, renders)
+    assert [row["pass_spp"] for row, _ in result.runs] == [[5, 5, 10, 20]] * 2
+    assert [row["wall_s"] for row, _ in result.runs] == pytest.approx([1.0, 1.0])
+    tries = result.calibration["budget_tries"]
+    assert [(t["passes"], t["measured_s"]) for t in tries] == [([10, 10, 20, 40], pytest.approx(2.0)),
+                                                               ([5, 5, 10, 20], pytest.approx(1.0))]
+    assert result.calibration["passes"] == [5, 5, 10, 20] and result.calibration["spp"] == 40
 
 
 # -- the store: a point rendered again replaces its images cleanly ---------------------------------

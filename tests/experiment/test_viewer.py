@@ -92,7 +92,8 @@ def test_report_page_embeds_one_viewer_per_scene_offline(sweep):
     assert not re.search(r'(src|href)="(https?:)?//', html) and "<link" not in html    # nothing fetched
     (data,) = page_data(html)
     assert (data["width"], data["height"]) == (synth.WIDTH, synth.HEIGHT)
-    assert data["regions"] == synth.REGIONS and data["sets"][data["start"]]["name"] == "equal time 0.2 s (0.2 s measured)"
+    assert data["regions"] == synth.REGIONS
+    assert data["sets"][data["start"]]["name"] == "equal time 0.2 s (0.2 s measured)"
     ref = decode(data["images"]["ref"]).reshape(synth.HEIGHT, synth.WIDTH, 3)
     np.testing.assert_allclose(ref, synth.reference_image(), rtol=2 ** -11)   # HDR: 4.0 stays 4.0
     assert ref.max() == synth.BRIGHT

@@ -47,6 +47,14 @@ def rescaled_count(count: int, seconds: float, budget_s: float, fixed_s: float =
     return max(1, int(round(count * max(scale, 0.0))))
 
 
+def rescaled_passes(sizes, seconds: float, budget_s: float) -> tuple[int, ...]:
+    """A progressive budget point's pass sizes scaled so that their sum fills ``budget_s``, from
+    a run of ``sizes`` that took ``seconds`` (each pass at least 1 spp)."""
+    total = sum(sizes)
+    factor = rescaled_count(total, seconds, budget_s) / total
+    return tuple(max(1, int(round(size * factor))) for size in sizes)
+
+
 def tolerance_text() -> str:
     """The tolerance as the report and the log state it, "+-25%"."""
     return f"+-{BUDGET_TOLERANCE * 100:g}%"

@@ -5,9 +5,9 @@ Shared by the report's comparison viewer (``viewer``) and the publication figure
 
 * equal time: with ``time_budgets``, the points of one budget (each calibrated to about that
   wall time; named by the budget and the measured range, and not called equal time when a point
-  is off its budget, ``budget_set_name``); with an spp ladder only, each strategy's point nearest in log time to a budget
-  that every curve covers (``analysis.equal_time_budgets``), so the times differ somewhat and
-  are always shown;
+  is off its budget, ``budget_set_name``); with an spp ladder only, each strategy's point
+  nearest in log time to a budget that every curve covers (``analysis.equal_time_budgets``),
+  so the times differ somewhat and are always shown;
 * equal spp: the ladder points of one sample count.
 
 Each shown image is one seed's render (the point's first stored image); numbers under it are

@@ -168,8 +168,7 @@ class SweepRunner:
             # a budget point's seeds already stored at its calibrated count count in its measured time
             stored_times = tuple(r["wall_s"] for r in in_force if r["point"] == point.id and r["seed"] in point.seeds
                                  and r.get("identity_hash") == ident_hash and calibration is not None
-                                 and r["spp"] == calibration.get("spp") and not r.get("checkpoints")) \
-                if point.budget_s is not None and not point.progressive else ()
+                                 and r["spp"] == calibration.get("spp")) if point.budget_s is not None else ()
             yield PointTask(point=point, scene=scenes[point.scene], sampler=samplers[point.sampler],
                             strategy=with_depth(strategies[point.strategy], self.config.max_depth),
                             seeds=tuple(s for s in point.seeds if done.get((point.id, s)) != ident_hash),

@@ -189,7 +189,8 @@ def budget_message(event: str, info: dict) -> str:
     off = (f"{info['point']}: median render time {info['measured']:.3g} s at {info['spp']} spp is outside "
            f"{tolerance_text()} of its {info['budget']:g} s budget")
     if event == "budget_retry":
-        return f"{off}; recalibrated to {info['new_spp']} spp, rendering its seeds again (retry {info['retry']} of {info['retries']})"
+        return (f"{off}; recalibrated to {info['new_spp']} spp, rendering its seeds again "
+                f"(retry {info['retry']} of {info['retries']})")
     tried = f"after {info['retries']} retr{'y' if info['retries'] == 1 else 'ies'}" if info["retries"] else "(no retry)"
     return f"{off} {tried}; the report marks it as off budget"
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import metrics
-from .budget import BUDGET_RETRIES, measured_time, rescaled_count, within_budget
+from .budget import BUDGET_RETRIES, measured_time, rescaled_count, rescaled_passes, within_budget
 from .config import PluginSpec, SceneSpec, sample_count_plugin
 from .plan import Point, point_id, warmup_sizes
 from .progressive import Checkpoint, run_passes
@@ -240,12 +240,24 @@ def run_row(task: PointTask, seed: int, spp: int) -> dict:
 
 
 def execute_progressive(task: PointTask, render_at) -> PointResult:
-    """A progressive point's runs, one per missing seed, as rows with their checkpoints."""
+    """A progressive point's runs, one per missing seed, as rows with their checkpoints; a budget
+    point's kept to its budget (``keep_passes_to_budget``)."""
     sizes = tuple(task.passes) or None                  # None: fitted to the budget by the first run
     for size in warmup_sizes(sizes):                    # compile, untimed
         render_at(size, task.point.warmup_seed)
     result = PointResult(task, 0)
-    for seed in task.seeds:
+    sizes = progressive_runs(task, render_at, result, sizes, task.seeds)
+    if task.point.budget_s is not None:
+        keep_passes_to_budget(task, render_at, result, sizes)
+    return result
+
+
+def progressive_runs(task: PointTask, render_at, result: PointResult, sizes, seeds) -> tuple[int, ...]:
+    """Render a progressive run of each seed into ``result.runs`` (replacing what it held), with
+    passes of ``sizes`` (None: the first run fits them to the budget and records the calibration);
+    returns the pass sizes rendered."""
+    result.runs = []
+    for seed in seeds:
         for _ in range(1 + RECOMPILE_RETRIES):
             checkpoints = run_passes(render_at, seed, sizes, task.point.budget_s)
             if checkpoints[-1].cache_misses == 0:
@@ -259,7 +271,33 @@ def execute_progressive(task: PointTask, render_at) -> PointResult:
                                   "identity_hash": task.identity_hash}
         result.spp = checkpoints[-1].spp
         result.runs.append(progressive_row(task, seed, done, checkpoints))
-    return result
+    return sizes
+
+
+def keep_passes_to_budget(task: PointTask, render_at, result: PointResult, sizes) -> None:
+    """``keep_to_budget`` for a progressive budget point: while the median of its runs' elapsed
+    times is off the budget, every pass size is scaled by the measured time
+    (``budget.rescaled_passes``) and every seed of the point rendered again."""
+    point = task.point
+    base = result.calibration or dict(task.calibration or {})
+    stored = list(task.stored_times)
+    tries = []
+    for retry in range(BUDGET_RETRIES + 1):
+        times = stored + [row["wall_s"] for row, _ in result.runs]
+        tries.append({"spp": result.spp, "passes": list(sizes), "measured_s": measured_time(times), "times": times})
+        if within_budget(tries[-1]["measured_s"], point.budget_s) or retry == BUDGET_RETRIES:
+            break
+        sizes = rescaled_passes(sizes, tries[-1]["measured_s"], point.budget_s)
+        for size in warmup_sizes(sizes):                                    # compile, untimed
+            render_at(size, point.warmup_seed)
+        progressive_runs(task, render_at, result, sizes, point.seeds if stored else task.seeds)
+        stored = []
+    if result.calibration is None and len(tries) == 1:
+        return                               # a resumed point at its budget: its calibration stands
+    result.calibration = {**base, "kind": "calibration", "point": point.id, "budget_s": point.budget_s,
+                          "identity_hash": task.identity_hash, "spp": result.spp, "passes": list(sizes),
+                          "budget_tries": tries,
+                          "within_budget": within_budget(tries[-1]["measured_s"], point.budget_s)}
 
 
 def progressive_row(task: PointTask, seed: int, sizes, checkpoints: list[Checkpoint]) -> tuple[dict, list]:
