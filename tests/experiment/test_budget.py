@@ -106,7 +106,7 @@ def test_a_point_that_misses_every_try_stops_after_the_retries_and_says_so():
     SweepRunner(None, None, None, lambda event, **info: events.append((event, info))).report_budget_tries(result)
     assert [e for e, _ in events] == ["budget_retry", "budget_retry", "budget_missed"]
     lines = [budget_message(e, info) for e, info in events]
-    assert lines[0].startswith("s/p/i/t1s: median render time 3 s at 100 spp is outside +-25% of its 1 s budget")
+    assert lines[0].startswith("s/p/i/t1s: median render time 3.000 s at 100 spp is outside +-25% of its 1 s budget")
     assert "(retry 1 of 2)" in lines[0] and "(retry 2 of 2)" in lines[1]
     assert "after 2 retries" in lines[2] and "the report marks it as off budget" in lines[2]
 

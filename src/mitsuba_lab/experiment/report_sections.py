@@ -246,7 +246,8 @@ class SectionTables:
                    f"seeds of corrected relMSE x that seed's time, over the best strategy's at that budget: "
                    f"the equal-time relMSE ratio to the best, with its range at one standard error of both "
                    f"(a ratio whose range includes a target has not shown it either way). Rows: the budget and "
-                   f"the range of its points' median times. " + budget_rule(), "",
+                   f"the range of its points' median times; a point off its budget (median time outside "
+                   f"{tolerance_text()} of it) is marked and not compared.", "",
                    *markdown_table(["budget", *names], body)]
             md += self._region_bias_table(name, rect, ref, stats, label)
         return md

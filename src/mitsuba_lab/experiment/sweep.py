@@ -186,7 +186,7 @@ def progress_printer(bar):
 def budget_message(event: str, info: dict) -> str:
     """The log line of a budget point rendered again (``budget_retry``) or still off its budget
     after its retries (``budget_missed``): ``SweepRunner.report_budget_tries``."""
-    off = (f"{info['point']}: median render time {info['measured']:.3g} s at {info['spp']} spp is outside "
+    off = (f"{info['point']}: median render time {info['measured']:.3f} s at {info['spp']} spp is outside "
            f"{tolerance_text()} of its {info['budget']:g} s budget")
     if event == "budget_retry":
         return (f"{off}; recalibrated to {info['new_spp']} spp, rendering its seeds again "
