@@ -87,7 +87,8 @@ class SectionTables:
         short = f"{MIN_TRUSTED_TIME_S * 1000:g} ms"
         header = ["rank", "strategy", "spp", "time s", "MSE", "corrected MSE", "relMSE (+- seed std)", "efficiency",
                   "slope log MSE / log t", "FLIP", "CIEDE2000", "rays / sample (ext, shadow; others)"]
-        efficiencies = fmt_pm_column([p.efficiency for _, _, p, _ in rows], [p.efficiency_se for _, _, p, _ in rows])
+        errors = [getattr(p, "efficiency_se", math.nan) for _, _, p, _ in rows]     # (NaN: not measured)
+        efficiencies = fmt_pm_column([p.efficiency for _, _, p, _ in rows], errors)
         body = [[rank if ranked else "not ranked", label(key), p.spp,
                  fmt(p.time_s) + ("" if timing_trusted(p) else f" (< {short})"), fmt(p.mse), fmt(p.mse_corrected),
                  f"{fmt(p.rel_mse)} +- {fmt(p.rel_mse_std, 2)}", efficiency, slope_cell(s), fmt(p.flip),
@@ -95,7 +96,8 @@ class SectionTables:
                  rays_cell(p.rays_per_sample)]
                 for rank, (((ranked, _), key, p, s), efficiency) in enumerate(zip(rows, efficiencies), 1)]
         ranked = [(key, p) for (ok, _), key, p, _ in rows if ok]
-        best = best_of({label(key): (1.0 / p.efficiency, p.efficiency_se / p.efficiency ** 2) for key, p in ranked},
+        best = best_of({label(key): (1.0 / p.efficiency, getattr(p, "efficiency_se", math.nan) / p.efficiency ** 2)
+                        for key, p in ranked},
                        min((p.seeds for _, p in ranked), default=0))
         caption = (f"Each strategy's longest point (median wall time of one render). Renders shorter than "
                    f"{short} are timing noise (launch overhead and scheduler jitter): such a point is not "
