@@ -87,7 +87,7 @@ def variance_of_mean(stack) -> np.ndarray:
     return per_pixel_variance(stack) / stack.shape[0]
 
 
-def bias_squared(stack, ref, ref_floor=0.0) -> tuple[float, float]:
+def bias_squared(stack, ref, ref_floor=0.0, tile: int | None = None) -> tuple[float, float]:
     """Estimate the squared bias of the estimator that produced ``stack``.
 
     For each pixel ``p`` (channels averaged), with ``m_p = mean_r img_r[p]``::
@@ -104,7 +104,9 @@ def bias_squared(stack, ref, ref_floor=0.0) -> tuple[float, float]:
     Returns ``(mean_p d_p, std_p(d_p) / sqrt(P))``. The standard error treats
     the ``P`` pixels as independent samples of ``d``; channels of one pixel
     are averaged first because they share sample paths. Correlated pixels (a
-    wide reconstruction filter) make this error bar optimistic.
+    wide reconstruction filter, a photon map's kernel) make this error bar optimistic;
+    with ``tile`` the error is the larger of that and the one from the means of
+    ``tile`` x ``tile`` pixel blocks, which holds correlations shorter than a block.
     """
     stack = _f64(stack)
     n_renders = stack.shape[0]
@@ -117,9 +119,22 @@ def bias_squared(stack, ref, ref_floor=0.0) -> tuple[float, float]:
     d = np.broadcast_to(d, mean_img.shape)
     if d.ndim == 3:
         d = d.mean(axis=-1)
+    if tile and tile > 1 and d.ndim == 2:
+        return float(d.mean()), max(_pixel_se(d.ravel()), _tile_se(d, tile))
     d = d.ravel()
-    se = float(np.std(d, ddof=1) / math.sqrt(d.size)) if d.size > 1 else math.inf
-    return float(d.mean()), se
+    return float(d.mean()), _pixel_se(d)
+
+
+def _pixel_se(d: np.ndarray) -> float:
+    return float(np.std(d, ddof=1) / math.sqrt(d.size)) if d.size > 1 else math.inf
+
+
+def _tile_se(d: np.ndarray, tile: int) -> float:
+    """The standard error of ``d``'s mean from the means of ``tile`` x ``tile`` blocks (the
+    whole blocks; their spread holds the correlation of neighbouring pixels)."""
+    h, w = (d.shape[0] // tile) * tile, (d.shape[1] // tile) * tile
+    blocks = d[:h, :w].reshape(h // tile, tile, w // tile, tile).mean(axis=(1, 3)).ravel()
+    return _pixel_se(blocks) if blocks.size > 1 else math.inf
 
 
 # --------------------------------------------------------------------------

@@ -156,6 +156,26 @@ def test_veach_table_is_absent_without_a_balance_weighting(synthetic):
     assert report.veach_table("s", groups) == []
 
 
+def test_veach_section_is_absent_with_one_lab_mis_weighting(synthetic):
+    """A balance weighting alone (the other strategy not lab_mis): nothing to compare, so no
+    section at all (issue 42: sections with nothing to say are left out, not printed empty)."""
+    report = Report(str(synthetic))
+    groups = {}
+    for p in report.stats["s"]:
+        if p.strategy in ("mis_balance", "nee") and p.sampler == "independent":
+            groups.setdefault((p.strategy, p.sampler), []).append(p)
+    assert report.veach_table("s", groups) == []
+
+
+def test_veach_bound_without_a_standard_error_is_not_resolved():
+    from mitsuba_lab.experiment.analysis import veach_bound
+
+    nan = float("nan")
+    balance = {"variance": 2.0, "variance_se": nan, "ref_mean_square": 0.0}
+    other = {"variance": 1.0, "variance_se": nan, "ref_mean_square": 0.0}
+    assert veach_bound(balance, other, 1, 4)["verdict"] == "not resolved with 2 seeds (needs at least 3)"
+
+
 # -- mitsuba_lab.reporting ---------------------------------------------------------------------
 
 def test_number_formatting():

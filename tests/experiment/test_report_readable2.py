@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import synthetic_sweep as synth
 
-from mitsuba_lab.experiment.report import ERROR_RANGE, STRIP_COLUMNS, build_report, curves_figure, strip_figure
+from mitsuba_lab.experiment.report import (ERROR_RANGE, SIGNED_CMAP, STRIP_COLUMNS, build_report, curves_figure,
+                                           strip_figure)
 from mitsuba_lab.experiment.spectrum import SLOPE_SE_LIMIT, fit_slope, slope_cell, slope_table
 from mitsuba_lab.reporting.figures import legend_outside, pyplot, series_styles
 
@@ -97,20 +98,25 @@ def test_thumbnail_strip_wraps_and_has_colour_bars():
         assert len(thumbs) == 17
         columns = {round(ax.get_position().x0, 3) for ax in thumbs}
         assert len(columns) == STRIP_COLUMNS and len({round(ax.get_position().y0, 3) for ax in thumbs}) == 3
-        bars = [ax for ax in fig.axes if ax.get_xlabel().startswith("log10")]
-        assert sorted(ax.get_xlabel().split(" (")[0].split(" |")[0] for ax in bars) == [
-            "log10 reference variance", "log10 relative error"]
+        bars = [ax for ax in fig.axes if ax.get_xlabel().startswith(("log10", "signed"))]
+        assert sorted(ax.get_xlabel().split("\n")[0].split(" (")[0] for ax in bars) == [
+            "log10 reference variance", "log10 relative error", "signed difference"]
         error_bar = next(ax for ax in bars if "relative error" in ax.get_xlabel())
         assert error_bar.get_xlim() == pytest.approx(ERROR_RANGE)
         assert len([t for t in error_bar.get_xticklabels() if t.get_text()]) >= 3
         maps = [ax.images[0] for ax in fig.axes if ax.images and not ax.get_title()]
-        assert len(maps) == 17                                  # one map under each thumbnail
-        assert {m.get_clim() for m in maps[1:]} == {ERROR_RANGE}  # the renders' maps share the bar's range
+        error_maps = [m for m in maps if m.get_cmap().name == "magma"]
+        signed_maps = [m for m in maps if m.get_cmap().name == SIGNED_CMAP]
+        assert len(error_maps) == 16 and len(signed_maps) == 16  # both maps under each render
+        assert len(maps) == 33                                   # and the variance under the reference
+        assert {m.get_clim() for m in error_maps} == {ERROR_RANGE}  # the renders' maps share the bar's range
+        (low, high), = {m.get_clim() for m in signed_maps}      # one symmetric range for every signed map
+        assert low == -high and high > 0
     finally:
         pyplot().close(fig)
     small = strip_figure(reference, variance, chosen[:2])
     try:                                                         # few renders: one row, no empty cells
-        assert len([ax for ax in small.axes if ax.images]) == 6
+        assert len([ax for ax in small.axes if ax.images]) == 8
     finally:
         pyplot().close(small)
     balanced = strip_figure(reference, variance, chosen[:7])    # 8 cells: two rows of 4, not 6 + 2

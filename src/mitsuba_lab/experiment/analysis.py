@@ -17,6 +17,13 @@ Definitions used throughout the report:
 * rel_variance, rel_bias2: the same two on images weighted by 1 / sqrt(ref^2 + 0.01),
   i.e. in relMSE's units (relMSE = rel_bias2 + rel_variance + relative floor), where a bright
   light's pixels do not swamp the rest of the image.
+
+Verdicts (``separated``, ``best_of``, ``not_resolved``): a verdict (the best or most
+efficient strategy, biased, resolved, a slope) is given only when its uncertainty separates
+it: the estimate lies more than ``separation_factor`` standard errors from what it is told
+apart from (2 for an error taken over pixels; Student's t at 97.5% for one taken over the
+seeds, 12.7 with 2 seeds). Otherwise it reads "not resolved with N seeds (needs about M)", M
+from the standard error's 1/sqrt(N) scaling (``seeds_needed``).
 """
 from __future__ import annotations
 
@@ -38,6 +45,102 @@ FLOOR_WARNING_FACTOR = 10.0
 #: to rank: launch overhead and scheduler jitter of a few milliseconds are then a sizeable
 #: part of the time (a user's 10 ms, 4 spp point once topped an efficiency ranking).
 MIN_TRUSTED_TIME_S = 0.05
+
+
+#: A verdict from an error taken over pixels needs its estimate this many standard errors away.
+SEPARATION = 2.0
+#: The most seeds a "needs about" names; past it, "more than" this.
+MOST_SEEDS = 100_000
+
+
+def separation_factor(seeds: int | None = None) -> float:
+    """How many standard errors separate a verdict: SEPARATION for an error taken over many
+    pixels (``seeds`` None), Student's t at 97.5% with seeds - 1 degrees of freedom for one
+    taken over the seeds (12.7 with 2 seeds, 4.3 with 3, 2.1 with 20); NaN with one seed."""
+    if seeds is None:
+        return SEPARATION
+    if seeds < 2:
+        return math.nan
+    from scipy.stats import t
+
+    return float(t.ppf(0.975, seeds - 1))
+
+
+def separated(gap: float, se: float, seeds: int | None = None) -> bool:
+    """Whether ``gap`` (an estimate's distance from what it is told apart from) exceeds its
+    ``separation_factor`` standard errors; False where either is missing."""
+    return bool(gap > separation_factor(seeds) * se) if math.isfinite(gap) and math.isfinite(se) else False
+
+
+def seeds_needed(seeds: int, gap: float, se: float, over_seeds: bool = True) -> int | None:
+    """About how many seeds would separate ``gap`` when the standard error ``se`` (measured
+    with ``seeds``) falls as 1/sqrt(seeds); None where no number of seeds would (no gap, no
+    error), MOST_SEEDS + 1 past MOST_SEEDS."""
+    if not (math.isfinite(gap) and math.isfinite(se)) or gap <= 0 or se <= 0 or seeds < 1:
+        return None
+    factor = lambda m: separation_factor(m if over_seeds else None)        # noqa: E731
+    m = max(seeds + 1, math.ceil(seeds * (SEPARATION * se / gap) ** 2))
+    while m <= MOST_SEEDS and not factor(m) * se * math.sqrt(seeds / m) < gap:
+        m = max(m + 1, math.ceil(m * 1.05))
+    return m if m <= MOST_SEEDS else MOST_SEEDS + 1
+
+
+def not_resolved(seeds: int, needed: int | None) -> str:
+    """The verdict where the uncertainty does not separate one: "not resolved with N seeds
+    (needs about M)"."""
+    if needed is None:
+        return f"not resolved with {seeds} seeds"
+    if needed > MOST_SEEDS:
+        return f"not resolved with {seeds} seeds (needs more than {MOST_SEEDS})"
+    rounded = needed if needed < 100 else int(float(f"{needed:.2g}"))
+    return f"not resolved with {seeds} seeds (needs about {rounded})"
+
+
+@dataclass
+class Best:
+    """The least costly of a set of strategies (``best_of``), and whether that is resolved."""
+    winner: str | None              # the least costly (None: nothing measured)
+    runner: str | None = None       # the next; None when the winner is alone
+    ratio: float = math.nan         # the runner's cost over the winner's
+    low: float = math.nan           # that ratio's interval at the separation used
+    high: float = math.nan
+    seeds: int = 0
+    resolved: bool = False
+    needed: int | None = None
+
+    def text(self) -> str:
+        """"bdpt (mis costs 2.7x, 1.6 to 4.5)", or "not resolved with 2 seeds (needs about 40):
+        bdpt and mis within 1.03x (0.21 to 5.1)"."""
+        from ..reporting import fmt
+
+        if self.winner is None:
+            return "n/a"
+        if self.runner is None:
+            return f"{self.winner} (the only one measured)"
+        ratio = f"{fmt(self.ratio, 3)}x, {fmt(self.low, 2)} to {fmt(self.high, 2)}"
+        if self.resolved:
+            return f"{self.winner} ({self.runner} costs {ratio})"
+        return f"{not_resolved(self.seeds, self.needed)}: {self.winner} and {self.runner} within {ratio}"
+
+
+def best_of(costs: dict, seeds: int) -> Best:
+    """The least costly of ``costs`` {name: (cost, its standard error over the seeds)} (NaN
+    costs left out), resolved when the next one's cost ratio to it lies outside Student's-t
+    standard errors of the log ratio (both costs' relative errors combined, the seeds
+    independent); ``seeds``: the fewest any of them has."""
+    measured = sorted((c, se, name) for name, (c, se) in costs.items() if math.isfinite(c) and c > 0)
+    if not measured:
+        return Best(None, seeds=seeds)
+    (c1, se1, first), rest = measured[0], measured[1:]
+    if not rest:
+        return Best(first, seeds=seeds, resolved=True)
+    c2, se2, second = rest[0]
+    gap = math.log(c2 / c1)
+    log_se = math.hypot(se1 / c1, se2 / c2)
+    half = separation_factor(seeds) * log_se
+    resolved = separated(gap, log_se, seeds)
+    return Best(first, second, c2 / c1, c2 / c1 * math.exp(-half), c2 / c1 * math.exp(half), seeds, resolved,
+                None if resolved else seeds_needed(seeds, gap, log_se))
 
 
 def timing_trusted(point) -> bool:
@@ -78,6 +181,9 @@ class PointStats:
     times: list = field(default_factory=list)         # each seed's wall time (the rows' order)
     images: list = field(default_factory=list)        # stored image paths (relative to the sweep folder)
     pilots: list = field(default_factory=list)        # each seed's pilot_choice (None: no pilot)
+    efficiency_se: float = math.nan                   # over the seeds (``seed_cost``'s error)
+    mean_ratio: float = math.nan                      # image mean over the reference's, mean over seeds
+    mean_ratio_se: float = math.nan                   # its standard error (seeds and reference)
 
 
 @functools.lru_cache(maxsize=512)
@@ -132,12 +238,22 @@ def efficiency_of(errors, times, floor: float = 0.0) -> float:
     return 1.0 / seed_cost(errors, times, floor)[0]          # (NaN at the floor)
 
 
+def bias_tile(shape) -> int:
+    """The block side (pixels) of bias^2's standard error (``metrics.bias_squared``'s ``tile``):
+    8, or less on a small image so that at least 64 blocks remain. A photon map's kernel or a
+    wide filter correlates neighbouring pixels, and a standard error that treats them as
+    independent resolved a bias^2 from 2 seeds of an unbiased estimator."""
+    height, width = shape[:2]
+    return max(1, min(8, int(math.sqrt(height * width / 64))))
+
+
 def relative_bias_variance(stack: np.ndarray, reference) -> tuple[float, float, float]:
     """(variance, bias^2, its standard error) in relMSE's units: every image and the reference
     multiplied by 1 / sqrt(ref^2 + 0.01), the reference's variance by its square."""
     weight = 1.0 / np.sqrt(reference.image.astype(np.float64) ** 2 + 1e-2)
     weighted = stack * weight
-    bias2, se = metrics.bias_squared(weighted, reference.image * weight, reference.variance * weight ** 2)
+    bias2, se = metrics.bias_squared(weighted, reference.image * weight, reference.variance * weight ** 2,
+                                     tile=bias_tile(reference.image.shape))
     return metrics.mean_variance(weighted), bias2, se
 
 
@@ -150,7 +266,10 @@ def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
     times = [r["wall_s"] for r in rows]
     time_s = statistics.median(times)
     floor, rel_floor = reference.mse_floor, reference.rel_mse_floor()
-    bias2, bias2_se = metrics.bias_squared(stack, reference.image, reference.variance)
+    bias2, bias2_se = metrics.bias_squared(stack, reference.image, reference.variance,
+                                           tile=bias_tile(reference.image.shape))
+    cost, cost_se = seed_cost(mse, times, floor)
+    ratio, ratio_se = mean_ratio(stack, reference)
     samples = first["spp"] * stack.shape[1] * stack.shape[2]
     rays = {k: _mean([r["rays"].get(k, 0) for r in rows]) / samples for k in first.get("rays", {})}
     regions = {}
@@ -168,12 +287,28 @@ def point_stats(rows: list[dict], folder: str, reference) -> PointStats:
         kernel_s=statistics.median(r["kernel_s"] for r in rows), mse=_mean(mse), mse_std=_std(mse),
         rel_mse=_mean(rel), rel_mse_std=_std(rel), mse_corrected=corrected,
         rel_mse_corrected=_mean(rel) - rel_floor, variance=metrics.mean_variance(stack), bias2=bias2,
-        bias2_se=bias2_se, efficiency=efficiency_of(mse, times, floor),
+        bias2_se=bias2_se, efficiency=1.0 / cost, efficiency_se=cost_se / cost ** 2,
+        mean_ratio=ratio, mean_ratio_se=ratio_se,
         near_floor=_mean(mse) < FLOOR_WARNING_FACTOR * floor, rel_variance=rel_variance,
         rel_bias2=rel_bias2, rel_bias2_se=rel_bias2_se,
         flip=_mean([r.get("flip") for r in rows]), ciede2000=_mean([r.get("ciede2000") for r in rows]),
         rays_per_sample=rays, regions=regions, times=times, images=[r["image"] for r in rows],
         pilots=[pilot_choice(r.get("integrator_stats") or {}) for r in rows])
+
+
+def mean_ratio(stack: np.ndarray, reference) -> tuple[float, float]:
+    """(the image mean over the reference's, averaged over the seeds; its standard error): the
+    spread of the seeds' ratios and the reference's own noise (its mean's relative standard
+    error) combined. The quickest bias check: 1 within its interval for an unbiased strategy."""
+    ref = reference.image.astype(np.float64)
+    ref_mean = float(ref.mean())
+    if not ref_mean > 0:
+        return math.nan, math.nan
+    ratios = stack.reshape(stack.shape[0], -1).astype(np.float64).mean(axis=1) / ref_mean
+    ratio = float(ratios.mean())
+    seeds_se = float(ratios.std(ddof=1) / math.sqrt(ratios.size)) if ratios.size > 1 else math.nan
+    ref_rel_se = math.sqrt(float(np.mean(reference.variance)) / ref[..., 0].size) / ref_mean
+    return ratio, math.hypot(seeds_se, ratio * ref_rel_se)
 
 
 def region_stack(stats: PointStats, folder: str, rect) -> np.ndarray:
@@ -240,13 +375,18 @@ def veach_bound(balance: dict, other: dict, n_emitter: int, spp: int) -> dict:
     The variances are estimates over R seeds; the verdict is "holds" when the
     measured lhs <= rhs, "within noise" when the excess is below two standard
     errors of the difference (jackknife, the two treated as independent), else
-    "violated".
+    "violated"; an excess with no standard error (fewer than three seeds) is not resolved.
     """
     slack = (1.0 / min(n_emitter, 1) - 1.0 / (n_emitter + 1)) * balance["ref_mean_square"] / spp
     rhs = other["variance"] + slack
     excess = balance["variance"] - rhs
     se = math.hypot(balance["variance_se"], other["variance_se"])
-    verdict = "holds" if excess <= 0 else ("within noise" if excess <= 2 * se else "violated")
+    if excess <= 0:
+        verdict = "holds"
+    elif not math.isfinite(se):             # (jackknife errors need three seeds)
+        verdict = "not resolved with 2 seeds (needs at least 3)"
+    else:
+        verdict = "within noise" if excess <= 2 * se else "violated"
     return {"lhs": balance["variance"], "rhs": rhs, "slack": slack, "se": se, "verdict": verdict}
 
 
@@ -279,7 +419,7 @@ def region_at_budgets(points: list[PointStats], label, region: str, rel_floor: f
     best nor compared.
 
     Returns {budget: {label: {rel_mse, rel_mse_corrected, rel_mse_se, time_s, time_spread, cost,
-    cost_se, x_best, x_best_range, budget_s, off_budget}}}."""
+    cost_se, seeds, x_best, x_best_range, budget_s, off_budget}}}."""
     table = {}
     for p in points:
         if p.budget_s is None or region not in p.regions:
@@ -289,7 +429,7 @@ def region_at_budgets(points: list[PointStats], label, region: str, rel_floor: f
         cell = {"rel_mse": raw, "rel_mse_corrected": raw - rel_floor, "time_s": p.time_s,
                 "time_spread": max(p.times) / min(p.times) if min(p.times) > 0 else math.nan,
                 "rel_mse_se": p.regions[region].get("rel_mse_se", math.nan), "cost": cost, "cost_se": cost_se,
-                "budget_s": p.budget_s, "off_budget": missed_budget(p)}
+                "seeds": len(p.times), "budget_s": p.budget_s, "off_budget": missed_budget(p)}
         table.setdefault(p.budget_s, {})[label(p)] = cell
     for cells in table.values():
         # (NaN cost: at the floor; off budget: not an equal-time render)
@@ -327,21 +467,41 @@ def ratio_range(cell: dict, best: dict) -> tuple[float, float]:
     return ratio * math.exp(-log_se), ratio * math.exp(log_se)
 
 
+#: The verdict on a bias^2 estimate more than two standard errors below zero.
+UNRELIABLE = "unreliable variance estimate (heavy tails)"
+
+
+def bias_verdict(bias2: float, se: float, seeds: int) -> tuple[str, int | None]:
+    """(verdict, seeds needed) on a bias^2 estimate +- its standard error (an error over
+    pixels): "biased" more than two standard errors above zero; UNRELIABLE more than two
+    below, where bias^2 cannot be (the seeds' variance estimate is off: heavy tails, a few
+    fireflies); else ``not_resolved``, with the seeds at which an estimate of this size would
+    be two standard errors from zero."""
+    if separated(bias2, se):
+        return "biased", None
+    if separated(-bias2, se):
+        return UNRELIABLE, None
+    needed = seeds_needed(seeds, abs(bias2), se, over_seeds=False)
+    return not_resolved(seeds, needed), needed
+
+
 def bias_by_passes(points: list[PointStats], passes_of) -> dict:
     """Relative bias^2 and variance (relMSE's units) of one progressive strategy against its
     pass count.
 
     ``passes_of(point)`` gives a point's passes. Rows sorted by passes, each with relMSE, the
-    relative variance, the relative bias^2 estimate, its standard error and whether it is
-    resolved (more than two standard errors above zero); ``slope`` is the log-log slope of
-    bias^2 against passes over the resolved rows (NaN with fewer than two): negative when the
-    bias shrinks as passes grow.
+    relative variance, the relative bias^2 estimate, its standard error, whether it is
+    resolved (``separated`` from zero: more than two standard errors above it), ``verdict``
+    (``bias_verdict``) and ``needed`` (the seeds that would resolve it); ``slope`` is the
+    log-log slope of bias^2 against passes over the resolved rows (NaN with fewer than two):
+    negative when the bias shrinks as passes grow.
     """
     rows = []
     for p in sorted(points, key=passes_of):
+        verdict, needed = bias_verdict(p.rel_bias2, p.rel_bias2_se, p.seeds)
         rows.append({"passes": passes_of(p), "time_s": p.time_s, "rel_mse": p.rel_mse,
                      "variance": p.rel_variance, "bias2": p.rel_bias2, "bias2_se": p.rel_bias2_se,
-                     "resolved": p.rel_bias2 > 2 * p.rel_bias2_se, "seeds": p.seeds})
+                     "resolved": verdict == "biased", "verdict": verdict, "needed": needed, "seeds": p.seeds})
     resolved = [r for r in rows if r["resolved"]]
     fit = slope([r["passes"] for r in resolved], [r["bias2"] for r in resolved]) if len(resolved) >= 2 else math.nan
     return {"rows": rows, "slope": fit}

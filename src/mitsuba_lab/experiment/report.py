@@ -29,6 +29,15 @@ from .spectrum import plot_error_spectra, slope_table
 from .store import ResultStore
 from .strategy_grid import grid_section
 
+#: The rule every verdict of the report follows, stated once at its top.
+VERDICT_RULE = (
+    "Verdicts: a verdict (best or most efficient, biased, resolved, a slope) is given only where its "
+    "uncertainty separates it: more than two standard errors for an error taken over pixels, Student's t at "
+    "97.5% for one taken over the seeds (12.7 standard errors with 2 seeds, 4.3 with 3); otherwise it reads "
+    "\"not resolved with N seeds (needs about M)\", M from the standard error's 1/sqrt(N) scaling. Numbers "
+    "carry the digits that tell apart values differing by more than their errors. A bias^2 more than two "
+    "standard errors below zero is flagged as an unreliable variance estimate (heavy tails).")
+
 CSV_COLUMNS = ("point", "scene", "strategy", "sampler", "spp", "budget_s", "seed", "wall_s", "kernel_s",
                "compile_s", "mse", "rel_mse", "flip", "ciede2000", "finite", "negative", "peak_rss_mib", "host",
                "image")
@@ -110,7 +119,8 @@ class Report(SectionTables):
                     "Metrics: relMSE = mean (x - ref)^2 / (ref^2 + 0.01); `corrected` values subtract the "
                     "reference's noise floor; efficiency = 1 / (mean over seeds of corrected MSE x that "
                     "seed's wall time); variance = mean per-pixel variance across seeds; bias^2 = squared error of "
-                    "the seed mean minus its variance and the reference floor (+- one standard error)."]
+                    "the seed mean minus its variance and the reference floor (+- one standard error).",
+                    "", VERDICT_RULE]
         left = self.meta.get("left_out", []) + [
             {**a, "reason": f"same estimator as {a['same_as']}: {a['reason']}"} for a in self.meta.get("aliases", [])]
         if left:
@@ -148,6 +158,7 @@ class Report(SectionTables):
         md += ["", f"![relMSE against time]({os.path.basename(plot)})"]
         md += self.efficiency_table(groups, label)
         md += self.equal_time_table(groups, label)
+        md += self.mean_table(groups, label)
         md += self.bias_table(stats)
         md += self.passes_section(scene, groups, label)
         md += slope_table(groups, label)
@@ -162,7 +173,10 @@ class Report(SectionTables):
         md += self.veach_table(scene, groups)
         strip = self.image_strip(scene, groups, label)
         if strip:
-            md += ["", f"![reference, each strategy at about equal time, error maps]({os.path.basename(strip)})"]
+            md += ["", f"![reference, each strategy at about equal time, error maps]({os.path.basename(strip)})",
+                   "", "Under each render: its relative error |x - ref| / (|ref| + 0.01) (one seed), then the signed "
+                       "difference of its mean over the seeds from the reference (red above, blue below, one "
+                       "symmetric range for all): noise averages out of the mean, bias stays."]
         return "\n".join(md)
 
     def viewer_marker(self, scene, stats) -> list[str]:
@@ -214,8 +228,10 @@ class Report(SectionTables):
         chosen = []
         for key, points in groups.items():
             pick = min(points, key=lambda p: abs(math.log(p.time_s / target)) if target else -p.time_s)
+            mean = np.mean([run_image(self.folder, path) for path in pick.images], axis=0)
             title = strip_title(label(key), pick.spp, pick.time_s) + ("\n(off budget)" if missed_budget(pick) else "")
-            chosen.append((title, run_image(self.folder, pick.images[0])))
+            chosen.append((title, run_image(self.folder, pick.images[0]),
+                           mean))
         height, width = ref.image.shape[:2]
         fig = strip_figure(ref.image, ref.variance, chosen, self._regions(scene, width, height))
         return save_figure(fig, os.path.join(self.out, f"{scene}_images.png"))
@@ -225,6 +241,22 @@ class Report(SectionTables):
 STRIP_COLUMNS = 6
 #: log10 relative error range of every error map (one colour bar for all).
 ERROR_RANGE = (-3.0, 0.5)
+#: The signed maps' range: the largest of the renders' 99th percentiles of |difference|, at least this.
+SIGNED_FLOOR = 1e-3
+#: The signed maps' colour map: diverging, blue below the reference, red above, white at zero.
+SIGNED_CMAP = "RdBu_r"
+
+
+def signed_difference(mean: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Per pixel (mean - ref) / (|ref| + 0.01), channels averaged: where a strategy's mean over
+    its seeds over- (positive) or under-estimates (negative) the reference."""
+    ref = reference.astype(np.float64)
+    return (mean.astype(np.float64) - ref).mean(-1) / (np.abs(ref).mean(-1) + 1e-2)
+
+
+def signed_range(differences) -> float:
+    """One symmetric limit for every signed map: the largest 99th percentile of |difference|."""
+    return max([SIGNED_FLOOR] + [float(np.percentile(np.abs(d), 99)) for d in differences])
 
 
 def curves_figure(groups, label, styles=None):
@@ -254,10 +286,12 @@ def strip_title(name: str, spp: int, time_s: float, width: int = 24) -> str:
 
 
 def strip_figure(reference, variance, chosen, regions=None, columns: int = STRIP_COLUMNS):
-    """The reference and each (title, image) of ``chosen`` as thumbnails in a grid of at most
-    ``columns`` cells a row, each image above its map: log10 reference variance under the
-    reference, log10 relative error |x - ref| / (|ref| + 0.01) under the renders; below the
-    grid one colour bar for the variance and one shared by all error maps."""
+    """The reference and each (title, image, mean over seeds) of ``chosen`` as thumbnails in a
+    grid of at most ``columns`` cells a row, each image above its maps: log10 reference variance
+    under the reference; under each render log10 relative error |x - ref| / (|ref| + 0.01) and
+    below that the signed difference of its mean over the seeds (the image itself
+    when ``chosen`` gives no mean), (mean - ref) / (|ref| + 0.01), in a diverging colour map
+    with one symmetric range for all; below the grid one colour bar for each kind of map."""
     from matplotlib.patches import Rectangle
 
     plt = pyplot()
@@ -267,50 +301,69 @@ def strip_figure(reference, variance, chosen, regions=None, columns: int = STRIP
     height, width = reference.shape[:2]
     aspect = height / width
     cell_w = 2.2
-    fig = plt.figure(figsize=(cell_w * cols, rows * (2 * cell_w * aspect + 0.5) + 0.5), dpi=100)
+    fig = plt.figure(figsize=(max(cell_w * cols, 6.6), rows * (3 * cell_w * aspect + 0.5) + 0.7), dpi=100)
     # outer rows: one per row of cells (room for the titles between them), then the colour bars
-    outer = fig.add_gridspec(rows + 1, cols, height_ratios=[2 * aspect] * rows + [0.06], hspace=0.22,
+    outer = fig.add_gridspec(rows + 1, cols, height_ratios=[3 * aspect] * rows + [0.09], hspace=0.22,
                              wspace=0.06)
+    entries = [(c[0], c[1], c[2] if len(c) > 2 else c[1]) for c in chosen]
+    signed = [signed_difference(mean, reference) for _, _, mean in entries]
+    limit = signed_range(signed)
 
     def cell(i):
-        inner = outer[divmod(i, cols)].subgridspec(2, 1, hspace=0.03)
-        return fig.add_subplot(inner[0]), fig.add_subplot(inner[1])
+        inner = outer[divmod(i, cols)].subgridspec(3, 1, hspace=0.03)
+        return fig.add_subplot(inner[0]), fig.add_subplot(inner[1]), inner[2]
 
-    top, bottom = cell(0)
+    top, bottom, _ = cell(0)
     top.imshow(images.srgb_preview(reference))
     top.set_title("reference", fontsize=8)
     for name, (x0, y0, x1, y1) in (regions or {}).items():
         top.add_patch(Rectangle((x0 - 0.5, y0 - 0.5), x1 - x0, y1 - y0, fill=False, color="cyan", lw=0.8))
     var_map = bottom.imshow(np.log10(np.maximum(variance.mean(-1), 1e-12)), cmap="viridis")
-    axes, err_map = [top, bottom], None
-    for i, (title, image) in enumerate(chosen, 1):
-        top, bottom = cell(i)
+    axes, err_map, signed_map = [top, bottom], None, None
+    for i, ((title, image, _), difference) in enumerate(zip(entries, signed), 1):
+        top, bottom, third = cell(i)
         top.imshow(images.srgb_preview(image))
         top.set_title(title, fontsize=8)
         rel_err = np.abs(image - reference).mean(-1) / (np.abs(reference).mean(-1) + 1e-2)
         err_map = bottom.imshow(np.log10(np.maximum(rel_err, 1e-4)), cmap="magma", vmin=ERROR_RANGE[0],
                                 vmax=ERROR_RANGE[1])
-        axes += [top, bottom]
+        signed_axis = fig.add_subplot(third)
+        signed_map = signed_axis.imshow(difference, cmap=SIGNED_CMAP, vmin=-limit, vmax=limit)
+        axes += [top, bottom, signed_axis]
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])
-    _colour_bar(fig, var_map, outer[-1, 0], "log10 reference variance (map under the reference)")
+    bars = outer[-1, :].subgridspec(1, 3, wspace=0.1)
+    _colour_bar(fig, var_map, bars[0, 0], "log10 reference variance\n(map under the reference)")
     if err_map is not None:
-        _colour_bar(fig, err_map, outer[-1, 1:], "log10 relative error |x - ref| / (|ref| + 0.01), every render's map")
+        _colour_bar(fig, err_map, bars[0, 1], "log10 relative error (one seed)\n|x - ref| / (|ref| + 0.01)")
+        _colour_bar(fig, signed_map, bars[0, 2], "signed difference (seeds' mean)\n(mean - ref) / (|ref| + 0.01)",
+                    symmetric=True)
     return fig
 
 
-def _colour_bar(fig, mappable, spec, label: str) -> None:
+def _colour_bar(fig, mappable, spec, label: str, symmetric: bool = False) -> None:
     """A horizontal colour bar in ``spec``, inset from its ends so that the end labels of two
-    bars side by side do not touch."""
-    from matplotlib.ticker import MaxNLocator
+    bars side by side do not touch; a ``symmetric`` one is ticked at its ends and zero."""
+    from matplotlib.ticker import FixedLocator, MaxNLocator
 
     bar = fig.colorbar(mappable, cax=fig.add_subplot(spec.subgridspec(1, 12, wspace=0)[0, 1:11]),
                        orientation="horizontal")
-    bar.locator = MaxNLocator(6, steps=[1, 2, 5, 10])       # whole and half decades
+    if symmetric:
+        limit = mappable.get_clim()[1]
+        bar.locator = FixedLocator([-limit, 0.0, limit])
+        bar.formatter = _SignedFormatter()
+    else:
+        bar.locator = MaxNLocator(6, steps=[1, 2, 5, 10])       # whole and half decades
     bar.update_ticks()
     bar.set_label(label, fontsize=7)
     bar.ax.tick_params(labelsize=7)
+
+
+def _SignedFormatter():
+    from matplotlib.ticker import FuncFormatter
+
+    return FuncFormatter(lambda x, _: "0" if x == 0 else f"{x:+.2g}")
 
 
 def check_sweep_folder(folder: str) -> None:

@@ -15,11 +15,13 @@ from collections import defaultdict
 
 from .. import metrics
 from ..plugins.params import resolve as resolve_params
-from ..reporting import fmt, markdown_table
+from ..reporting import fmt, fmt_pm, fmt_pm_column, markdown_table
+from ..reporting.numbers import digits_for_error
 from ..reporting.figures import series_styles
-from .analysis import (MIN_TRUSTED_TIME_S, PointStats, bias_by_passes, budget_columns, curve, efficiency_of,
-                       equal_time_budgets, region_at_budgets,
-                       region_bias_variance, region_floor, region_stack_stats, timing_trusted, veach_bound)
+from .analysis import (MIN_TRUSTED_TIME_S, UNRELIABLE, PointStats, best_of, bias_by_passes, bias_verdict,
+                       budget_columns, curve, efficiency_of, equal_time_budgets, not_resolved, region_at_budgets,
+                       region_bias_variance, region_floor, region_stack_stats, seed_cost, seeds_needed, separated,
+                       separation_factor, timing_trusted, veach_bound)
 from .budget import BUDGET_RETRIES, budget_label, missed_budget, off_budget_text, tolerance_text
 from .config import PASS_PARAMETER
 from .spectrum import fit_slope, slope_cell, slope_note
@@ -52,11 +54,10 @@ def budget_cell(c: dict) -> str:
     lo, hi = c["x_best_range"]
     ratio = f"{fmt(c['x_best'], 3)}x" if lo == hi or math.isnan(lo) else \
         f"{fmt(c['x_best'], 3)}x, {fmt(lo, 3)} to {fmt(hi, 3)}"
-    se = "" if math.isnan(c["rel_mse_se"]) else f" +- {fmt(c['rel_mse_se'], 2)}"
     spread = f", times {fmt(c['time_spread'], 2)}x apart" if c["time_spread"] > TIME_SPREAD_NOTED else ""
     if c.get("off_budget"):
         ratio = f"**off the {c['budget_s']:g} s budget**: not compared"
-    return f"{fmt(c['rel_mse_corrected'])}{se} ({fmt(c['time_s'], 2)} s{spread}, {ratio})"
+    return f"{fmt_pm(c['rel_mse_corrected'], c['rel_mse_se'])} ({fmt(c['time_s'], 2)} s{spread}, {ratio})"
 
 
 def budget_rule() -> str:
@@ -98,13 +99,19 @@ class SectionTables:
         short = f"{MIN_TRUSTED_TIME_S * 1000:g} ms"
         header = ["rank", "strategy", "spp", "time s", "MSE", "corrected MSE", "relMSE (+- seed std)", "efficiency",
                   "slope log MSE / log t", "FLIP", "CIEDE2000", "rays / sample (ext, shadow; others)"]
+        errors = [getattr(p, "efficiency_se", math.nan) for _, _, p, _ in rows]     # (NaN: not measured)
+        efficiencies = fmt_pm_column([p.efficiency for _, _, p, _ in rows], errors)
         body = [[rank if ranked else "not ranked", label(key), p.spp,
                  fmt(p.time_s) + ("" if timing_trusted(p) else f" (< {short})") +
                  (f" (**{off_budget_text(p)}**)" if missed_budget(p) else ""), fmt(p.mse), fmt(p.mse_corrected),
-                 f"{fmt(p.rel_mse)} +- {fmt(p.rel_mse_std, 2)}", fmt(p.efficiency), slope_cell(s), fmt(p.flip),
+                 f"{fmt(p.rel_mse)} +- {fmt(p.rel_mse_std, 2)}", efficiency, slope_cell(s), fmt(p.flip),
                  fmt(p.ciede2000),
                  rays_cell(p.rays_per_sample)]
-                for rank, ((ranked, _), key, p, s) in enumerate(rows, 1)]
+                for rank, (((ranked, _), key, p, s), efficiency) in enumerate(zip(rows, efficiencies), 1)]
+        ranked = [(key, p) for (ok, _), key, p, _ in rows if ok]
+        best = best_of({label(key): (1.0 / p.efficiency, getattr(p, "efficiency_se", math.nan) / p.efficiency ** 2)
+                        for key, p in ranked},
+                       min((p.seeds for _, p in ranked), default=0))
         caption = (f"Each strategy's longest point (median wall time of one render). Renders shorter than "
                    f"{short} are timing noise (launch overhead and scheduler jitter): such a point is not "
                    f"ranked and is listed last, and the slope is fitted only over points of at least {short}.")
@@ -121,7 +128,11 @@ class SectionTables:
         if off:
             caption += (f" **Off budget:** {', '.join(off)} (median time outside {tolerance_text()} of its time "
                         f"budget): ranked by the time it took, not as a render at its budget.")
+        verdict = [] if len(ranked) < 2 else [
+            "", f"**Most efficient:** {best.text()} (efficiency +- its standard error over the seeds; the cost "
+                f"ratio's interval at Student's t over the seeds)."]
         return ["", "### Efficiency (largest sample count), ranked", "", caption, "", *markdown_table(header, body),
+                *verdict,
                 *slope_note([(label(key), fit) for _, key, _, fit in rows], "slope column"),
                 *self.progressive_note(groups, label)]
 
@@ -145,7 +156,9 @@ class SectionTables:
 
     def equal_time_table(self, groups, label) -> list[str]:
         """With time budgets, each strategy's point at each budget (``budget_table``); else each
-        curve interpolated (log-log) at times every curve covers."""
+        curve interpolated (log-log) at times every curve covers. One strategy: nothing to compare."""
+        if len(groups) < 2:
+            return []
         columns = budget_columns([p for points in groups.values() for p in points])
         if columns:
             return self.budget_table(groups, label, columns)
@@ -183,44 +196,100 @@ class SectionTables:
     def bias_table(self, stats) -> list[str]:
         header = ["point", "seeds", "variance", "bias^2 (+- se)", "relative variance", "relative bias^2 (+- se)",
                   "relMSE floor-corrected"]
-        body = [[self.shown(s.scene, s.strategy, s.point), s.seeds, fmt(s.variance), _bias_cell(s.bias2, s.bias2_se), fmt(s.rel_variance),
-                 _bias_cell(s.rel_bias2, s.rel_bias2_se), fmt(s.rel_mse_corrected)] for s in stats]
+        body = [[self.shown(s.scene, s.strategy, s.point), s.seeds, fmt(s.variance),
+                 _bias_cell(s.bias2, s.bias2_se, s.seeds), fmt(s.rel_variance),
+                 _bias_cell(s.rel_bias2, s.rel_bias2_se, s.seeds), fmt(s.rel_mse_corrected)] for s in stats]
         return ["", "### Bias and variance per point", "",
                 "Relative: the same in relMSE's units (pixels weighted by 1 / (ref^2 + 0.01)). bias^2 is an "
                 "estimate (the seed mean's squared error minus its expected noise), so for an unbiased "
-                "estimator it scatters around zero and is negative about as often as positive; a value "
-                "within two standard errors of zero is marked \"within noise\": no bias is resolved there.", "",
+                "estimator it scatters around zero and is negative about as often as positive. Its standard "
+                "error is taken over blocks of pixels (neighbouring pixels of a blurring estimator are not "
+                "independent). Marked \"biased\" more than two standard errors above zero; more than two below "
+                f"zero, where no bias^2 can be, \"{UNRELIABLE}\": the seeds' variance estimate is off, not "
+                "the bias absent; otherwise \"not resolved with N seeds (needs about M)\", M the seeds at "
+                "which an estimate of this size would be two standard errors from zero (an unbiased "
+                "estimator's keeps shrinking, so no number of seeds resolves it).", "",
                 *markdown_table(header, body)]
 
+    def mean_table(self, groups, label) -> list[str]:
+        """Per strategy (its longest point) the image mean over the reference's, with its 95%
+        interval over the seeds: the quickest bias check, 1 within the interval for an unbiased
+        strategy."""
+        body = []
+        for key, points in groups.items():
+            p = max(points, key=lambda q: q.time_s)
+            half = separation_factor(p.seeds) * p.mean_ratio_se
+            gap = abs(p.mean_ratio - 1.0)
+            if separated(gap, p.mean_ratio_se, p.seeds):
+                verdict = f"biased: {100 * (p.mean_ratio - 1):+.2g}%"
+            else:
+                verdict = not_resolved(p.seeds, seeds_needed(p.seeds, gap, p.mean_ratio_se))
+            body.append([label(key), p.spp, fmt(p.time_s), p.seeds, _interval(p.mean_ratio, half), verdict])
+        if not body:
+            return []
+        return ["", "### Image mean over the reference's", "",
+                "Each strategy's longest point: the mean over its seeds of the image's mean over the "
+                "reference's image mean, with its 95% interval (Student's t over the seeds, the reference's "
+                "own noise included). Off 1 by more than the interval: biased (a bias that cancels over the "
+                "image does not show here; the bias table does).", "",
+                *markdown_table(["strategy", "spp", "time s", "seeds", "mean / reference mean (95% interval)",
+                                 "verdict"], body)]
+
     def region_tables(self, scene, groups, label) -> list[str]:
+        """Per region each strategy's relMSE and efficiency at its longest point, and the most
+        efficient strategy per region. Efficiency and verdict come from the estimate of the
+        region tables at each budget (``region_at_budgets``): the cost, the mean over seeds of
+        (relMSE - the region's relMSE floor) x that seed's time; with time budgets the verdict is
+        that of the largest budget, otherwise of the longest points."""
         names = sorted({n for points in groups.values() for p in points for n in p.regions})
         if not names:
             return []
         ref = self.references[scene]
         rects = self._regions(scene, ref.image.shape[1], ref.image.shape[0])
-        floors = {n: float(metrics.region(ref.variance, rects[n]).mean()) if n in rects else 0.0 for n in names}
-        header = ["strategy"] + [f"{n} {what}" for n in names for what in ("relMSE", "efficiency", "1/(relMSE x t)")]
-        body, best = [], {}
+        floors = {n: region_floor(ref, rects[n]) for n in names if n in rects}
+        rel_floors = {n: floors[n]["rel_mse"] if n in floors else 0.0 for n in names}
+        header = ["strategy"] + [f"{n} {what}" for n in names for what in ("relMSE", "efficiency")]
+        columns, costs, seeds = defaultdict(list), defaultdict(dict), defaultdict(list)
         for key, points in groups.items():
             top = max(points, key=lambda p: p.time_s)
-            cells = []
             for n in names:
                 r = top.regions[n]
-                eff = efficiency_of(r["mse_seeds"], top.times, floors[n])
-                best.setdefault(n, []).append((eff, label(key)))
-                rel_eff = efficiency_of(r["rel_mse_seeds"], top.times)
-                cells += [fmt(r["rel_mse"]), fmt(eff), fmt(rel_eff)]
-            body.append([label(key), *cells])
-        md = ["", "### Regions of interest (largest sample count): relMSE and efficiency "
-                  "(efficiency from the region MSE minus the region's reference floor; the relative "
-                  "version weighs dim and bright pixels alike)", "", *markdown_table(header, body)]
+                cost, cost_se = seed_cost(r["rel_mse_seeds"], top.times, rel_floors[n])
+                costs[n][label(key)] = (cost, cost_se)
+                seeds[n].append(top.seeds)
+                columns[(n, "relMSE")].append((r["rel_mse"], r.get("rel_mse_se", math.nan)))
+                columns[(n, "efficiency")].append((1.0 / cost, cost_se / cost ** 2))
+        cells = {k: fmt_pm_column([v for v, _ in c], [e for _, e in c]) for k, c in columns.items()}
+        body = [[label(key), *(cells[(n, what)][i] for n in names for what in ("relMSE", "efficiency"))]
+                for i, key in enumerate(groups)]
+        md = ["", "### Regions of interest (largest sample count): relMSE and efficiency", "",
+              "Efficiency: 1 / cost, the cost the mean over seeds of (region relMSE - the region's reference "
+              "floor) x that seed's time, as in the region tables at each budget; +- one standard error over "
+              "the seeds.", "", *markdown_table(header, body)]
         md += ["", "Reference noise floor per region (what a perfect render would measure there): " + "; ".join(
             f"{n}: relMSE {fmt(f['rel_mse'])}, MSE {fmt(f['mse'])}, relative standard error of the region "
-            f"mean {fmt(100 * f['mean_rel_se'], 2)}%" for n, f in
-            ((n, region_floor(ref, rects[n])) for n in names if n in rects)) + "."]
-        md += ["", "Most efficient per region: " + "; ".join(
-            f"{n}: {max((e, k) for e, k in v if not math.isnan(e))[1]}" for n, v in best.items()
-            if any(not math.isnan(e) for e, _ in v)) + "."]
+            f"mean {fmt(100 * f['mean_rel_se'], 2)}%" for n, f in floors.items()) + "."]
+        if len(groups) < 2:
+            return md
+        points = [p for group in groups.values() for p in group]
+        budgets = sorted({p.budget_s for p in points if p.budget_s is not None})
+        verdicts = []
+        for n in names:
+            if budgets:
+                table = region_at_budgets(points, lambda p: label((p.strategy, p.sampler)), n, rel_floors[n])
+                budget, cells_at = max(table.items()) if table else (None, {})
+                best = best_of({k: (c["cost"], c["cost_se"]) for k, c in cells_at.items() if not c["off_budget"]},
+                               min((c["seeds"] for c in cells_at.values()), default=0))
+                where = f"{n} at {budget:g} s" if budget is not None else n
+            else:
+                best, where = best_of(costs[n], min(seeds[n])), n
+            if best.winner is not None:
+                verdicts.append(f"{where}: {best.text()}")
+        if verdicts:
+            md += ["", "Most efficient per region (least cost; " + (
+                "at the largest time budget, as in the region's table at each budget" if budgets else
+                "each strategy's longest point") + "; the cost ratio's interval at Student's t over the seeds): "
+                   + "; ".join(verdicts) + "."]
         return md
 
     def region_budget_tables(self, scene, stats, label) -> list[str]:
@@ -237,7 +306,9 @@ class SectionTables:
             names = sorted({n for cells in table.values() for n in cells})
             columns = budget_columns(stats)
             body = [[budget_label(budget, columns[budget]["low"], columns[budget]["high"]),
-                     *(budget_cell(c) if (c := cells.get(n)) else "n/a" for n in names)]
+                     *(budget_cell(c) if (c := cells.get(n)) else "n/a" for n in names),
+                     best_of({k: (c["cost"], c["cost_se"]) for k, c in cells.items() if not c["off_budget"]},
+                             min(c["seeds"] for c in cells.values())).text()]
                     for budget, cells in table.items()]
             md += ["", f"### Region `{name}` at each time budget", "",
                    f"Cells: relMSE minus the region's reference floor ({fmt(floor['rel_mse'])}) +- one "
@@ -247,8 +318,9 @@ class SectionTables:
                    f"the equal-time relMSE ratio to the best, with its range at one standard error of both "
                    f"(a ratio whose range includes a target has not shown it either way). Rows: the budget and "
                    f"the range of its points' median times; a point off its budget (median time outside "
-                   f"{tolerance_text()} of it) is marked and not compared.", "",
-                   *markdown_table(["budget", *names], body)]
+                   f"{tolerance_text()} of it) is marked and not compared. Most efficient: the least cost, "
+                   f"named only where the next one's cost ratio lies outside Student's t standard errors over the "
+                   f"seeds.", "", *markdown_table(["budget", *names, "most efficient"], body)]
             md += self._region_bias_table(name, rect, ref, stats, label)
         return md
 
@@ -284,16 +356,15 @@ class SectionTables:
         for p in stats:
             if p.budget_s is not None and len(p.images) >= 2:
                 cells.setdefault(p.budget_s, {})[label((p.strategy, p.sampler))] = \
-                    region_bias_variance(p, self.folder, ref, rect)
+                    (*region_bias_variance(p, self.folder, ref, rect), p.seeds)
         if not cells:
             return []
         names = sorted({n for row in cells.values() for n in row})
-        body = [[f"{budget:g} s", *(f"{fmt(c[0])} / {_bias_cell(c[1], c[2])}" if (c := row.get(n)) else "n/a"
+        body = [[f"{budget:g} s", *(f"{fmt(c[0])} / {_bias_cell(c[1], c[2], c[3])}" if (c := row.get(n)) else "n/a"
                                     for n in names)] for budget, row in sorted(cells.items())]
         return ["", f"Region `{name}`: relative variance / bias^2 +- its standard error (relMSE's units; "
                     f"with the floor they add up to the region's relMSE; bias^2 is an estimate, near zero "
-                    f"or below for an unbiased strategy, \"within noise\" within two standard errors of "
-                    f"zero).", "", *markdown_table(["budget", *names], body)]
+                    f"or below for an unbiased strategy; its verdict as in the bias table).", "", *markdown_table(["budget", *names], body)]
 
     def passes_section(self, scene, groups, label) -> list[str]:
         """Bias^2 and variance against passes for the biased, consistent strategies (lab_photon's
@@ -318,12 +389,13 @@ class SectionTables:
             curves[label(key)] = result
             header = [unit, "seeds", "time s", "relMSE", "variance", "bias^2 (+- se)", "resolved", "bias^2 / relMSE"]
             body = [[r["passes"], r["seeds"], fmt(r["time_s"]), fmt(r["rel_mse"]), fmt(r["variance"]),
-                     f"{fmt(r['bias2'])} +- {fmt(r['bias2_se'], 2)}", "yes" if r["resolved"] else "no",
+                     fmt_pm(r["bias2"], r["bias2_se"]), "yes" if r["resolved"] else r["verdict"],
                      fmt(r["bias2"] / r["rel_mse"] if r["rel_mse"] > 0 else math.nan, 2)] for r in result["rows"]]
             md += ["", f"### {label(key)}: bias^2 and variance against {unit}", "",
                    f"In relMSE's units (pixels weighted by 1 / (ref^2 + 0.01), so the light's edge pixels do "
                    f"not swamp the rest): relMSE = bias^2 + variance + reference floor ({fmt(rel_floor)}); "
-                   f"bias^2 +- one standard error, resolved when more than two above zero. Log-log slope "
+                   f"bias^2 +- one standard error (over blocks of pixels), resolved when more than two above "
+                   f"zero, \"{UNRELIABLE}\" when more than two below. Log-log slope "
                    f"of the resolved bias^2 against {unit}: {slope_cell(fit)}.", "",
                    *markdown_table(header, body),
                    *slope_note([(label(key), fit)], "above", "theory for progressive photon mapping (alpha 2/3): "
@@ -403,9 +475,8 @@ class SectionTables:
                                         "Var balance", "Var other + slack", "standard error", "verdict"], rows)]
         for line in unmatched:
             md += ["", f"Not compared: {line}."]
-        if not rows and not unmatched:
-            md += ["", "Nothing to compare: no other lab_mis weighting shares a sampler and emitter_samples "
-                       "with a balance one."]
+        if not rows and not unmatched:      # (one lab_mis weighting alone: nothing to say)
+            return []
         md.append("")
         md.append("Variances are sample variances over the seeds (jackknife standard errors); "
                   "'within noise' means the excess is under two standard errors. The bound is exact for "
@@ -468,7 +539,17 @@ def _params_text(params: dict | None) -> str:
     return ", ".join(f"{k} = {v}" for k, v in sorted(params.items())) or "(defaults)"
 
 
-def _bias_cell(bias2: float, se: float) -> str:
-    """A bias^2 estimate with its standard error, marked when it is within two of them of zero."""
-    within = not math.isnan(bias2) and not math.isnan(se) and abs(bias2) <= 2 * se
-    return f"{fmt(bias2)} +- {fmt(se, 2)}" + (" (within noise)" if within else "")
+def _bias_cell(bias2: float, se: float, seeds: int) -> str:
+    """A bias^2 estimate with its standard error and its verdict (``analysis.bias_verdict``)."""
+    if math.isnan(bias2):
+        return fmt(bias2)
+    return f"{fmt_pm(bias2, se)} ({bias_verdict(bias2, se, seeds)[0]})"
+
+
+def _interval(value: float, half: float) -> str:
+    """"value (low to high)", all three with the digits ``value``'s error needs (the bare value
+    where there is no interval)."""
+    if not math.isfinite(half):
+        return fmt(value)
+    digits = digits_for_error(value, half / 2)
+    return f"{fmt(value, digits)} ({fmt(value - half, digits)} to {fmt(value + half, digits)})"
