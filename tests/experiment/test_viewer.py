@@ -359,6 +359,13 @@ def test_split_view_shows_a_left_of_the_divider_and_b_right(biased):
         assert is_a[:xd3][far[:xd3]].all() and is_b[xd3:][far[xd3:]].all()
         page.viewer().locator(".vw-side-a").select_option("biased")   # the lists pick the sides too
         assert page.text(".vw-split-note") == "left of the divider: A biased; right: B good"
+        page.press("1")                                 # the reference is no side
+        assert page.text(".vw-split-note").startswith("the split view compares two strategies")
+        assert page.text(".vw-labels .vw-on") == "2 biased"
+        page.press("ArrowRight")                        # A steps onto B: the sides swap
+        assert page.text(".vw-split-note") == "left of the divider: A good; right: B biased"
+        page.press("ArrowRight")                        # past the reference, back to biased
+        assert page.text(".vw-split-note") == "left of the divider: A biased; right: B good"
         page.hover(fx=0.1)
         assert page.text(".vw-status >> nth=1").startswith("A biased, pixel")
         page.press("s")
