@@ -42,8 +42,11 @@ def _region_errors(image, reference) -> dict:
     return out
 
 
-def write_sweep(folder, seeds=SEEDS, strategies=STRATEGIES, budgets=BUDGETS, spps=SPPS) -> None:
+def write_sweep(folder, seeds=SEEDS, strategies=STRATEGIES, budgets=BUDGETS, spps=SPPS, bias=None) -> None:
+    """``bias``: {strategy: HEIGHT x WIDTH relative bias}, that strategy's images are the
+    reference times (1 + bias) plus the noise (a known over- and under-estimation)."""
     rng = np.random.default_rng(11)
+    bias = bias or {}
     store = ResultStore(str(folder))
     store.append({"kind": "meta", "config": "synthetic.toml", "name": "synthetic", "machine": {}})
     reference = reference_image()
@@ -61,7 +64,8 @@ def write_sweep(folder, seeds=SEEDS, strategies=STRATEGIES, budgets=BUDGETS, spp
             point = f"s/{name}/independent/{tag}"
             for seed in seeds:
                 sigma = noise / np.sqrt(spp) * (reference + 0.05)
-                image = (reference + rng.normal(0, 1, reference.shape) * sigma).astype(np.float32)
+                mean = reference * (1 + bias[name][..., None]) if name in bias else reference
+                image = (mean + rng.normal(0, 1, reference.shape) * sigma).astype(np.float32)
                 path = store.image_path(point, seed)
                 images.write_exr(path, image)
                 store.append({"kind": "run", "point": point, "scene": "s", "strategy": name,

@@ -222,3 +222,171 @@ def test_zoom_and_drag_keep_one_view_for_all_images(sweep):
         page.press("0")
         assert page.shot(canvas_only=True) == plain
         assert page.errors == []
+
+
+# -- the signed difference and the split view ---------------------------------------------------
+
+#: "biased" over-estimates by 30% left of the image's middle column and under-estimates by 30%
+#: right of it (little noise); "good" is unbiased.
+BIAS = np.where(np.arange(synth.WIDTH) < synth.WIDTH // 2, 0.3, -0.3)[None, :] * np.ones((synth.HEIGHT, 1))
+
+
+@pytest.fixture(scope="module")
+def biased(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("viewer_biased")
+    synth.write_sweep(folder, strategies={"biased": 0.1, "good": 0.3}, bias={"biased": BIAS})
+    build_report(str(folder))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def single(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("viewer_single")
+    synth.write_sweep(folder, strategies={"biased": 0.1}, bias={"biased": BIAS})
+    build_report(str(folder))
+    return folder
+
+
+def test_signed_difference_has_a_symmetric_range_and_costs_no_data(biased, sweep):
+    from mitsuba_lab.experiment.viewer import signed_difference
+
+    (data,) = page_data((biased / "report" / "index.html").read_text())
+    lo, hi = data["diff_range"]
+    assert lo == -hi and 0.2 < hi < 0.5                 # 30% bias, shrunk by sqrt(ref^2 + 0.01) where dim
+    assert data["colormaps"]["diff"][8] == [247, 246, 246]   # RdBu_r: white at zero
+    assert not any(k.endswith(":diff") for k in data["images"])   # computed in the browser
+    image, ref = synth.reference_image() * 1.3, synth.reference_image()
+    np.testing.assert_allclose(signed_difference(image, ref),
+                               np.mean(0.3 * ref / np.sqrt(ref.astype(np.float64) ** 2 + 0.01), axis=-1), rtol=1e-6)
+    (plain,) = page_data((sweep / "report" / "index.html").read_text())
+    assert set(plain["images"]) == {k for k in plain["images"] if not k.endswith(":diff")}
+
+
+def expected_diff_colour(data, entry, x, y):
+    """The colour the signed view gives image pixel (x, y) of ``entry``, from the page's data."""
+    from mitsuba_lab.experiment.viewer import signed_difference
+
+    shape = (synth.HEIGHT, synth.WIDTH, 3)
+    image = decode(data["images"][entry["rgb"]]).reshape(shape)
+    ref = decode(data["images"]["ref"]).reshape(shape)
+    value = signed_difference(image, ref)[y, x]
+    lo, hi = data["diff_range"]
+    stops = np.array(data["colormaps"]["diff"], dtype=float)
+    t = round(255 * min(max((value - lo) / (hi - lo), 0), 1)) / 255 * (len(stops) - 1)
+    k = min(int(t), len(stops) - 2)
+    return stops[k] * (1 - (t - k)) + stops[k + 1] * (t - k)
+
+
+def test_signed_difference_is_red_where_brighter_and_blue_where_darker(biased):
+    (data,) = page_data((biased / "report" / "index.html").read_text())
+    entry = data["sets"][data["start"]]["entries"][1]
+    assert entry["label"] == "biased"
+    left = [(x, y) for x in range(0, synth.WIDTH // 2 - 1, 3) for y in range(0, synth.HEIGHT, 3)]
+    right = [(x, y) for x in range(synth.WIDTH // 2 + 1, synth.WIDTH, 3) for y in range(0, synth.HEIGHT, 3)]
+    with open_page(biased / "report" / "index.html") as page:
+        page.press("2")
+        image = page.shot(canvas_only=True)
+        page.press("d")
+        assert page.viewer().locator(".vw-diff").is_checked() and not page.viewer().locator(".vw-err").is_checked()
+        assert "red brighter than the reference" in page.text(".vw-help")
+        # rows and columns away from the region outlines and their names
+        shown = page.canvas_rgb().astype(int)
+        for x, y in left:
+            r, g, b = shown[at(x, y)[1], at(x, y)[0]]
+            assert r > b + 60 and r > g + 60, (x, y, r, g, b)        # over-estimation: red
+        for x, y in right:
+            r, g, b = shown[at(x, y)[1], at(x, y)[0]]
+            assert b > r + 60 and b > g + 20, (x, y, r, g, b)        # under-estimation: blue
+        np.testing.assert_allclose(page.pixel(*at(10, 8)), expected_diff_colour(data, entry, 10, 8), atol=1)
+        np.testing.assert_allclose(page.pixel(*at(18, 8)), expected_diff_colour(data, entry, 18, 8), atol=1)
+        page.press("1")                                 # the reference minus itself: white throughout
+        assert page.pixel(*at(10, 8)) == page.pixel(*at(18, 8))
+        np.testing.assert_allclose(page.pixel(*at(10, 8)), (247, 246, 246), atol=1)
+        page.press("2")
+        page.hover(fx=(18.5 / synth.WIDTH), fy=(8.5 / synth.HEIGHT))
+        assert re.search(r"signed difference -0\.\d+", page.text(".vw-status >> nth=1"))
+        page.press("e")                                 # the |error| map beside it: no sign
+        assert page.viewer().locator(".vw-err").is_checked() and not page.viewer().locator(".vw-diff").is_checked()
+        error_map = page.shot(canvas_only=True)
+        page.press("e")
+        assert page.shot(canvas_only=True) == image and error_map != image
+        assert page.errors == []
+
+
+def test_split_view_shows_a_left_of_the_divider_and_b_right(biased):
+    with open_page(biased / "report" / "index.html") as page:
+        page.press("2")
+        single_a = page.canvas_rgb()
+        page.press("3")
+        single_b = page.canvas_rgb()
+        assert (single_a != single_b).any()
+        page.press("2")
+        split = page.viewer().locator(".vw-split-on")
+        assert split.is_enabled() and not split.is_checked()
+        page.press("s")
+        assert split.is_checked()
+        assert page.text(".vw-split-note") == "left of the divider: A biased; right: B good"
+        assert page.text(".vw-labels .vw-on") == "2 biased" and page.text(".vw-labels .vw-b") == "3 good"
+        assert page.viewer().get_by_role("button", name="1 reference").is_disabled()
+
+        def sides():
+            """Canvas columns that show A and that show B (the divider, its handle and the
+            side labels along the bottom left out)."""
+            shown = page.canvas_rgb()
+            height, width = shown.shape[:2]
+            xd = round(page.divider() * width)
+            rows = slice(0, height - 30)
+            is_a = (shown[rows] == single_a[rows]).all(axis=(0, 2))
+            is_b = (shown[rows] == single_b[rows]).all(axis=(0, 2))
+            far = np.abs(np.arange(width) - xd) > 8
+            return xd, width, is_a, is_b, far
+
+        xd, width, is_a, is_b, far = sides()
+        assert xd == width // 2
+        assert is_a[:xd][far[:xd]].all() and is_b[xd:][far[xd:]].all()
+        assert not is_b[:xd][far[:xd]].any() and not is_a[xd:][far[xd:]].any()
+
+        page.drag_divider(0.25)                         # the mouse moves the divider, the image stays
+        assert page.divider() == 0.25
+        xd2, width, is_a, is_b, far = sides()
+        assert xd2 == round(0.25 * width)
+        assert is_a[:xd2][far[:xd2]].all() and is_b[xd2:][far[xd2:]].all()
+        assert is_b[xd2 + 9:xd - 8].all()               # these columns changed sides
+        page.press("]")
+        assert page.divider() == 0.3
+        page.press("b")                                 # two strategies: b swaps the sides
+        assert page.text(".vw-split-note") == "left of the divider: A good; right: B biased"
+        single_a, single_b = single_b, single_a
+        xd3, width, is_a, is_b, far = sides()
+        assert is_a[:xd3][far[:xd3]].all() and is_b[xd3:][far[xd3:]].all()
+        page.viewer().locator(".vw-side-a").select_option("biased")   # the lists pick the sides too
+        assert page.text(".vw-split-note") == "left of the divider: A biased; right: B good"
+        page.press("1")                                 # the reference is no side
+        assert page.text(".vw-split-note").startswith("the split view compares two strategies")
+        assert page.text(".vw-labels .vw-on") == "2 biased"
+        page.press("ArrowRight")                        # A steps onto B: the sides swap
+        assert page.text(".vw-split-note") == "left of the divider: A good; right: B biased"
+        page.press("ArrowRight")                        # past the reference, back to biased
+        assert page.text(".vw-split-note") == "left of the divider: A biased; right: B good"
+        page.hover(fx=0.1)
+        assert page.text(".vw-status >> nth=1").startswith("A biased, pixel")
+        page.press("s")
+        assert not split.is_checked() and (page.canvas_rgb() == single_b).all()   # A (biased) alone
+        assert page.errors == []
+
+
+def test_one_strategy_signed_view_works_and_split_is_disabled(single):
+    with open_page(single / "report" / "index.html") as page:
+        split = page.viewer().locator(".vw-split-on")
+        assert split.is_disabled() and not split.is_checked()
+        assert page.text(".vw-split-note") == "the split view needs two strategies; this comparison has one"
+        page.press("s")
+        assert not split.is_checked()
+        page.press("2")
+        page.press("d")
+        shown = page.canvas_rgb().astype(int)
+        r, g, b = shown[at(10, 8)[1], at(10, 8)[0]]
+        assert r > b + 60
+        r, g, b = shown[at(18, 8)[1], at(18, 8)[0]]
+        assert b > r + 60
+        assert page.errors == [] and page.broken_images() == 0

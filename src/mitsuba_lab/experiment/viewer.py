@@ -7,6 +7,13 @@ and the reference, H x W log10 values for the two per-pixel maps (relative error
 variance across seeds; log10 first, so values far below half's smallest normal survive).
 ``viewer.js`` (a package file, inlined into the page once) decodes them, applies the
 exposure and the sRGB curve, and draws crops of the scene's regions beside the image.
+
+The signed difference map (``signed_difference``: over- and under-estimation) costs no data:
+the browser computes it from the render's and the reference's half floats, which the page
+holds anyway; only its symmetric colour range travels (``diff_range``). Half rounding of the
+two images limits it to relative differences above about 1e-3, far below the range any
+single render's noise sets. Stored as a third map it would add a fifth to a scene's data.
+The split view (two strategies either side of a divider) is drawn from the same data.
 """
 from __future__ import annotations
 
@@ -33,11 +40,16 @@ STYLE = """.viewer { border: 1px solid #bbb; padding: 0.6em; margin: 0.5em 0 1.5
 .vw-row button { font: inherit; font-size: 0.85em; padding: 0.15em 0.5em; border: 1px solid #999;
   background: #f4f4f4; border-radius: 3px; cursor: pointer; }
 .vw-row button.vw-on { background: #2a7ae2; color: #fff; border-color: #2a7ae2; }
+.vw-row button.vw-b { background: #e2762a; color: #fff; border-color: #e2762a; }
+.vw-row button:disabled { opacity: 0.45; cursor: default; }
+.vw-split select { font: inherit; font-size: 0.85em; }
+.vw-split input[type=range] { width: 120px; }
 .vw-body { display: flex; flex-wrap: wrap; gap: 1em; align-items: flex-start; }
 .vw-canvas { background: #222; cursor: grab; image-rendering: pixelated; }
 .vw-crops { border-collapse: collapse; font-size: 0.75em; }
 .vw-crops td, .vw-crops th { border: none; padding: 0.15em 0.3em; text-align: center; vertical-align: top; }
 .vw-crops td.vw-on { outline: 2px solid #2a7ae2; }
+.vw-crops td.vw-b { outline: 2px solid #e2762a; }
 .vw-crops canvas { image-rendering: pixelated; display: block; margin: 0 auto; border: 1px solid #888; }
 .vw-status { font-size: 0.8em; color: #333; min-height: 1.3em; }
 .vw-legend { display: inline-block; width: 160px; height: 10px; vertical-align: middle; border: 1px solid #999; }
@@ -53,6 +65,14 @@ def encode_half(values: np.ndarray) -> str:
 
 def log_map(values: np.ndarray) -> np.ndarray:
     return np.log10(np.maximum(values, 10.0 ** LOG_FLOOR))
+
+
+def signed_difference(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Per-pixel signed relative difference mean_c (x - ref) / sqrt(ref^2 + 0.01): positive
+    where the render is brighter than the reference, negative where darker. Its magnitude is
+    on the scale of ``relative_error``; viewer.js computes the same from the page's data."""
+    ref = reference.astype(np.float64)
+    return np.mean((image.astype(np.float64) - ref) / np.sqrt(ref ** 2 + 1e-2), axis=-1)
 
 
 def colormap_stops(name: str, count: int = 17) -> list[list[int]]:
@@ -86,6 +106,16 @@ def _range(maps: list[np.ndarray], low: float = 1.0, high: float = 99.5) -> list
     return [round(lo, 2), round(max(hi, lo + 0.1), 2)]
 
 
+def _symmetric_range(maps: list[np.ndarray], high: float = 99.5) -> list[float]:
+    """[-R, R] for a scene's signed maps, R the ``high`` percentile of |value| over all of
+    them (2 significant digits): zero sits in the middle of the diverging colour map."""
+    values = np.abs(np.concatenate([m.ravel() for m in maps])) if maps else np.zeros(1)
+    values = values[np.isfinite(values)]
+    limit = float(np.percentile(values, high)) if values.size else 0.0
+    limit = float(f"{max(limit, 1e-3):.2g}")
+    return [-limit, limit]
+
+
 def scene_data(folder: str, scene: str, stats: list, reference, regions: dict) -> dict | None:
     """The JSON-ready data of one scene's viewer (None without any comparison set).
 
@@ -99,7 +129,7 @@ def scene_data(folder: str, scene: str, stats: list, reference, regions: dict) -
     height, width = ref.shape[:2]
     ref_var = np.mean(reference.variance / (ref.astype(np.float64) ** 2 + 1e-2), axis=-1)
     blobs = {"ref": encode_half(ref)}
-    err_maps, var_maps = [np.sqrt(ref_var)], [ref_var]
+    err_maps, var_maps, diff_maps = [np.sqrt(ref_var)], [ref_var], []
     ref_entry = {"label": "reference", "key": "reference", "rgb": "ref", "err": "ref:err", "var": "ref:var",
                  "detail": f"reference: {reference.meta.get('integrator')}, {reference.meta.get('spp')} spp in "
                            f"{reference.meta.get('chunks')} chunks; error map: its own standard error, "
@@ -116,6 +146,7 @@ def scene_data(folder: str, scene: str, stats: list, reference, regions: dict) -
                 err, var = relative_error(image, ref), relative_variance(folder, p, ref)
                 err_maps.append(err)
                 var_maps.append(var)
+                diff_maps.append(signed_difference(image, ref))
                 blobs[key] = encode_half(image)
                 blobs[key + ":err"] = encode_half(log_map(err))
                 blobs[key + ":var"] = encode_half(log_map(var))
@@ -137,7 +168,9 @@ def scene_data(folder: str, scene: str, stats: list, reference, regions: dict) -
             "regions": {n: list(map(int, r)) for n, r in regions.items()}, "sets": out_sets, "images": blobs,
             "crop_exposure": {n: crop_exposure(ref, r) for n, r in regions.items()},
             "err_range": _range([log_map(m) for m in err_maps]), "var_range": _range([log_map(m) for m in var_maps]),
-            "colormaps": {"err": colormap_stops("magma"), "var": colormap_stops("viridis")}}
+            "diff_range": _symmetric_range(diff_maps),
+            "colormaps": {"err": colormap_stops("magma"), "var": colormap_stops("viridis"),
+                          "diff": colormap_stops("RdBu_r")}}
 
 
 def _fmt(value) -> str:

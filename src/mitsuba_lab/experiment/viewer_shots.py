@@ -2,15 +2,20 @@
 Debian's Chromium through ``executable_path`` (no browser download).
 
 ``ViewerPage`` opens a report, collects page errors and failed console messages, and offers
-what the tests need: keys, wheel zoom, drag, the exposure slider, one canvas pixel, element
-screenshots. ``python -m mitsuba_lab.experiment.viewer_shots OUTDIR/report/index.html DIR
-[N]`` writes the four screenshots of viewer N (default 0) shown in notes and issues:
-initial, after key 2, zoomed, error map on.
+what the tests need: keys, wheel zoom, drag, the exposure slider, the split view's divider,
+one canvas pixel or the whole canvas, element screenshots. ``python -m
+mitsuba_lab.experiment.viewer_shots OUTDIR/report/index.html DIR [N]`` writes the screenshots
+of viewer N (default 0) shown in notes and issues: initial, after key 2, zoomed, error map on,
+signed difference on, split view, split view of the signed difference with the divider moved
+(the last two only where the comparison holds two strategies).
 """
 from __future__ import annotations
 
+import base64
 import os
 import sys
+
+import numpy as np
 
 from .browser import chromium
 
@@ -62,6 +67,19 @@ class ViewerPage:
             "([n, x, y]) => Array.from(document.querySelectorAll('.vw-canvas')[n].getContext('2d')"
             ".getImageData(x, y, 1, 1).data).slice(0, 3)", [n, x, y]))
 
+    def canvas_rgb(self, n: int = 0) -> np.ndarray:
+        """The main canvas as a height x width x 3 uint8 array (what it holds, not a screenshot)."""
+        b64, width, height = self.page.evaluate(
+            """n => { const c = document.querySelectorAll('.vw-canvas')[n];
+                      const px = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+                      let s = ''; for (let i = 0; i < px.length; i++) s += String.fromCharCode(px[i]);
+                      return [btoa(s), c.width, c.height]; }""", n)
+        return np.frombuffer(base64.b64decode(b64), np.uint8).reshape(height, width, 4)[..., :3]
+
+    def divider(self, n: int = 0) -> float:
+        """The split view's divider as a fraction of the image area's width (its slider)."""
+        return float(self.viewer(n).locator(".vw-divider").input_value()) / 100
+
     def text(self, selector: str, n: int = 0) -> str:
         return self.viewer(n).locator(selector).first.inner_text()
 
@@ -89,6 +107,15 @@ class ViewerPage:
         self.page.mouse.move(box["x"] + box["width"] / 2 + dx, box["y"] + box["height"] / 2 + dy, steps=4)
         self.page.mouse.up()
 
+    def drag_divider(self, fraction: float, n: int = 0) -> None:
+        """Drag the split view's divider with the mouse (grabbed at its handle, mid-height)
+        to ``fraction`` of the image area's width."""
+        self.hover(n, self.divider(n), 0.5)
+        self.page.mouse.down()
+        box = self.canvas(n).bounding_box()
+        self.page.mouse.move(box["x"] + fraction * box["width"], box["y"] + box["height"] / 2, steps=5)
+        self.page.mouse.up()
+
     def set_exposure(self, ev: float, n: int = 0) -> None:
         """Move the slider as a person would: a new value, then its input event."""
         self.viewer(n).locator(".vw-exposure").evaluate(
@@ -101,21 +128,37 @@ class ViewerPage:
 
 
 def take_shots(html_path: str, out_dir: str, n: int = 0) -> dict:
-    """The four screenshots of viewer n: initial, after key 2, zoomed in (4 wheel clicks at
-    the image centre), error map on (key e). Returns their paths, the page's errors and its
-    number of broken images."""
+    """The screenshots of viewer n: initial, after key 2, zoomed in (4 wheel clicks at the
+    image centre), error map on (key e), signed difference on (view reset, key d), split
+    view of the first two strategies (key s, image mode), and the split view's signed
+    difference with the divider dragged to a third. Returns their paths (the split views'
+    left out where the comparison holds one strategy), the page's errors and its number of
+    broken images."""
     os.makedirs(out_dir, exist_ok=True)
-    names = ("1_initial.png", "2_after_key_2.png", "3_zoomed.png", "4_error_map.png")
-    paths = [os.path.join(out_dir, name) for name in names]
+    paths = []
     with ViewerPage(html_path) as page:
+        def shot(name):
+            paths.append(os.path.join(out_dir, name))
+            page.shot(paths[-1], n)
+
         page.hover(n)
-        page.shot(paths[0], n)
+        shot("1_initial.png")
         page.press("2", n)
-        page.shot(paths[1], n)
+        shot("2_after_key_2.png")
         page.zoom(4, n)
-        page.shot(paths[2], n)
+        shot("3_zoomed.png")
         page.press("e", n)
-        page.shot(paths[3], n)
+        shot("4_error_map.png")
+        page.press("0", n)
+        page.press("d", n)
+        shot("5_signed_difference.png")
+        if page.viewer(n).locator(".vw-split-on").is_enabled():
+            page.press("d", n)
+            page.press("s", n)
+            shot("6_split.png")
+            page.press("d", n)
+            page.drag_divider(1 / 3, n)
+            shot("7_split_signed_difference.png")
         return {"shots": paths, "errors": list(page.errors), "broken_images": page.broken_images(),
                 "viewers": page.viewer_count()}
 
