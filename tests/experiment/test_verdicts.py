@@ -117,7 +117,7 @@ def test_the_region_verdict_is_the_region_tables_verdict(region_report):
     for region in synth.REGIONS:
         lines = md.splitlines()
         start = lines.index(f"### Region `{region}` at each time budget")
-        table = [row for row in lines[start:start + 8] if row.startswith(f"| {max(synth.BUDGETS):g} s |")]
+        table = [row for row in lines[start:start + 8] if row.startswith(f"| {max(synth.BUDGETS):g} s (")]
         row_verdict = table[0].strip("|").split("|")[-1].strip()
         assert f"{region} at {max(synth.BUDGETS):g} s: {row_verdict}" in line
         if case == "overlap":
