@@ -12,8 +12,8 @@ import pytest
 import synthetic_sweep as synth
 
 from mitsuba_lab import images
-from mitsuba_lab.experiment.analysis import (UNRELIABLE, best_of, bias_by_passes, bias_verdict, point_stats,
-                                             seeds_needed, separation_factor)
+from mitsuba_lab.experiment.analysis import bias_by_passes, point_stats
+from mitsuba_lab.experiment.verdicts import UNRELIABLE, best_of, bias_verdict, seeds_needed, separation_factor
 from mitsuba_lab.experiment.reference import Reference
 from mitsuba_lab.experiment.report import build_report
 from mitsuba_lab.experiment.report_sections import SectionTables
