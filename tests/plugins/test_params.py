@@ -256,7 +256,9 @@ def test_sampler_in_an_xml_scene_and_its_clone_keep_their_parameters(kind, extra
         assert type(twin) is type(sampler) and twin.settings() == expected
     image = np.array(mi.render(scene, spp=8, seed=1))
     assert np.isfinite(image).all() and image.mean() > 0
-    assert np.array_equal(image, np.array(mi.render(scene, spp=8, seed=1)))
+    # the same samples again; a pixel's samples add with float atomics across threads, whose order
+    # varies from run to run (~1e-7 relative seen under load)
+    np.testing.assert_allclose(image, np.array(mi.render(scene, spp=8, seed=1)), rtol=1e-5, atol=0)
 
 
 def test_sampler_xml_errors_name_the_parameter():
