@@ -284,5 +284,9 @@ def test_a_bidirectional_sweep_fills_the_rays_per_sample_column(tmp_path):
         assert row["rays_camera"] == pixels * row["spp"]
         assert row["rays_light"] > 0 and row["rays_sensor"] > 0 and row["rays_merge"] > 0
     summary = (tmp_path / "out" / "report" / "summary.md").read_text()
-    cell = next(line for line in summary.splitlines() if line.startswith("| 1 ")).split("|")[-2]
+    # (the efficiency table's row of strategy "mis": ranked "1", or "not ranked" when it rendered
+    # in under 50 ms, which depends on the machine)
+    lines = summary.splitlines()
+    table = lines[lines.index("### Efficiency (largest sample count), ranked"):]
+    cell = next(line for line in table if line.startswith("| ") and line.split("|")[2].strip() == "mis").split("|")[-2]
     assert "; connection " in cell and " light " in cell and " merge " in cell, cell
