@@ -106,3 +106,29 @@ def test_console_script():
     exe = os.path.join(os.path.dirname(sys.executable), "mitsuba-lab")
     proc = subprocess.run([exe, "plugins", "lab_zsobol"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and "width" in proc.stdout, proc.stderr
+
+
+def test_the_committed_plugin_reference_is_current():
+    """plugins/README.md is what `mitsuba-lab plugins --markdown` writes from the declarations
+    and docstrings: a parameter declared, renamed or re-documented without running it fails here."""
+    from mitsuba_lab.commands.plugin_reference import markdown_reference, reference_path
+
+    with open(reference_path(), encoding="utf-8") as handle:
+        committed = handle.read()
+    assert committed == markdown_reference(), "plugins/README.md is stale: run `mitsuba-lab plugins --markdown`"
+
+
+def test_the_reference_has_every_plugin_and_parameter_and_no_docstring_table():
+    from mitsuba_lab.commands.plugin_reference import markdown_reference
+
+    text = markdown_reference()
+    for name in params.lab_plugins():
+        section = text.split(f"\n## {name}\n", 1)[1].split("\n## ", 1)[0]
+        for p in params.declared(name):
+            assert f"| `{p.name}` | {command.type_name(p)} | `{command.show(p.default)}` |" in section, (name, p.name)
+    assert "=====" not in text and ":monosp:" not in text and ".. code-block" not in text
+
+
+def test_markdown_takes_no_plugin_name():
+    code, out, err = run(["plugins", "lab_mis", "--markdown"])
+    assert code == 2 and "give no NAME" in err and "\n" not in err.strip()

@@ -117,15 +117,15 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                          samples, so any value is unbiased; raise it where
                          light tracing carries the image (light seen through
                          glass). (Default: 1)
-    max_vertices  int    Most light-subpath vertices held at once (>= 1024; 88
-                         bytes each in RGB, 124 where a BSDF is anisotropic or
-                         has a normal or bump map). A render whose light subpaths need
+    max_vertices  int    Most light-subpath vertices held at once (>= 1024;
+                         ``vertices.vertex_bytes``: 100 bytes each, 164 where a
+                         BSDF is anisotropic or has a normal or bump map). A render whose light subpaths need
                          more is split into passes of fewer samples per pixel;
                          when even one sample per pixel does not fit, a pass
                          traces fewer light subpaths than camera subpaths and
                          camera sample i uses light subpath i mod N (still
                          unbiased; neighbouring passes share nothing).
-                         (Default: 2^21, 176-248 MiB)
+                         (Default: 2^21, 200-328 MiB)
     only_strategy string ``s,t``: the image of strategy (s, t) alone, with its
                          MIS weight (Veach's per-strategy images: over all (s, t)
                          the images sum to the full one). Empty: all strategies.

@@ -16,6 +16,8 @@ from ..plugins import params as declarations
 
 TYPE_NAMES = {int: "int", float: "float", bool: "bool", str: "string"}
 _MONOSP = re.compile(r"\s*\(:monosp:`[^`]*`\)\s*$")
+#: The generated plugin reference, in the plugins' folder.
+REFERENCE_NAME = "README.md"
 
 
 def add_arguments(parser) -> None:
@@ -24,10 +26,21 @@ def add_arguments(parser) -> None:
                           "values and meaning. Needs no Mitsuba variant.")
     parser.add_argument("name", nargs="?", metavar="NAME",
                         help="a lab plugin, e.g. lab_mis (default: list them all)")
+    parser.add_argument("--markdown", action="store_true",
+                        help=f"write the plugin reference ({REFERENCE_NAME} beside the plugins: every "
+                             f"plugin's description and parameter table) from the declarations and docstrings")
 
 
 def run(args, out) -> int:
-    if args.name is None:
+    if args.markdown:
+        from ..errors import LabError
+        from .plugin_reference import write_reference
+
+        if args.name is not None:
+            raise LabError("plugins --markdown writes the reference of every plugin: give no NAME")
+        path = write_reference()
+        print(f"wrote {os.path.relpath(path)} ({len(declarations.lab_plugins())} plugins)", file=out)
+    elif args.name is None:
         print(format_list(), file=out)
     else:
         print(format_plugin(args.name), file=out)
@@ -94,6 +107,13 @@ def lab_integrators() -> tuple[str, ...]:
 def summaries() -> dict[str, str]:
     """Plugin name -> first line of its class docstring (else its module docstring), read
     from the plugin sources named by ``plugins.PLUGIN_MODULES`` without importing them."""
+    return {name: _MONOSP.sub("", doc.strip().splitlines()[0]).rstrip(".") if doc.strip() else ""
+            for name, doc in docstrings().items()}
+
+
+def docstrings() -> dict[str, str]:
+    """Plugin name -> its class docstring (else its module docstring), read from the plugin
+    sources named by ``plugins.PLUGIN_MODULES`` without importing them."""
     from .. import plugins as package
 
     root = package.__path__[0]
@@ -110,7 +130,7 @@ def summaries() -> dict[str, str]:
 
 
 def _registered(tree: ast.Module) -> dict[str, str]:
-    """``mi.register_*("name", lambda props: Class(props))`` -> {name: Class's summary}."""
+    """``mi.register_*("name", lambda props: Class(props))`` -> {name: Class's docstring}."""
     classes = {node.name: ast.get_docstring(node) or "" for node in tree.body
                if isinstance(node, ast.ClassDef)}
     module_doc = (ast.get_docstring(tree) or "").split(":", 1)[-1].strip()
@@ -126,8 +146,7 @@ def _registered(tree: ast.Module) -> dict[str, str]:
             body = call.args[1].body
             if isinstance(body, ast.Call) and isinstance(body.func, ast.Name):
                 doc = classes.get(body.func.id, "")
-        first = (doc or module_doc).strip().splitlines()[0] if (doc or module_doc).strip() else ""
-        found[call.args[0].value] = _MONOSP.sub("", first).rstrip(".")
+        found[call.args[0].value] = doc or module_doc
     return found
 
 
