@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from mitsuba_lab.commands import plugins as command
+from mitsuba_lab.commands import plugin_text as command
 from mitsuba_lab.plugins import params
 
 from test_cli import ROOT, run

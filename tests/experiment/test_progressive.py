@@ -12,10 +12,10 @@ from mitsuba_lab.experiment.run import SweepRunner
 from mitsuba_lab.experiment.store import ResultStore
 from mitsuba_lab.render import RenderStats
 
+from agreement import Z_BOUND
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CORNELL = os.path.join(ROOT, "scenes", "cornell_box.xml")
-#: |z| above this fails an agreement check (two comparisons per integrator: P(|z| > 4) ~ 6e-5 each).
-Z_BOUND = 4.0
 
 
 def test_ladder_passes_double_and_hit_every_ladder_value():

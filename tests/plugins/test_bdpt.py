@@ -25,12 +25,11 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from agreement import pixel_problem, renders, z_scores
+from agreement import Z_BOUND, pixel_problem, renders, z_scores
 from backend import HOME, variant
 from mitsuba_lab.scene import load_scene, make_integrator
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-Z_BOUND = 5.0
 RES = 24
 SEEDS_LAB = range(16)
 SEEDS_REF = range(1000, 1016)

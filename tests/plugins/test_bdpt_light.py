@@ -12,9 +12,8 @@ import pytest
 
 from mitsuba_lab.plugins.integrators.bdpt.light_subpath import render_light_tracing
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights
-from agreement import renders, z_scores
+from agreement import Z_BOUND, renders, z_scores
 
-Z_BOUND = 5.0
 SEEDS_LAB = range(16)
 SEEDS_REF = range(1000, 1016)
 SPP = 16

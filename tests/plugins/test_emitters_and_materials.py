@@ -1,16 +1,15 @@
 """Agreement with Mitsuba's `path` on every emitter kind and on delta / rough / layered BSDFs.
 
-Same statistics and bound as test_consistency.py (|z| <= 4.5 on 8x8 block means and
+Same statistics and bound as test_consistency.py (|z| <= Z_BOUND on 8x8 block means and
 whole-image means, 16 seeds each, disjoint seed ranges).
 """
 import mitsuba as mi
 import numpy as np
 import pytest
 
-from agreement import renders, z_scores
+from agreement import Z_BOUND, renders, z_scores
 from mitsuba_lab.scene import make_integrator
 
-Z_MAX = 4.5
 SEEDS = 16
 
 
@@ -88,7 +87,7 @@ def test_agrees_with_mitsuba_path(scene_name, strategy):
     lab = renders(sc, make_integrator(kind, {"max_depth": 6, **params}), 64, range(SEEDS))
     assert np.isfinite(lab).all() and (lab >= 0).all()
     result = z_scores(lab, ref)
-    assert result.max_abs_z <= Z_MAX, (f"{strategy} on {scene_name}: max |z| {result.max_abs_z:.2f}, "
+    assert result.max_abs_z <= Z_BOUND, (f"{strategy} on {scene_name}: max |z| {result.max_abs_z:.2f}, "
                                        f"image z {result.image_z}, relative difference {result.rel_diff}")
 
 

@@ -10,7 +10,7 @@ Three kinds of evidence, cheapest first:
    images agree to float rounding (rtol 1e-5, atol 1e-6): an exact check of the whole
    loop (Russian roulette, MIS weights, emitter sampling) on every such scene.
 3. The other strategies against `path` in expectation (tests/agreement.py: 8 x 8
-   block and whole-image z-scores, |z| <= 4.5, 12 seeds each, disjoint seed ranges)
+   block and whole-image z-scores, |z| <= Z_BOUND, 12 seeds each, disjoint seed ranges)
    on the scenes where their variance can be estimated from 12 renders. Left out, by
    design: lab_naive on tiny_bright_light (a BSDF ray hits a light of radius 5e-4
    about once in 1e7) and near_delta_glossy; lab_nee on near_delta_glossy (an
@@ -26,14 +26,13 @@ import os
 import numpy as np
 import pytest
 
-from agreement import renders, z_scores
+from agreement import Z_BOUND, renders, z_scores
 from mitsuba_lab.render import render
 from mitsuba_lab.scene import SceneTraits, load_scene, make_integrator, strategy_applicability
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 STIFF = sorted(os.path.basename(p) for p in glob.glob(os.path.join(ROOT, "scenes", "stiff", "*.xml")))
 RES = 24
-Z_MAX = 4.5
 SEEDS = 12
 
 STRATEGIES = {
@@ -138,7 +137,7 @@ def test_agrees_with_mitsuba_path(scene_name, strategy, spp):
     depth = -1 if scene_name == "closed_box_albedo_099.xml" else MAX_DEPTH
     lab = renders(scene(scene_name), make_integrator(kind, {"max_depth": depth, **params}), spp, range(SEEDS))
     result = z_scores(lab, reference(scene_name, spp))
-    assert result.max_abs_z <= Z_MAX, (f"{strategy} on {scene_name}: max |z| {result.max_abs_z:.2f}, "
+    assert result.max_abs_z <= Z_BOUND, (f"{strategy} on {scene_name}: max |z| {result.max_abs_z:.2f}, "
                                        f"image z {result.image_z}, relative difference {result.rel_diff}")
 
 
@@ -162,7 +161,7 @@ def test_scaling_by_1e_4_changes_nothing(strategy):
     tiny = renders(scene("scaled_1e-4.xml"), make_integrator(kind, {"max_depth": MAX_DEPTH, **params}), 32,
                    range(SEEDS))
     result = z_scores(tiny, unscaled_reference())
-    assert result.max_abs_z <= Z_MAX, (f"{strategy} on scaled_1e-4: max |z| {result.max_abs_z:.2f}, "
+    assert result.max_abs_z <= Z_BOUND, (f"{strategy} on scaled_1e-4: max |z| {result.max_abs_z:.2f}, "
                                        f"relative difference {result.rel_diff}")
 
 
@@ -173,7 +172,7 @@ def test_mitsuba_path_is_dark_on_the_tiny_box():
     tiny = renders(scene("scaled_1e-4.xml"), make_integrator("path", {"max_depth": MAX_DEPTH}), 32,
                    range(SEEDS))
     result = z_scores(tiny, unscaled_reference())
-    assert result.max_abs_z > 3 * Z_MAX and result.rel_diff.mean() < -0.05, result.rel_diff
+    assert result.max_abs_z > 3 * Z_BOUND and result.rel_diff.mean() < -0.05, result.rel_diff
 
 
 def unscaled_reference():

@@ -4,7 +4,7 @@ cuda_ad_* variant, tests/backend.py): every unbiased lab estimator and every lab
 Mitsuba's `path` (with the independent sampler) in expectation, with no NaN, Inf or negative
 pixel.
 
-Tolerance: |z| <= Z_MAX = 5 for every 8x8 block mean and every whole-image channel mean
+Tolerance: |z| <= Z_BOUND (tests/agreement.py) for every 8x8 block mean and every whole-image channel mean
 (Welch, 16 seeds a side, about 30 degrees of freedom; at most 4 x 3 blocks x 3 channels + 3 =
 39 z-scores a case, 45 cases). Under agreement P(|t_30| > 5) = 2.3e-5, so the whole file fails
 by chance with probability < 0.04 (fewer in fact: the z-scores of a case are correlated);
@@ -16,10 +16,9 @@ import pytest
 import mitsuba as mi
 import backend
 import mitsuba_lab
-from agreement import pixel_problem, renders, z_scores
+from agreement import Z_BOUND, pixel_problem, renders, z_scores
 from mitsuba_lab.scene import make_integrator
 
-Z_MAX = 5.0
 SEEDS = 16
 REF_SEEDS = range(1000, 1000 + SEEDS)
 LAB_SEEDS = range(SEEDS)
@@ -65,7 +64,7 @@ def assert_agrees(images, ref, label, variant):
     problem = pixel_problem(images, "spectral" in variant)
     assert not problem, f"{label}: {problem}"
     result = z_scores(images, ref)
-    assert result.max_abs_z <= Z_MAX, (f"{label}: max |z| {result.max_abs_z:.2f}, image z {result.image_z}, "
+    assert result.max_abs_z <= Z_BOUND, (f"{label}: max |z| {result.max_abs_z:.2f}, image z {result.image_z}, "
                                        f"relative difference of means {result.rel_diff}")
 
 
@@ -92,4 +91,4 @@ def test_a_three_percent_bias_is_caught_in_every_variant(variant):
     name, cache = variant
     ref = reference(cache)
     images = renders(cache["scene"], make_integrator("lab_mis", DEPTH), SPP, LAB_SEEDS)
-    assert z_scores(images * 1.03, ref).max_abs_z > Z_MAX, name
+    assert z_scores(images * 1.03, ref).max_abs_z > Z_BOUND, name

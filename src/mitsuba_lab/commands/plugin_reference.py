@@ -7,7 +7,10 @@ import os
 import re
 
 from ..plugins import params as declarations
-from .plugins import REFERENCE_NAME, allowed_text, default_text, docstrings, summaries, type_name
+from .plugin_text import allowed_text, default_text, docstrings, summaries, type_name
+
+#: The generated plugin reference, in the plugins' folder.
+REFERENCE_NAME = "README.md"
 
 _MONOSP = re.compile(r"\s*\(:monosp:`([^`]*)`\)")
 _RULE = re.compile(r"^=+( +=+)+\s*$")        # a reStructuredText simple table's rule

@@ -2,22 +2,16 @@
 
 Reads the declarations (``plugins/params.py``) and the plugins' docstrings (parsed from
 their source, not imported), so it needs no Mitsuba variant. The helpers that turn a
-``Param`` into text (``type_name``, ``default_text``, ``allowed_text``,
-``parameter_help``) also write ``render``'s option help.
+``Param`` into text (``plugin_text``, and ``parameter_help`` here) also write ``render``'s option help.
 """
 from __future__ import annotations
 
-import ast
 import difflib
 import os
-import re
 
 from ..plugins import params as declarations
-
-TYPE_NAMES = {int: "int", float: "float", bool: "bool", str: "string"}
-_MONOSP = re.compile(r"\s*\(:monosp:`[^`]*`\)\s*$")
-#: The generated plugin reference, in the plugins' folder.
-REFERENCE_NAME = "README.md"
+from .plugin_reference import REFERENCE_NAME, write_reference
+from .plugin_text import allowed_text, default_text, summaries, type_name
 
 
 def add_arguments(parser) -> None:
@@ -34,7 +28,6 @@ def add_arguments(parser) -> None:
 def run(args, out) -> int:
     if args.markdown:
         from ..errors import LabError
-        from .plugin_reference import write_reference
 
         if args.name is not None:
             raise LabError("plugins --markdown writes the reference of every plugin: give no NAME")
@@ -48,33 +41,6 @@ def run(args, out) -> int:
 
 
 # -- Text of a declared parameter ---------------------------------------------------------------
-
-def type_name(param) -> str:
-    return TYPE_NAMES.get(param.kind, getattr(param.kind, "__name__", str(param.kind)))
-
-
-def show(value) -> str:
-    """A default as a user writes it: true/false, 2 not 2.0, 0.666667, strings bare."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return f"{value:g}"
-    return str(value)
-
-
-def default_text(param) -> str:
-    return show(param.default)
-
-
-def allowed_text(param) -> str:
-    """The values the parameter takes: its choices, its constraint, or its type."""
-    if param.choices:
-        return " | ".join(param.choices)
-    if param.expected:
-        return param.expected
-    return {int: "an integer", float: "a number", bool: "true | false", str: "a string"}.get(
-        param.kind, type_name(param))
-
 
 def parameter_help(name: str, plugins: tuple[str, ...]) -> str:
     """Help text for an option setting parameter ``name`` of the given ``plugins``: the
@@ -103,52 +69,6 @@ def lab_integrators() -> tuple[str, ...]:
 
 
 # -- Listing ----------------------------------------------------------------------------------
-
-def summaries() -> dict[str, str]:
-    """Plugin name -> first line of its class docstring (else its module docstring), read
-    from the plugin sources named by ``plugins.PLUGIN_MODULES`` without importing them."""
-    return {name: _MONOSP.sub("", doc.strip().splitlines()[0]).rstrip(".") if doc.strip() else ""
-            for name, doc in docstrings().items()}
-
-
-def docstrings() -> dict[str, str]:
-    """Plugin name -> its class docstring (else its module docstring), read from the plugin
-    sources named by ``plugins.PLUGIN_MODULES`` without importing them."""
-    from .. import plugins as package
-
-    root = package.__path__[0]
-    found = {}
-    for module in package.PLUGIN_MODULES:
-        path = os.path.join(root, *module.removeprefix(package.__name__ + ".").split(".")) + ".py"
-        try:
-            with open(path, encoding="utf-8") as handle:
-                tree = ast.parse(handle.read())
-        except (OSError, SyntaxError):
-            continue
-        found.update(_registered(tree))
-    return found
-
-
-def _registered(tree: ast.Module) -> dict[str, str]:
-    """``mi.register_*("name", lambda props: Class(props))`` -> {name: Class's docstring}."""
-    classes = {node.name: ast.get_docstring(node) or "" for node in tree.body
-               if isinstance(node, ast.ClassDef)}
-    module_doc = (ast.get_docstring(tree) or "").split(":", 1)[-1].strip()
-    found = {}
-    for node in tree.body:
-        call = node.value if isinstance(node, ast.Expr) else None
-        if not (isinstance(call, ast.Call) and isinstance(call.func, ast.Attribute)
-                and call.func.attr in ("register_integrator", "register_sampler") and call.args
-                and isinstance(call.args[0], ast.Constant)):
-            continue
-        doc = ""
-        if len(call.args) > 1 and isinstance(call.args[1], ast.Lambda):
-            body = call.args[1].body
-            if isinstance(body, ast.Call) and isinstance(body.func, ast.Name):
-                doc = classes.get(body.func.id, "")
-        found[call.args[0].value] = doc or module_doc
-    return found
-
 
 def format_list() -> str:
     names = declarations.lab_plugins()
