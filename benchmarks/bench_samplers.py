@@ -22,7 +22,7 @@ MSE is given with its standard error over the seeds, over the whole image and
 without the pixels that see the light directly (reference luminance above
 ``--emitter-threshold``, grown by one pixel): on this scene much of a QMC
 sampler's MSE sits on the light's edge, a 2D anti-aliasing problem on which every
-(0,2)-net sampler behaves alike (README, Speed). The blue-noise spectra are likewise given on the
+(0,2)-net sampler behaves alike. The blue-noise spectra are likewise given on the
 whole image and on the rows below the light (``spectrum.rows_below_bright``); the
 low-spp blue-noise study repeats them on non-square pixel blocks (a crop window and a
 res x res/2 film) and with a deliberately wrong layout. Every render binds the film to its

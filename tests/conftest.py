@@ -20,8 +20,8 @@ def _run_from_project_root(monkeypatch):
 def _drop_the_module_scenes(request):
     """Scenes a test module keeps in a dict of its own (a cache shared by its tests) are dropped
     when the module ends: Dr.Jit traces a virtual call for every BSDF, emitter and shape alive
-    in the process, so scenes held for the whole session made every later render slower (README,
-    Platform notes: lab_vcm's pilot measured 107 ms per pass late in a full run, ~15 ms fresh)."""
+    in the process, so scenes held for the whole session made every later render slower (lab_vcm's
+    pilot measured 107 ms per pass late in a full run, ~15 ms fresh)."""
     yield
     for value in list(vars(request.module).values()):
         if isinstance(value, dict) and any(holds_mitsuba(v) for v in list(value.values())):

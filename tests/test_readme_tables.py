@@ -1,4 +1,8 @@
-"""README.md's plugin parameters agree with the declarations (``plugins/params.py``).
+"""The hand-written parameter tables agree with the declarations (``plugins/params.py``), and
+experiments/README.md lists every shipped config.
+
+The tables live in ``plugins/design.md`` (how the plugins work; the generated reference,
+``plugins/README.md``, is checked by ``tests/commands/test_plugins_command.py``).
 
 Integrators: every row ``| `name` | type | default | meaning |`` of a parameter table has the
 declared type and default of each lab integrator in its scope (the plugins named on the line
@@ -25,11 +29,15 @@ INTEGRATORS = tuple(p for p in params.lab_plugins() if params.plugin_kind(p) == 
 SAMPLERS = tuple(p for p in params.lab_plugins() if params.plugin_kind(p) == "sampler")
 
 
+#: The file holding the integrator and sampler tables checked here.
+TABLES = os.path.join("plugins", "design.md")
+
+
 def section(title: str) -> str:
-    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as handle:
+    with open(os.path.join(ROOT, TABLES), encoding="utf-8") as handle:
         text = handle.read()
-    match = re.search(rf"^## {re.escape(title)}\n(.*?)(?=^## )", text, re.M | re.S)
-    assert match, f"README.md has no '## {title}' section"
+    match = re.search(rf"^## {re.escape(title)}\n(.*?)(?=^## |\Z)", text, re.M | re.S)
+    assert match, f"{TABLES} has no '## {title}' section"
     return match.group(1)
 
 
@@ -58,7 +66,7 @@ def parameter_tables(text: str) -> list[tuple[str, list[list[str]]]]:
 
 
 def readme_value(text: str):
-    """A default as the README writes it: `power`, false, 2/3, 2^21, -1, 0.5."""
+    """A default as design.md writes it: `power`, false, 2/3, 2^21, -1, 0.5."""
     text = text.strip().strip("`").strip()
     if re.fullmatch(r"-?\d+/\d+", text):
         num, den = text.split("/")
@@ -114,15 +122,15 @@ def test_integrator_table_rows_agree_with_the_declarations():
             name, kind, default = row[0].strip("`"), row[1], row[2]
             assert kind in TYPES, f"{name}: unknown type '{kind}'"
             scope = named or [p for p in INTEGRATORS if declaration(p, name)]
-            assert scope, f"README table row '{name}': no lab integrator declares it"
+            assert scope, f"design.md table row '{name}': no lab integrator declares it"
             for plugin in scope:
                 param = declaration(plugin, name)
-                assert param is not None, f"README says {plugin} has '{name}'; it does not declare it"
-                assert param.kind is TYPES[kind], f"{plugin}.{name}: README type {kind}, declared {param.kind}"
+                assert param is not None, f"design.md says {plugin} has '{name}'; it does not declare it"
+                assert param.kind is TYPES[kind], f"{plugin}.{name}: design.md type {kind}, declared {param.kind}"
                 assert agrees(readme_value(default), param), \
-                    f"{plugin}.{name}: README default {default}, declared {param.default!r}"
+                    f"{plugin}.{name}: design.md default {default}, declared {param.default!r}"
                 for choice in param.choices:
-                    assert f"`{choice}`" in row[3], f"{plugin}.{name}: README does not name '{choice}'"
+                    assert f"`{choice}`" in row[3], f"{plugin}.{name}: design.md does not name '{choice}'"
                 checked += 1
     assert checked >= 7
 
@@ -136,20 +144,20 @@ def test_every_integrator_parameter_is_in_the_readme(plugin):
         tabulated = {row[0].strip("`") for above, rows in tables for row in rows
                      if not any(f"`{p}`" in above for p in INTEGRATORS) or f"`{plugin}`" in above}
         missing = [p.name for p in params.declared(plugin) if p.name not in tabulated]
-        assert not missing, f"README's integrator tables lack {plugin}'s {missing}"
+        assert not missing, f"design.md's integrator tables lack {plugin}'s {missing}"
         return
     missing = [p.name for p in params.declared(plugin) if f"`{p.name}`" not in prose]
-    assert not missing, f"README's {plugin} paragraph does not name {missing}"
+    assert not missing, f"design.md's {plugin} paragraph does not name {missing}"
     stated = stated_defaults(prose) + re.findall(r"`(\w+)`\s+\(([^,)=;]+)", prose)
     assert stated
     for name, default in stated:
         param = declaration(plugin, name)
-        assert param is not None, f"README names '{name}' as a {plugin} parameter"
+        assert param is not None, f"design.md names '{name}' as a {plugin} parameter"
         assert agrees(readme_value(default), param), \
-            f"{plugin}.{name}: README default {default.strip()}, declared {param.default!r}"
+            f"{plugin}.{name}: design.md default {default.strip()}, declared {param.default!r}"
     for param in params.declared(plugin):
         for choice in param.choices:
-            assert f"`{choice}`" in prose, f"{plugin}.{param.name}: README does not name '{choice}'"
+            assert f"`{choice}`" in prose, f"{plugin}.{param.name}: design.md does not name '{choice}'"
 
 
 # -- Samplers -----------------------------------------------------------------------------------
@@ -177,20 +185,33 @@ def test_sampler_parameters_and_defaults_agree(plugin):
     row = rows[plugin]
     for param in params.declared(plugin):
         where = shared if param.name in shared_names else row
-        assert f"`{param.name}`" in where, f"README does not name {plugin}'s '{param.name}'"
+        assert f"`{param.name}`" in where, f"design.md does not name {plugin}'s '{param.name}'"
         for choice in param.choices:
-            assert f"`{choice}`" in row, f"{plugin}.{param.name}: README does not name '{choice}'"
+            assert f"`{choice}`" in row, f"{plugin}.{param.name}: design.md does not name '{choice}'"
     stated = stated_defaults(shared) + stated_defaults(row)
     assert stated
     for name, default in stated:
         param = declaration(plugin, name)
         if param is None and name not in shared_names:
-            pytest.fail(f"README names '{name}' as a {plugin} parameter; it does not declare it")
+            pytest.fail(f"design.md names '{name}' as a {plugin} parameter; it does not declare it")
         if param is not None:
             assert agrees(readme_value(default), param), \
-                f"{plugin}.{name}: README default {default.strip()}, declared {param.default!r}"
+                f"{plugin}.{name}: design.md default {default.strip()}, declared {param.default!r}"
 
 
 def test_readme_values_are_read_as_written():
     assert [readme_value(v) for v in ("-1", "false", "`power`", "2/3", "2^21", "0.5", " 16 ")] == \
         [-1, False, "power", 2 / 3, 2 ** 21, 0.5, 16]
+
+
+# -- Shipped configs ----------------------------------------------------------------------------
+
+def test_experiments_readme_lists_every_shipped_config():
+    """Each experiments/*.toml has its row in experiments/README.md's table (| `name.toml` | ...),
+    and every row names a file that exists."""
+    folder = os.path.join(ROOT, "experiments")
+    shipped = sorted(f for f in os.listdir(folder) if f.endswith(".toml"))
+    assert len(shipped) >= 10
+    with open(os.path.join(folder, "README.md"), encoding="utf-8") as handle:
+        rows = [cells(line)[0].strip("`") for line in handle if line.startswith("| `") and ".toml`" in line]
+    assert sorted(r for r in rows if r.endswith(".toml")) == shipped

@@ -214,7 +214,7 @@ def isolation_config(tmp_path, integrator="lab_mis"):
 
 def test_the_sweep_renders_in_a_process_of_its_own(tmp_path):
     """Each render traces a virtual call for every Mitsuba object alive in its process, so the
-    sweep renders in a process that holds only its own scene (README: 20 small scenes held by
+    sweep renders in a process that holds only its own scene (measured once: 20 small scenes held by
     the caller made a 1-spp lab_mis render at 64x64 take 22 ms in the caller, 4.6 ms there).
     Asserted by the process each row names, not by timing (the suite must pass under load)."""
     import os

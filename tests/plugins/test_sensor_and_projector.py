@@ -15,7 +15,7 @@
 Agreement: tests/agreement.py's z-scores of 8x8 block means and image means, 16 seeds a side,
 |z| <= 5, on 32 x 24 films (non-square). lab_bdpt with every strategy, lab_vcm ``bpt`` (exact:
 lab_bdpt's estimator) and ``vcm`` with a small radius (r_1 = 0.02: the blur's bias is far below
-16 seeds' noise). Power, measured once (README): the t = 1 weight x 1.03 fails the textured
+16 seeds' noise). Power, measured once: the t = 1 weight x 1.03 fails the textured
 projector's test (max |z| 5.51), the orthographic camera started with the pinhole's t = 1 term
 fails by |z| 217; the projector's density x 1.03 fails the density check by 3%. (The same
 density x 1.03 in every weight renders the same mean: weights built from one density still sum

@@ -23,7 +23,7 @@ grid to leave it out.
 The fields are packed into fixed-width records of floats (integers by their bits), one flat
 array per record kind (``POINT``, ``RECORD``, ``TANGENTS``): Dr.Jit reads a power-of-two run of
 floats in one packet load, so a connection or a merge reads a vertex in two or three loads
-instead of some twenty gathers (``benchmarks/bench_vcm.py``; README).
+instead of some twenty gathers (``benchmarks/bench_vcm.py`` measures the light pass and merging).
 """
 from __future__ import annotations
 

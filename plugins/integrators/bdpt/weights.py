@@ -207,7 +207,7 @@ class BdptWeights:
         samples in K neighbouring lanes, so each of them merges with another iteration's light
         vertices; blocks of 64 lanes per iteration, which kept a SIMD packet in one iteration's
         cells, gave all of a pixel's samples in a pass the same light vertices: 1.3x to 2.3x the
-        merging variance on sds, for merges up to 20% cheaper (experiments/vcm_notes.md, "Lanes and iterations")."""
+        merging variance on sds, for merges up to 20% cheaper."""
         return 0 if self.lane_tables is None else lane % self.lane_tables[2]
 
     def _m(self, x):

@@ -34,8 +34,8 @@ def vcm_radius(r1: float, iteration: int, alpha: float) -> float:
 #: (of FIRST_PASS_LIGHT_SUBPATHS subpaths), within [MIN, MAX]_PASS_LIGHT_SUBPATHS subpaths
 #: (``benchmarks/bench_vcm.py`` compares the pass sizes). Below one light subpath per camera
 #: subpath, a pass holds at most MAX_PASS_CAMERA_LANES camera subpaths: they keep no state
-#: between vertices in memory, so a longer wavefront only saves passes (README: Veach's plates
-#: at light_paths 1/16).
+#: between vertices in memory, so a longer wavefront only saves passes (``benchmarks/bench_vcm.py
+#: --light-paths 0.0625`` measures it: fewer, longer passes).
 PASS_LIGHT_VERTICES = 1 << 20
 FIRST_PASS_LIGHT_SUBPATHS = 1 << 18
 MIN_PASS_LIGHT_SUBPATHS, MAX_PASS_LIGHT_SUBPATHS = 1 << 14, 1 << 18
@@ -101,8 +101,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            ``epanechnikov`` (2 / pi) (1 - d^2 / r_i^2) / r_i^2, as
                            lab_photon, or ``constant`` 1 / (pi r_i^2), as SmallVCM.
                            Epanechnikov's blur costs 2/3 the bias for 4/3 the
-                           variance (experiments/vcm_notes.md: lower error where
-                           merging carries the light); MIS counts merging with the disc's area
+                           variance, a lower error where merging carries the
+                           light; MIS counts merging with the disc's area
                            either way (Default: ``epanechnikov``)
     merge_first     bool   Merge at the camera's first vertex too (modes vcm and
                            bpm), as Georgiev et al.'s VCM does. false: no
@@ -112,8 +112,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            NEE and connections. The merges of one iteration
                            share its light vertices, and at the first vertex
                            they add variance that light tracing does not
-                           (experiments/vcm_notes.md: equal or lower error on
-                           every scene of vcm.toml without them). ppm always
+                           (without them: equal or lower error on every scene of
+                           experiments/vcm.toml). ppm always
                            merges there (Default: false)
     merge_vertices  string ``all``: every stored light vertex merges;
                            ``caustic``: only those reached through a delta lobe
@@ -123,8 +123,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            vertex, in every MIS sum too, so the image stays
                            consistent; paths without one get their light from
                            the connections, NEE, emitter hits and light tracing,
-                           and the grid holds and merges fewer vertices
-                           (experiments/vcm_notes.md, "Caustic merges"). Mode vcm (Default: ``all``)
+                           and the grid holds and merges fewer vertices, so
+                           scenes without caustics skip most merging. Mode vcm (Default: ``all``)
     connections     string ``all``: a camera vertex connects to every stored
                            vertex of its light subpath (lab_bdpt); ``one``: to
                            one of the n it may use, picked uniformly and counted
@@ -205,7 +205,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     RAY_KINDS = LabBDPTIntegrator.RAY_KINDS + ("merge",)
     #: In mode vcm, a connection that would add less than this share of its lane's estimate so
     #: far runs with probability (its share / this) (``camera_subpath.connection_roulette``;
-    #: README: the Cornell box 9% faster for 1% more variance); mode bpt keeps lab_bdpt's image.
+    #: connections that add a sliver seldom pay for their shadow ray: the Cornell box 9% faster for
+    #: 1% more variance); mode bpt keeps lab_bdpt's image.
     CONNECT_SHARE = 0.1
 
     def __init__(self, props: mi.Properties):

@@ -23,7 +23,7 @@ measured variance and cost; this is its coarsest form, one choice for the whole 
   its error, but the longer render's pixel samples are not every technique's), so light that path tracing's pilot
   misses (a caustic, a light behind glass) counts as error, not as a small variance, while in
   the renders with shared seeds light both sample alike counts for neither (a pilot's own spread
-  underestimates a heavy tail: experiments/vcm_notes.md);
+  underestimates a heavy tail);
 * cost per iteration (``PilotCosts``), with ``pilot_costs = counted`` (the default) the work the
   pilot renders counted, by kind (``WORK_COSTS``: rays, connections, merge lookups, stored light
   vertices, passes), times the ``cost_*`` parameters (nanoseconds per unit, fitted once by
@@ -62,7 +62,7 @@ PATH_TRACING_SIZE = 4
 #: Path tracing is chosen when its relative variance x time is below this share of every
 #: technique's: its pilot's error is heavy-tailed (low when the pilot misses the rare paths that
 #: dominate it), and choosing it where it is poor costs far more than the converse
-#: (experiments/vcm_notes.md, "A pilot's choice": the measured choices).
+#: (``tests/plugins/test_vcm_choices.py`` checks the choices this gives on four scenes).
 PATH_TRACING_MARGIN = 0.8
 #: Most light subpaths per camera subpath lab_vcm traces (``params.LAB_VCM``'s light_paths).
 MOST_LIGHT_PATHS = 64.0

@@ -13,8 +13,7 @@ from .report import format_gradient_table, write_gradients, write_optimisation, 
 EPILOG = """config tables: [scene] path | builtin ("cornell_texture"), resolution, texture_size, defaults;
 [render] max_depth (required), spp, target_spp, seed; [optimise] iterations, learning_rate,
 loss (l2 | relative_l2), eval_spp; [parameters."KEY"] init, min, max, truth; [gradients] key, spp, samplers,
-seeds, reference_spp, reference_seeds. See README (Inverse rendering) and
-src/mitsuba_lab/inverse/config.py."""
+seeds, reference_spp, reference_seeds. Defaults and meanings: src/mitsuba_lab/inverse/config.py."""
 
 
 def add_arguments(parser) -> None:
