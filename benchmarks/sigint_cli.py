@@ -8,7 +8,7 @@ It writes one line to stderr:
 
 * ``sigint-cli: render`` when a render call begins (``render.render``, through
   ``interrupts.rendering``);
-* ``sigint-cli: pass`` at each pass boundary of a multi-pass integrator (``interrupts.checkpoint``).
+* ``sigint-cli: pass`` at each pass boundary of a multi-pass integrator (``checkpoint``).
 
 ``--kernels`` as the first argument also turns Dr.Jit's log to Info. Dr.Jit then writes a line
 ``-> launching HASH (n=SIZE, ...`` just before each kernel runs, so a signal can be sent while
@@ -20,6 +20,7 @@ import contextlib
 import sys
 
 from mitsuba_lab import cli, interrupts
+from mitsuba_lab.plugins import interrupts as plugin_interrupts
 
 PREFIX = "sigint-cli:"
 
@@ -30,7 +31,7 @@ def _say(event: str) -> None:
 
 
 def _instrument() -> None:
-    checkpoint, rendering = interrupts.checkpoint, interrupts.rendering
+    checkpoint, rendering = plugin_interrupts.checkpoint, interrupts.rendering
 
     def reported_checkpoint(*integrators):
         _say("pass")
@@ -42,7 +43,7 @@ def _instrument() -> None:
         with rendering():
             yield
 
-    interrupts.checkpoint, interrupts.rendering = reported_checkpoint, reported_rendering
+    plugin_interrupts.checkpoint, interrupts.rendering = reported_checkpoint, reported_rendering
 
 
 def api_sweep(config: str, output: str) -> int:

@@ -7,6 +7,7 @@ import mitsuba as mi
 import pytest
 
 from mitsuba_lab import interrupts
+from mitsuba_lab.plugins.interrupts import checkpoint
 
 
 def sigint_raises() -> bool:
@@ -54,16 +55,16 @@ class Cancelled:
 
 
 def test_checkpoint_raises_when_mitsuba_cancelled_the_render():
-    interrupts.checkpoint(Cancelled(False))         # nothing to do
+    checkpoint(Cancelled(False))         # nothing to do
     with pytest.raises(KeyboardInterrupt):
-        interrupts.checkpoint(Cancelled(False), Cancelled(True))
+        checkpoint(Cancelled(False), Cancelled(True))
 
 
 def test_checkpoint_respects_an_ignored_sigint():
     """The sweep's render process ignores SIGINT (its caller handles Ctrl-C): so does the check."""
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        interrupts.checkpoint(Cancelled(True))
+        checkpoint(Cancelled(True))
     finally:
         signal.signal(signal.SIGINT, previous)
 

@@ -134,6 +134,16 @@ def test_no_import_cycle():
     assert cycles(graph) == []
 
 
+def test_the_plugins_import_nothing_of_the_orchestration_layer():
+    """plugins/ stands on its own (scene traits, parameter declarations, variant checks and the
+    Ctrl-C handling it needs live in it): the orchestration layer imports the plugins, never the
+    reverse, not even inside a function."""
+    graph = import_graph(module_files(), deferred=True)
+    reaching_out = {name: sorted(t for t in targets if not t.startswith("mitsuba_lab.plugins"))
+                    for name, targets in graph.items() if name.startswith("mitsuba_lab.plugins")}
+    assert {name: targets for name, targets in reaching_out.items() if targets} == {}
+
+
 def test_no_import_cycle_counting_imports_inside_functions():
     """Deferred imports too: the library never reaches back into cli (check.py takes its
     argument helpers from commands.args)."""

@@ -32,7 +32,7 @@ from mitsuba_lab.plugins.integrators.support import base_render, warn_if_unsuppo
 from mitsuba_lab.plugins.params import UNBOUNDED
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
-from mitsuba_lab.scene import SceneTraits
+from mitsuba_lab.plugins.scene_traits import SceneTraits
 
 #: max_depth = -1 (unbounded) as the path loop holds it: 2^32 - 1 segments.
 DEPTH_UNBOUNDED = 0xFFFFFFFF

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import mitsuba as mi
 
-from mitsuba_lab import interrupts
+from mitsuba_lab.plugins import interrupts
 
 
 def warn_if_unsupported(integrator, traits) -> str:

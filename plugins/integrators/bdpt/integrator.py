@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass, field
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab import interrupts
+from mitsuba_lab.plugins import interrupts
 from mitsuba_lab.plugins.integrators import spawn, spectral
 from mitsuba_lab.plugins.integrators.aim import AimedEmission
 from mitsuba_lab.plugins.integrators.counters import RayCounters
@@ -16,7 +16,7 @@ from mitsuba_lab.plugins.integrators.support import base_render, render_argument
 from mitsuba_lab.plugins.params import UNBOUNDED, bdpt_only_strategy
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
-from mitsuba_lab.scene import SceneTraits
+from mitsuba_lab.plugins.scene_traits import SceneTraits
 
 from . import splats
 from .camera_subpath import CameraPass, sensor_constants, trace_camera_subpaths

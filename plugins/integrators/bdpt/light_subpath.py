@@ -338,7 +338,7 @@ def render_light_tracing(scene: mi.Scene, sensor: mi.Sensor | int = 0, seed: int
     Returns the film's developed image (``TensorXf``), comparable to ``mi.render`` of Mitsuba's
     ``ptracer`` with the same ``max_depth`` / ``rr_depth`` (emitters seen directly included).
     """
-    from mitsuba_lab.scene import SceneTraits
+    from mitsuba_lab.plugins.scene_traits import SceneTraits
 
     if isinstance(sensor, int):
         sensor = scene.sensors()[sensor]

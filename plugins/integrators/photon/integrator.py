@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass, field
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab import interrupts
+from mitsuba_lab.plugins import interrupts
 from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.integrators import spawn
 from mitsuba_lab.plugins.integrators.aim import AimedEmission
@@ -16,7 +16,7 @@ from mitsuba_lab.plugins.integrators.footprint import pixel_footprint
 from mitsuba_lab.plugins.integrators.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
-from mitsuba_lab.scene import SceneTraits
+from mitsuba_lab.plugins.scene_traits import SceneTraits
 from mitsuba_lab.plugins.params import DIRECT_MODES, UNBOUNDED  # noqa: F401 (re-exported)
 
 from mitsuba_lab.plugins.integrators import spectral

@@ -18,7 +18,7 @@ instead of writing them, a retried task cannot leave a duplicate row.
 """
 from __future__ import annotations
 
-from .. import interrupts
+from ..plugins import interrupts
 from ..errors import LabError
 from .worker import PointResult, PointTask, execute
 

@@ -1,0 +1,59 @@
+"""Ctrl-C while Mitsuba renders: Python's SIGINT handler kept in force.
+
+Mitsuba 3.9 runs each bound render call (``Integrator.render``, ``render_forward``,
+``render_backward``) under a SIGINT handler of its own (C++ ``ScopedSignalHandler``,
+src/render/python/integrator_v.cpp). On Ctrl-C it logs "Received interrupt signal, winding
+down..", cancels the integrator (its ``should_stop()`` turns True, which a JIT render does not
+read), puts back the handler it replaced and raises SIGINT again for that one. Two things go
+wrong:
+
+* It keeps the replaced handler in one static variable. A render call made inside another
+  one records Mitsuba's own handler as the one to put back, and the lab's Python integrators
+  do this on every render: their ``render`` calls Mitsuba's, which calls the Python ``render``
+  back, which calls Mitsuba's again. After that, Ctrl-C only prints that line twice and is lost
+  for the rest of the process. The plugins' ``integrators.support.base_render`` calls ``restore``
+  before the inner call, so it finds Python's handler.
+* It puts a handler back with C ``signal()``, which restarts interrupted system calls. A
+  process blocked in ``recv``, like a sweep waiting for its render process, then does not see
+  Ctrl-C until the call returns.
+
+``restore`` installs Python's handler again as ``signal.signal`` does (no restart).
+``checkpoint`` is the multi-pass integrators' check between passes. (The orchestration layer's
+``mitsuba_lab.interrupts`` wraps whole render calls and writes.)
+
+Only the main thread can set handlers: in another thread these do nothing.
+"""
+from __future__ import annotations
+
+import signal
+import threading
+
+
+def in_main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+def restore() -> None:
+    """Install Python's SIGINT handler (``signal.getsignal``) again, in place of whatever
+    Mitsuba left: the default raises KeyboardInterrupt, ``SIG_IGN`` ignores it. Costs one
+    system call. Does nothing outside the main thread, or if the handler was not set from
+    Python."""
+    if not in_main_thread():
+        return
+    handler = signal.getsignal(signal.SIGINT)
+    if handler is not None:
+        signal.signal(signal.SIGINT, handler)
+
+
+def checkpoint(*integrators) -> None:
+    """The cheap check between two passes of a multi-pass render (lab_photon, lab_bdpt, lab_vcm).
+
+    It installs Python's handler again (``restore``), and if Mitsuba's handler cancelled one of
+    ``integrators`` (``should_stop()``) it delivers the SIGINT again, to Python's handler. A
+    Ctrl-C that reached Python has already raised KeyboardInterrupt by this point. This catches
+    one that Mitsuba took but did not pass on. Outside the main thread it does nothing."""
+    if not in_main_thread():
+        return
+    restore()
+    if any(integrator.should_stop() for integrator in integrators):
+        signal.raise_signal(signal.SIGINT)
