@@ -106,7 +106,3 @@ class PhotonGrid:
         self.records = records.scattered(slot).eval()
         self.start, self.count = start, count
         self.bucket, self.slot = bucket, slot            # kept for tests and statistics
-
-    def nbytes(self) -> int:
-        from .records import RECORD_BYTES
-        return self.photon_count * (RECORD_BYTES + 8) + self.table_size * 8

@@ -18,8 +18,6 @@ import drjit as dr
 import mitsuba as mi
 
 FIELDS = ("p", "wi", "n", "power", "depth")
-#: Bytes per record in RGB variants: 4 three-component float vectors + one uint32.
-RECORD_BYTES = 4 * 3 * 4 + 4
 
 
 def spectrum_channels() -> int:
