@@ -12,8 +12,9 @@ from mitsuba_lab.plugins.integrators.estimator import Densities
 from mitsuba_lab.plugins.integrators.spawn import sample_visible_emitter
 
 
-def finite_or_zero(value):
-    """``value`` where all its channels are finite, else 0 (a guard against 0 * inf)."""
+def spectrum_or_zero(value):
+    """A spectrum ``value`` where all its channels are finite, else 0 in every channel (a guard
+    against 0 * inf). ``bdpt.light_subpath.float_or_zero`` is the same guard on one float."""
     return dr.select(dr.isfinite(dr.max(mi.unpolarized_spectrum(value))), value, 0.0)
 
 
@@ -31,7 +32,7 @@ def emitter_sample_contribution(beta, ds, em_weight, bsdf_val, w, active):
     sample's weight, already divided by n_L). A sample with a zero, negative or NaN pdf, or a
     non-finite value (a degenerate emitter, e.g. of zero area), contributes 0."""
     sampled = active & (ds.pdf > 0)
-    return dr.select(sampled, finite_or_zero(beta * w * bsdf_val * em_weight), 0)
+    return dr.select(sampled, spectrum_or_zero(beta * w * bsdf_val * em_weight), 0)
 
 
 def emitter_sampling(scene, sampler, ctx, si, bsdf, beta, L, sample_weight, n_L: int, active_em,

@@ -27,11 +27,11 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators import spawn
 from mitsuba_lab.plugins.integrators.counters import tally
-from mitsuba_lab.plugins.integrators.direct import finite_or_zero as spectrum_or_zero
+from mitsuba_lab.plugins.integrators.direct import spectrum_or_zero
 from mitsuba_lab.plugins.integrators.roulette import kept, russian_roulette
 
 from .endpoints import EmitterTable, direction_is_delta, nee_density
-from .light_subpath import carried, finite_or_zero, reverse_pdf, strategy_mask, transported
+from .light_subpath import carried, float_or_zero, reverse_pdf, strategy_mask, transported
 from .vertices import NONE, LightVertices
 from .weights import BdptWeights, SubpathMis
 
@@ -123,7 +123,7 @@ def connection(scene, cp: CameraPass, si, bsdf, beta, mis: SubpathMis, depth, sl
     pdf_y_fwd = bsdf_y.pdf(ctx_imp, y, wo_y, use)
     weight = w.connect(mis_y, mis, pdf_y_fwd, pdf_y_rev, pdf_x_fwd, pdf_x_rev,
                        dr.abs(dr.dot(y.n, d)), dr.abs(dr.dot(si.n, d)), dist2, depth)
-    value = spectrum_or_zero(beta * f_x * f_y * beta_y * (finite_or_zero(weight) * scale / dist2))
+    value = spectrum_or_zero(beta * f_x * f_y * beta_y * (float_or_zero(weight) * scale / dist2))
     use &= dr.max(mi.unpolarized_spectrum(value)) > 0
     if cp.connect_share > 0:
         taken, factor = connection_roulette(value, estimate, cp.connect_share, u, depth_y)
@@ -252,7 +252,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
             pdf_pos, pdf_dir, _ = table.emission(emitter, cos_light, pdf_nee, hit, si.p, -ray.d)
             # (light tracing never splats an emitter at infinity: no competitor for x_0 there)
             w_hit = w.hit(mis, pdf_nee, pdf_pos * pdf_dir, dr.select(infinite, 0.0, pdf_pos))
-            L += beta * finite_or_zero(w_hit) * emitter.eval(si, hit)
+            L += beta * float_or_zero(w_hit) * emitter.eval(si, hit)
         active &= si.is_valid()
 
         bsdf = si.bsdf(ray)
@@ -275,7 +275,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         pdf_pos, pdf_dir, delta = table.emission(ds.emitter, cos_light, pdf_nee, nee_on, ds.p, -ds.d)
         w_nee = w.nee(mis, pdf_nee, pdf_pos * pdf_dir, cos_light, dr.abs(dr.dot(si.n, ds.d)), dist2,
                       pdf_fwd, pdf_rev, delta, depth)
-        L += dr.select(nee_on, spectrum_or_zero(beta * f * em_weight * finite_or_zero(w_nee)), 0.0)
+        L += dr.select(nee_on, spectrum_or_zero(beta * f * em_weight * float_or_zero(w_nee)), 0.0)
 
         # ---------------- s >= 2: connections to the light subpath ----------------
         if dr.hint("connect" in w.enabled, mode="scalar"):
@@ -299,10 +299,10 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         pdf_rev = reverse_pdf(bsdf, ctx_imp, si, bs.wo, active_next)
         mis = w.scatter_camera(mis, bs.pdf, pdf_rev, dr.abs(dr.dot(si.n, wo_world)),
                                mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta), depth)
-        dvcm, dvc, first = finite_or_zero(mis.dvcm), finite_or_zero(mis.dvc), mi.Float(mis.first)
+        dvcm, dvc, first = float_or_zero(mis.dvcm), float_or_zero(mis.dvc), mi.Float(mis.first)
         dvm = carried(merging, mis.dvm, dvm)
         if dr.hint(w.caustic, mode="scalar"):
-            pending = finite_or_zero(mis.pending)
+            pending = float_or_zero(mis.pending)
         valid_ray |= active & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
         prev_it = dr.zeros(mi.Interaction3f)
         prev_it.p, prev_it.n, prev_it.t, prev_it.time = si.p, si.n, si.t, si.time

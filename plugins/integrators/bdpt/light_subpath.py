@@ -46,8 +46,9 @@ from .vertices import NONE, LightVertices
 from .weights import BdptWeights, SubpathMis
 
 
-def finite_or_zero(x):
-    """x where finite, else 0 (a 0 * inf density ratio must not turn a splat into NaN)."""
+def float_or_zero(x):
+    """A float ``x`` where finite, else 0 (a 0 * inf density ratio must not turn a splat into
+    NaN). ``direct.spectrum_or_zero`` is the same guard on a whole spectrum."""
     return dr.select(dr.isfinite(x), x, 0.0)
 
 
@@ -85,7 +86,7 @@ def transported(bsdf, si: mi.SurfaceInteraction3f, wo, active):
 def carried(merging: bool, value, old):
     """``value`` with vertex merging, else ``old`` itself (dvm stays a constant 0 without it, so
     lab_bdpt's kernels do not carry it)."""
-    return finite_or_zero(value) if merging else old
+    return float_or_zero(value) if merging else old
 
 
 def reverse_pdf(bsdf, ctx, si: mi.SurfaceInteraction3f, wo, active):
@@ -233,7 +234,7 @@ class LightTracer:
             active0 &= cos0 > 0
             le0 = emitter.eval(si0, active0)
             w0 = w.emitter_to_camera(sensor_pdf(ds0, we0), cos0, dr.square(ds0.dist), pdf_pos, delta_pos)
-            value0 = le0 * cos0 * pos_weight * sel_weight * we0 * finite_or_zero(w0) * scale
+            value0 = le0 * cos0 * pos_weight * sel_weight * we0 * float_or_zero(w0) * scale
             splats.splat(block, ds0.uv, si0.wavelengths, value0, active0)
 
         # ---------------- x_1, x_2, ..: the light subpath ----------------
@@ -300,7 +301,7 @@ class LightTracer:
                 f_cam, pdf_rev_cam = transported(bsdf, si, wo_cam, connect)
                 w_cam = w.light_to_camera(mis, sensor_pdf(ds, we), dr.abs(dr.dot(si.n, ds.d)),
                                           dr.square(ds.dist), pdf_rev_cam)
-                value = beta * f_cam * we * finite_or_zero(w_cam) * scale
+                value = beta * f_cam * we * float_or_zero(w_cam) * scale
                 splats.splat(block, ds.uv, si.wavelengths, value, connect)
 
             # ---------- adjoint BSDF sampling ----------
@@ -316,7 +317,7 @@ class LightTracer:
             beta *= dr.select(delta_lobe, bsdf_weight * adjoint_correction(si, wi_world, bs.wo),
                               dr.select(bs.pdf > 0, smooth_weight, 0.0))
             mis = w.scatter_light(mis, bs.pdf, pdf_rev, dr.abs(dr.dot(si.n, wo_world)), delta_lobe)
-            dvcm, dvc, first = finite_or_zero(mis.dvcm), finite_or_zero(mis.dvc), mi.Float(mis.first)
+            dvcm, dvc, first = float_or_zero(mis.dvcm), float_or_zero(mis.dvc), mi.Float(mis.first)
             dvm = carried(w.merging, mis.dvm, dvm)
             if dr.hint(w.caustic, mode="scalar"):
                 merges = mi.Float(mis.merges)

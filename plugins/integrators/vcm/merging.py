@@ -32,7 +32,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators.bdpt.light_subpath import finite_or_zero, reverse_pdf
+from mitsuba_lab.plugins.integrators.bdpt.light_subpath import float_or_zero, reverse_pdf
 from mitsuba_lab.plugins.integrators.bdpt.vertices import (NO_MERGE, POINT, POINT_WIDTH, RECORD, RECORD_WIDTH,
                                                            read, spectrum_at, unbits, vector)
 from mitsuba_lab.plugins.integrators.bdpt.weights import SubpathMis
@@ -57,7 +57,7 @@ def merge_roulette(weights, camera: SubpathMis, u):
     technique with fewer camera vertices competes, so every bound is 1)."""
     if u is None:
         return True, 1.0
-    return kept(dr.minimum(1.0, finite_or_zero(weights.merge_bound(camera)) * (1.0 / MERGE_ROULETTE)), u)
+    return kept(dr.minimum(1.0, float_or_zero(weights.merge_bound(camera)) * (1.0 / MERGE_ROULETTE)), u)
 
 
 def table(values) -> mi.Float:
@@ -168,7 +168,7 @@ class VertexGrid:
                     pdf_rev = reverse_pdf(bsdf, ctx_imp, si, wi, ok)
                     light = SubpathMis(record[RECORD["dvcm"]], record[RECORD["dvc"]],
                                        dr.select(depth_y == 1, 1.0, 0.0), record[RECORD["dvm"]])
-                    weight = finite_or_zero(w.merge(light, mis, pdf_fwd, pdf_rev)) * kernel(self.kernel, d2 * inv_radius2)
+                    weight = float_or_zero(w.merge(light, mis, pdf_fwd, pdf_rev)) * kernel(self.kernel, d2 * inv_radius2)
                     cos_g = dr.abs(dr.dot(wi_world, n_y))
                     beta_y = spectrum_at(record, RECORD["beta"])
                     result += dr.select(cos_g > 0, f_cos * beta_y * (weight / dr.maximum(cos_g, 1e-30)), 0.0)
