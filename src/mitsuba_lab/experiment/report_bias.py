@@ -31,7 +31,9 @@ class BiasTables:
                 f"zero, where no bias^2 can be, \"{UNRELIABLE}\": the seeds' variance estimate is off, not "
                 "the bias absent; otherwise \"not resolved with N seeds (needs about M)\", M the seeds at "
                 "which an estimate of this size would be two standard errors from zero (an unbiased "
-                "estimator's keeps shrinking, so no number of seeds resolves it).", "",
+                "estimator's keeps shrinking, so no number of seeds resolves it); a negative estimate names "
+                "no M (more seeds would flag it, never resolve a bias). Estimate and error carry the digits "
+                "that show on which side of two standard errors it lies.", "",
                 *markdown_table(header, body)]
 
     def mean_table(self, groups, label) -> list[str]:
@@ -81,7 +83,7 @@ def bias_cell(bias2: float, se: float, seeds: int) -> str:
     """A bias^2 estimate with its standard error and its verdict (``verdicts.bias_verdict``)."""
     if math.isnan(bias2):
         return fmt(bias2)
-    return f"{fmt_pm(bias2, se)} ({bias_verdict(bias2, se, seeds)[0]})"
+    return f"{fmt_pm(bias2, se, separation=SEPARATION)} ({bias_verdict(bias2, se, seeds)[0]})"
 
 
 def _interval(value: float, half: float) -> str:

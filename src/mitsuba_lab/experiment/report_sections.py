@@ -23,7 +23,7 @@ from .budget import BUDGET_RETRIES, budget_label, missed_budget, off_budget_text
 from .config import PASS_PARAMETER
 from .report_bias import BiasTables
 from .report_veach import VeachSection
-from .verdicts import UNRELIABLE, best_of
+from .verdicts import SEPARATION, UNRELIABLE, best_of
 from .spectrum import fit_slope, slope_cell, slope_note
 
 
@@ -329,7 +329,7 @@ class SectionTables(VeachSection, BiasTables):
             curves[label(key)] = result
             header = [unit, "seeds", "time s", "relMSE", "variance", "bias^2 (+- se)", "resolved", "bias^2 / relMSE"]
             body = [[r["passes"], r["seeds"], fmt(r["time_s"]), fmt(r["rel_mse"]), fmt(r["variance"]),
-                     fmt_pm(r["bias2"], r["bias2_se"]), "yes" if r["resolved"] else r["verdict"],
+                     fmt_pm(r["bias2"], r["bias2_se"], separation=SEPARATION), "yes" if r["resolved"] else r["verdict"],
                      fmt(r["bias2"] / r["rel_mse"] if r["rel_mse"] > 0 else math.nan, 2)] for r in result["rows"]]
             md += ["", f"### {label(key)}: bias^2 and variance against {unit}", "",
                    f"In relMSE's units (pixels weighted by 1 / (ref^2 + 0.01), so the light's edge pixels do "
