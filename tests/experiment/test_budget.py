@@ -226,6 +226,27 @@ def test_a_point_off_budget_is_left_out_of_the_ranking_at_its_budget(off_budget_
     assert "off its 0.2 s budget: 0.13 s" in md and "**Off budget:** noisy" in md
 
 
+def test_the_bias_tables_mark_the_point_off_budget(off_budget_sweep):
+    """Issue 42 follow-up, item 2: the walkthrough under load marked its off-budget 1 s points in the
+    equal-time, region and viewer tables but not in "Bias and variance per point" nor in the regions'
+    variance / bias^2 tables. Every row or cell of the off-budget point says so, no other does."""
+    report = off_budget_sweep
+    stats = sorted(report.stats["s"], key=lambda p: p.point)
+    md = "\n".join(report.bias_table(stats))
+    rows = {line.split("|")[1].strip(): line for line in md.splitlines() if line.startswith("| s/")}
+    off = [point for point, line in rows.items() if "off its" in line]
+    print("\n".join(line for line in md.splitlines() if "t0.2s" in line))
+    assert off == ["s/noisy/independent/t0.2s (**off its 0.2 s budget: 0.13 s**)"]
+    ref = report.references["s"]
+    rect = report._regions("s", ref.image.shape[1], ref.image.shape[0])["light"]
+    region = report._region_bias_table("light", rect, ref, stats, lambda key: key[0])
+    print("\n".join(region))
+    row_02 = next(line for line in region if line.startswith("| 0.2 s"))
+    good, noisy = (cell.strip() for cell in row_02.strip("|").split("|")[1:])
+    assert noisy.endswith("(**off its 0.2 s budget: 0.13 s**)") and "off its" not in good
+    assert not any("off its" in line for line in region if line.startswith("| 0.1 s"))
+
+
 def test_the_viewer_labels_the_point_off_budget(off_budget_sweep):
     from mitsuba_lab.experiment.viewer import scene_data
 

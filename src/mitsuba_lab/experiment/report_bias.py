@@ -19,7 +19,7 @@ class BiasTables:
     def bias_table(self, stats) -> list[str]:
         header = ["point", "seeds", "variance", "bias^2 (+- se)", "relative variance", "relative bias^2 (+- se)",
                   "relMSE floor-corrected"]
-        body = [[self.shown(s.scene, s.strategy, s.point), s.seeds, fmt(s.variance),
+        body = [[self.shown(s.scene, s.strategy, s.point) + off_budget_mark(s), s.seeds, fmt(s.variance),
                  bias_cell(s.bias2, s.bias2_se, s.seeds), fmt(s.rel_variance),
                  bias_cell(s.rel_bias2, s.rel_bias2_se, s.seeds), fmt(s.rel_mse_corrected)] for s in stats]
         return ["", "### Bias and variance per point", "",
@@ -68,15 +68,30 @@ class BiasTables:
         for p in stats:
             if p.budget_s is not None and len(p.images) >= 2:
                 cells.setdefault(p.budget_s, {})[label((p.strategy, p.sampler))] = \
-                    (*region_bias_variance(p, self.folder, ref, rect), p.seeds)
+                    (*self.region_bias(p, ref, rect), p.seeds, off_budget_mark(p))
         if not cells:
             return []
         names = sorted({n for row in cells.values() for n in row})
-        body = [[f"{budget:g} s", *(f"{fmt(c[0])} / {bias_cell(c[1], c[2], c[3])}" if (c := row.get(n)) else "n/a"
-                                    for n in names)] for budget, row in sorted(cells.items())]
+        body = [[f"{budget:g} s", *(f"{fmt(c[0])} / {bias_cell(c[1], c[2], c[3])}{c[4]}" if (c := row.get(n))
+                                    else "n/a" for n in names)] for budget, row in sorted(cells.items())]
         return ["", f"Region `{name}`: relative variance / bias^2 +- its standard error (relMSE's units; "
                     f"with the floor they add up to the region's relMSE; bias^2 is an estimate, near zero "
-                    f"or below for an unbiased strategy; its verdict as in the bias table).", "", *markdown_table(["budget", *names], body)]
+                    f"or below for an unbiased strategy; its verdict as in the bias table; a point off its "
+                    f"budget is marked).", "", *markdown_table(["budget", *names], body)]
+
+    def region_bias(self, p, ref, rect) -> tuple[float, float, float]:
+        """``analysis.region_bias_variance`` of a point in a region, computed once per report."""
+        cache = self.__dict__.setdefault("_region_bias_cache", {})
+        key = (p.point, tuple(rect))
+        if key not in cache:
+            cache[key] = region_bias_variance(p, self.folder, ref, rect)
+        return cache[key]
+
+
+def off_budget_mark(p) -> str:
+    """" (**off its 2 s budget: 1.4 s**)" after a point off its time budget (``budget.missed_budget``),
+    "" for any other."""
+    return f" (**{off_budget_text(p)}**)" if missed_budget(p) else ""
 
 
 def bias_cell(bias2: float, se: float, seeds: int) -> str:
