@@ -260,3 +260,54 @@ def test_the_viewer_labels_the_point_off_budget(off_budget_sweep):
     assert "off its 0.2 s budget: 0.13 s" in off_set["entries"][2]["detail"]
     on_set = by_name["equal time 0.1 s (0.1 s measured)"]
     assert [e["label"] for e in on_set["entries"]] == ["reference", "good", "noisy"]
+
+
+# -- the image strip: one budget for all ------------------------------------------------------
+
+def test_the_image_strip_shows_every_strategy_at_one_budget(tmp_path):
+    """Issue 42 follow-up, item 1: the strip ("each strategy at about equal time") took each
+    strategy's point nearest the middle of the common time range, so one strategy showed at 2 s
+    beside another at 0.99 s. With budgets it shows every strategy at the largest budget all have,
+    and says so; the synthetic sweep has budgets 0.1 and 0.2 s and spp points (4, 16 spp) whose
+    times differ per strategy (the old rule picked good at 16 spp, 0.064 s, and noisy at 0.032 s)."""
+    from mitsuba_lab.experiment.report import build_report
+
+    synth.write_sweep(tmp_path)
+    paths = build_report(str(tmp_path))
+    summary = open(os.path.join(tmp_path, "report", "summary.md")).read()
+    line = next(x for x in summary.splitlines() if x.startswith("![reference, each strategy"))
+    print(line)
+    assert line.startswith("![reference, each strategy at the 0.2 s budget (0.2 s measured), error maps]")
+    from mitsuba_lab.experiment.report import Report, strip_points
+
+    groups, label = group_points(Report(str(tmp_path)).stats["s"])
+    picks, _ = strip_points(groups, label)
+    assert {label(k): p.budget_s for k, p in picks.items()} == {"good": 0.2, "noisy": 0.2}
+
+
+def test_the_image_strip_takes_the_largest_budget_all_strategies_have_and_marks_off_budget(tmp_path,
+                                                                                            off_budget_sweep):
+    from mitsuba_lab.experiment.report import Report, strip_points
+
+    groups, label = group_points(off_budget_sweep.stats["s"])
+    picks, title = strip_points(groups, label)
+    print(title)
+    assert {label(k): p.budget_s for k, p in picks.items()} == {"good": 0.2, "noisy": 0.2}
+    assert title == "reference, each strategy at the 0.2 s budget (0.13-0.2 s measured; off budget: noisy 0.13 s), error maps"
+    synth.write_sweep(tmp_path)                      # noisy without its 0.2 s point: both at 0.1 s
+    synth.edit_runs(tmp_path, lambda row: [] if row["point"] == "s/noisy/independent/t0.2s" else None)
+    groups, label = group_points(Report(str(tmp_path)).stats["s"])
+    picks, title = strip_points(groups, label)
+    assert {label(k): p.budget_s for k, p in picks.items()} == {"good": 0.1, "noisy": 0.1}
+    assert title.startswith("reference, each strategy at the 0.1 s budget")
+
+
+def test_without_budgets_the_image_strip_title_names_each_images_time(tmp_path):
+    from mitsuba_lab.experiment.report import Report, strip_points
+
+    synth.write_sweep(tmp_path, budgets=())
+    groups, label = group_points(Report(str(tmp_path)).stats["s"])
+    picks, title = strip_points(groups, label)
+    print(title)
+    times = {label(k): f"{p.time_s:.2g} s" for k, p in picks.items()}
+    assert title == f"reference, each strategy at about equal time (good {times['good']}, noisy {times['noisy']}), error maps"
