@@ -311,3 +311,35 @@ def test_without_budgets_the_image_strip_title_names_each_images_time(tmp_path):
     print(title)
     times = {label(k): f"{p.time_s:.2g} s" for k, p in picks.items()}
     assert title == f"reference, each strategy at about equal time (good {times['good']}, noisy {times['noisy']}), error maps"
+
+
+# -- progressive retries under a fixed cost per pass ---------------------------------------------
+
+def test_progressive_retries_reach_a_budget_that_the_pass_count_alone_exceeds():
+    """Issue 42 follow-up, item 3: under load path's 1 s point went 47 -> 34 spp but 1.424 ->
+    1.391 s: each of its 8 passes cost about 0.16 s whatever its size, and the retry kept the 8
+    passes and scaled only their sizes. Here every timed pass takes 0.16 s + 2.5 ms per spp (8
+    passes of 47 spp: 1.40 s for a 1 s budget). The retry fits that model to the passes'
+    measured times and drops passes until their fixed part is at most half the budget (3 passes,
+    0.48 s), the rest filled with samples: one retry, within the budget."""
+    renders = FakeRenders(lambda count, seed: 0.16 + 0.0025 * count)
+    point = Point("s/p/i/t1s", "s", "p", "i", None, 1.0, (1, 2, 3), WARMUP, progressive=True)
+    progressive = PointTask(point=point, scene=SceneSpec("s", "s.xml", None, {}, {}),
+                            sampler=PluginSpec("i", "independent", {}), strategy=PluginSpec("p", "path", {}),
+                            seeds=(1, 2, 3), spp=None, reference_image=REFERENCE, regions={}, metrics=(),
+                            variant="scalar_rgb", passes=(1, 1, 1, 2, 4, 8, 16, 14))
+    result = execute_progressive(progressive, renders)
+    tries = result.calibration["budget_tries"]
+    print([(t["passes"], round(t["measured_s"], 4)) for t in tries])
+    assert tries[0]["measured_s"] == pytest.approx(8 * 0.16 + 47 * 0.0025)
+    assert len(tries) == 2 and result.calibration["within_budget"] is True
+    assert tries[1]["passes"] == [69, 69, 70] and tries[1]["measured_s"] == pytest.approx(1.0)
+    assert [row["pass_spp"] for row, _ in result.runs] == [[69, 69, 70]] * 3
+    # the fit alone, from injected pass times: deterministic, and with no fixed part the passes stay
+    times = [(n, 0.16 + 0.0025 * n) for n in (1, 1, 1, 2, 4, 8, 16, 14)]
+    assert budget.rescaled_passes((1, 1, 1, 2, 4, 8, 16, 14), 1.3975, 1.0, times) == (69, 69, 70)
+    assert budget.rescaled_passes((1, 1, 1, 2, 4, 8, 16, 14), 2 * 1.3975, 1.0, times) == (136,)   # twice as slow: one pass
+    assert budget.rescaled_passes((10, 10, 20, 40), 2.0, 1.0, [(n, 0.025 * n) for n in (10, 10, 20, 40)]) == \
+        (5, 5, 10, 20)
+    assert budget.pass_times([{"checkpoints": [{"spp": 1, "wall_s": 0.2}, {"spp": 3, "wall_s": 0.5}]}]) == \
+        [(1, 0.2), (2, pytest.approx(0.3))]
