@@ -221,3 +221,37 @@ def test_the_image_mean_over_the_references_says_biased_only_outside_its_interva
     scaled = SimpleNamespace(time_s=1.0, spp=4, seeds=8, mean_ratio=1.1, mean_ratio_se=0.005)
     md = "\n".join(tables.mean_table({("photon", "i"): [scaled]}, lambda key: key[0]))
     assert "| biased: +10% |" in md
+
+
+# -- a biased strategy is not named most efficient -------------------------------------------------
+
+def test_a_biased_or_marked_strategy_is_left_out_of_the_efficiency_verdicts(tmp_path):
+    """Issue 42 follow-up, item 5: with path allowed on a scene whose medium it ignores, every
+    table marked "path (ignores media)", its bias was "biased", and yet the report named it "most
+    efficient" in every region. Here "good" is 8x cheaper than "noisy" but renders the image 10%
+    too bright (a resolved bias everywhere): every efficiency verdict leaves it out and says why.
+    Then, unbiased but marked as ignoring part of the scene, it is left out as well."""
+    synth.write_sweep(tmp_path / "biased", bias={"good": np.full((synth.HEIGHT, synth.WIDTH), 0.1)})
+    md = open(build_report(str(tmp_path / "biased"))["md"]).read()
+    overall = _verdict_line(md, "**Most efficient:**")
+    regions = _verdict_line(md, "Most efficient per region")
+    print(overall, regions, sep="\n")
+    assert "good left out: biased here" in overall and not overall.startswith("**Most efficient:** good")
+    for region in synth.REGIONS:
+        assert f"{region} at 0.2 s: noisy (the only one measured), good left out: biased here" in regions
+        lines = md.splitlines()
+        start = lines.index(f"### Region `{region}` at each time budget")
+        rows = [row for row in lines[start:start + 8] if row.startswith("| 0.")]
+        assert rows and all(row.rstrip(" |").endswith("good left out: biased here") for row in rows), rows
+
+    synth.write_sweep(tmp_path / "marked")
+    from mitsuba_lab.experiment.store import ResultStore
+
+    ResultStore(str(tmp_path / "marked")).append(
+        {"kind": "meta", "config": "synthetic.toml", "name": "synthetic", "machine": {},
+         "unsupported": [{"scene": "s", "strategy": "good", "mark": "ignores media", "reason": "a test"}]})
+    md = open(build_report(str(tmp_path / "marked"))["md"]).read()
+    regions = _verdict_line(md, "Most efficient per region")
+    print(regions)
+    assert "good (ignores media) left out: it ignores part of the scene" in regions
+    assert "good (ignores media) left out" in _verdict_line(md, "**Most efficient:**")

@@ -36,7 +36,9 @@ VERDICT_RULE = (
     "97.5% for one taken over the seeds (12.7 standard errors with 2 seeds, 4.3 with 3); otherwise it reads "
     "\"not resolved with N seeds (needs about M)\", M from the standard error's 1/sqrt(N) scaling. Numbers "
     "carry the digits that tell apart values differing by more than their errors. A bias^2 more than two "
-    "standard errors below zero is flagged as an unreliable variance estimate (heavy tails).")
+    "standard errors below zero is flagged as an unreliable variance estimate (heavy tails). Efficiency ranks "
+    "consistent estimators: a strategy whose bias is resolved (over the image, or in a region) or that ignores "
+    "part of the scene is left out of a \"most efficient\" verdict there, and the verdict names it.")
 
 CSV_COLUMNS = ("point", "scene", "strategy", "sampler", "spp", "budget_s", "seed", "wall_s", "kernel_s",
                "compile_s", "mse", "rel_mse", "flip", "ciede2000", "finite", "negative", "peak_rss_mib", "host",

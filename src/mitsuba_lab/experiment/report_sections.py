@@ -23,7 +23,7 @@ from .budget import BUDGET_RETRIES, budget_label, missed_budget, off_budget_text
 from .config import PASS_PARAMETER
 from .report_bias import BiasTables
 from .report_veach import VeachSection
-from .verdicts import SEPARATION, UNRELIABLE, best_of
+from .verdicts import SEPARATION, UNRELIABLE, best_of, bias_verdict
 from .spectrum import fit_slope, slope_cell, slope_note
 
 
@@ -109,9 +109,11 @@ class SectionTables(VeachSection, BiasTables):
                  rays_cell(p.rays_per_sample)]
                 for rank, (((ranked, _), key, p, s), efficiency) in enumerate(zip(rows, efficiencies), 1)]
         ranked = [(key, p) for (ok, _), key, p, _ in rows if ok]
+        left = {label(key): why for key, p in ranked if (why := self.left_out_why(p))}
+        kept = [(key, p) for key, p in ranked if label(key) not in left]
         best = best_of({label(key): (1.0 / p.efficiency, getattr(p, "efficiency_se", math.nan) / p.efficiency ** 2)
-                        for key, p in ranked},
-                       min((p.seeds for _, p in ranked), default=0))
+                        for key, p in kept},
+                       min((p.seeds for _, p in kept), default=0))
         caption = (f"Each strategy's longest point (median wall time of one render). Renders shorter than "
                    f"{short} are timing noise (launch overhead and scheduler jitter): such a point is not "
                    f"ranked and is listed last, and the slope is fitted only over points of at least {short}.")
@@ -129,7 +131,8 @@ class SectionTables(VeachSection, BiasTables):
             caption += (f" **Off budget:** {', '.join(off)} (median time outside {tolerance_text()} of its time "
                         f"budget): ranked by the time it took, not as a render at its budget.")
         verdict = [] if len(ranked) < 2 else [
-            "", f"**Most efficient:** {best.text()} (efficiency +- its standard error over the seeds; the cost "
+            "", f"**Most efficient:** {best.text()}{left_out_note(left)} (efficiency +- its standard error over "
+                f"the seeds; the cost "
                 f"ratio's interval at Student's t over the seeds)."]
         return ["", "### Efficiency (largest sample count), ranked", "", caption, "", *markdown_table(header, body),
                 *verdict,
@@ -232,17 +235,22 @@ class SectionTables(VeachSection, BiasTables):
         points = [p for group in groups.values() for p in group]
         budgets = sorted({p.budget_s for p in points if p.budget_s is not None})
         verdicts = []
+        at = {(label((p.strategy, p.sampler)), p.budget_s): p for p in points}
+        tops = {label(key): max(group, key=lambda p: p.time_s) for key, group in groups.items()}
         for n in names:
             if budgets:
                 table = region_at_budgets(points, lambda p: label((p.strategy, p.sampler)), n, rel_floors[n])
                 budget, cells_at = max(table.items()) if table else (None, {})
-                best = best_of({k: (c["cost"], c["cost_se"]) for k, c in cells_at.items() if not c["off_budget"]},
+                left = self.left_out_in(scene, rects.get(n), {k: at[(k, budget)] for k in cells_at})
+                best = best_of({k: (c["cost"], c["cost_se"]) for k, c in cells_at.items()
+                                if not c["off_budget"] and k not in left},
                                min((c["seeds"] for c in cells_at.values()), default=0))
                 where = f"{n} at {budget:g} s" if budget is not None else n
             else:
-                best, where = best_of(costs[n], min(seeds[n])), n
-            if best.winner is not None:
-                verdicts.append(f"{where}: {best.text()}")
+                left = self.left_out_in(scene, rects.get(n), tops)
+                best, where = best_of({k: c for k, c in costs[n].items() if k not in left}, min(seeds[n])), n
+            if best.winner is not None or left:
+                verdicts.append(f"{where}: {best.text()}{left_out_note(left)}")
         if verdicts:
             md += ["", "Most efficient per region (least cost; " + (
                 "at the largest time budget, as in the region's table at each budget" if budgets else
@@ -263,10 +271,13 @@ class SectionTables(VeachSection, BiasTables):
                 continue
             names = sorted({n for cells in table.values() for n in cells})
             columns = budget_columns(stats)
+            at = {(label((p.strategy, p.sampler)), p.budget_s): p for p in stats}
+            left = {b: self.left_out_in(scene, rect, {k: at[(k, b)] for k in cells}) for b, cells in table.items()}
             body = [[budget_label(budget, columns[budget]["low"], columns[budget]["high"]),
                      *(budget_cell(c) if (c := cells.get(n)) else "n/a" for n in names),
-                     best_of({k: (c["cost"], c["cost_se"]) for k, c in cells.items() if not c["off_budget"]},
-                             min(c["seeds"] for c in cells.values())).text()]
+                     best_of({k: (c["cost"], c["cost_se"]) for k, c in cells.items()
+                              if not c["off_budget"] and k not in left[budget]},
+                             min(c["seeds"] for c in cells.values())).text() + left_out_note(left[budget])]
                     for budget, cells in table.items()]
             md += ["", f"### Region `{name}` at each time budget", "",
                    f"Cells: relMSE minus the region's reference floor ({fmt(floor['rel_mse'])}) +- one "
@@ -376,6 +387,22 @@ class SectionTables(VeachSection, BiasTables):
                 "own; a progressive pass count and count_rays are left out).", "",
                 *markdown_table(["kind", "name", "plugin", "parameters", "scenes"], body)]
 
+    def left_out_why(self, p, rect=None) -> str:
+        """Why point ``p`` is left out of a "most efficient" verdict (in region ``rect``, or over
+        the image): "biased here" where its bias^2 is resolved there, else "it ignores part of the
+        scene" where it is marked so ("ignores media"); "" for a strategy that may be named."""
+        if rect is None:           # (getattr: a point that carries no bias estimate has none resolved)
+            bias2, se = getattr(p, "rel_bias2", math.nan), getattr(p, "rel_bias2_se", math.nan)
+        else:
+            _, bias2, se = self.region_bias(p, self.references[p.scene], rect)
+        if math.isfinite(bias2) and bias_verdict(bias2, se, p.seeds)[0] == "biased":
+            return "biased here"
+        return "it ignores part of the scene" if (p.scene, getattr(p, "strategy", None)) in self.marks else ""
+
+    def left_out_in(self, scene, rect, points: dict) -> dict:
+        """{label: why} of ``points`` ({label: PointStats} on ``scene``) left out of a region's verdict."""
+        return {name: why for name, p in points.items() if (why := self.left_out_why(p, rect))}
+
     def _run_row(self, stats: PointStats) -> dict:
         """A run row of the point (rows in force only; the store does not change while the
         report is built, so the point -> row map is made once)."""
@@ -393,6 +420,12 @@ class SectionTables(VeachSection, BiasTables):
 
     def _regions(self, scene, width, height) -> dict:
         return {n: tuple(r) for n, r in self.references[scene].meta.get("regions", {}).items()}
+
+
+def left_out_note(left: dict) -> str:
+    """", path (ignores media) left out: biased here" after a verdict, for each strategy
+    ``left`` ({name: why}) kept out of it: an efficiency ranks consistent estimators only."""
+    return "".join(f", {name} left out: {why}" for name, why in left.items())
 
 
 def _params_text(params: dict | None) -> str:
