@@ -91,7 +91,7 @@ class SectionTables(VeachSection, BiasTables):
             trusted = timing_trusted(top)
             timed = [p for p in points if timing_trusted(p)]
             fit = fit_slope([p.time_s for p in timed], [p.mse_corrected for p in timed],
-                            [p.mse_std / math.sqrt(p.seeds) for p in timed])
+                            [p.mse_std / math.sqrt(p.seeds) for p in timed], axis="time")
             floor = math.isnan(top.efficiency)       # corrected MSE <= 0: at the reference's floor
             score = top.efficiency if trusted and not floor else -1.0
             rows.append(((trusted and not floor, score), key, top, fit))
@@ -336,7 +336,7 @@ class SectionTables(VeachSection, BiasTables):
             result = bias_by_passes(points, lambda p: int(self._param(p, unit, p.spp)))
             resolved = [r for r in result["rows"] if r["resolved"]]
             fit = fit_slope([r["passes"] for r in resolved], [r["bias2"] for r in resolved],
-                            [r["bias2_se"] for r in resolved])
+                            [r["bias2_se"] for r in resolved], axis=unit)
             curves[label(key)] = result
             header = [unit, "seeds", "time s", "relMSE", "variance", "bias^2 (+- se)", "resolved", "bias^2 / relMSE"]
             body = [[r["passes"], r["seeds"], fmt(r["time_s"]), fmt(r["rel_mse"]), fmt(r["variance"]),
