@@ -188,6 +188,10 @@ def test_a_user_scene_without_a_res_default(tmp_path):
     assert float(rows["lab_nee"]["mean"]) > 0
     film = check.load_check_scene(str(scene), 8, {}).sensors()[0].film().size()
     assert (film[0], film[1]) == (8, 5)
+    # the output says what film it rendered (issue 42 follow-up, item 6: the header said "--res 8" only)
+    print(text.splitlines()[:3])
+    assert "my_scene.xml: film 8x5 pixels (width x height), as rendered" in text
+    assert {r["film"] for r in rows.values()} == {"8x5"}
 
 
 def test_firefly_rule():

@@ -211,3 +211,18 @@ reference_seeds = 1
                    .replace("[gradients]", "[gradients]\nkey = \"red.albedo\""))
     with pytest.raises(LabError, match="unknown scene parameter key.*red.albedo.*the scene has: .*" + RED):
         inv.run(parser.parse_args([str(bad), "-o", str(tmp_path / "b")]), io.StringIO())
+
+
+def test_no_most_efficient_sampler_with_one_sampler():
+    """Issue 42 follow-up, item 7: one sampler ran (independent at 1 spp) and `invert` printed
+    "most gradient accuracy per second: independent": with one candidate nothing is compared."""
+    from mitsuba_lab.inverse.gradients import GradientPoint, GradientSweep
+
+    one = [GradientPoint("independent", 1, 2, time_s=0.1, rel_variance=2.34, rel_mse=1.69, efficiency=4.25),
+           GradientPoint("independent", 4, 2, time_s=0.3, rel_variance=0.6, rel_mse=0.5, efficiency=5.5)]
+    sweep = GradientSweep(one, np.zeros(3), 0.0, "blob.bsdf.reflectance.value", "l2")
+    text = inv.format_gradient_table(sweep)
+    print(text)
+    assert inv.best_sampler(one) is None and "most gradient accuracy" not in text
+    two = one + [GradientPoint("lab_independent", 1, 2, time_s=0.1, rel_variance=1.0, rel_mse=1.0, efficiency=9.0)]
+    assert inv.best_sampler(two) == ("lab_independent", 9.0)

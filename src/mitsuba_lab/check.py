@@ -397,6 +397,8 @@ def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
     scene = load_check_scene(path, args.res, defines)
     traits = SceneTraits.from_scene(scene)
     name = os.path.basename(path)
+    film = film_text(scene)
+    print(f"  {name}: film {film} pixels (width x height), as rendered", file=out, flush=True)
     warnings = traits.warnings()
     rows, judged, path_ref, twin, more = references(path, name, args, defines, traits)
     warnings += more
@@ -426,7 +428,15 @@ def check_scene(path, args, defines, out) -> tuple[list[dict], list[str]]:
         judge_strategy(row, stack, scene, chosen, args, judged, path_ref, twin)
         measured[strategy] = row
         rows.append(row)
+    for row in rows:
+        row.setdefault("film", film)                 # the film as rendered, in the CSV and the HTML
     return rows, warnings
+
+
+def film_text(scene) -> str:
+    """The scene's film as rendered, "64x48" (width x height): what ``--res`` made of it."""
+    size = scene.sensors()[0].film().size()
+    return f"{size[0]}x{size[1]}"
 
 
 def run(args, out) -> int:
@@ -459,7 +469,8 @@ def run(args, out) -> int:
     if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
         raise LabError(f"output folder does not exist or is not writable: {folder}")
 
-    settings = (f"--res {resolution_text(args.res)}, {args.spp} spp per strategy, reference {args.ref_spp} spp, "
+    settings = (f"--res {resolution_text(args.res)} (each scene's film as rendered: its line and the film column), "
+                f"{args.spp} spp per strategy, reference {args.ref_spp} spp, "
                 f"{args.splits} splits, max_depth {args.max_depth}, |z| <= {args.z_max:g}, "
                 f"escalate x{args.escalate}, firefly k = {args.firefly_k:g}")
     print(f"mitsuba-lab check: {len(scenes)} scene(s); {settings}", file=out)

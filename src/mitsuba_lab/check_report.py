@@ -5,7 +5,7 @@ import html
 
 from .reporting import dict_rows, fmt, html_page, html_table, write_csv as write_table, write_text
 
-COLUMNS = ("scene", "strategy", "status", "finite_fraction", "negative_pixels", "max_value",
+COLUMNS = ("scene", "film", "strategy", "status", "finite_fraction", "negative_pixels", "max_value",
            "fireflies", "mean", "ref_mean", "z", "camera_rays_per_pixel",
            "extension_rays_per_pixel", "shadow_rays_per_pixel", "other_rays_per_pixel", "time_s", "z_twin", "note", "evidence")
 

@@ -226,6 +226,27 @@ def test_a_point_off_budget_is_left_out_of_the_ranking_at_its_budget(off_budget_
     assert "off its 0.2 s budget: 0.13 s" in md and "**Off budget:** noisy" in md
 
 
+def test_the_bias_tables_mark_the_point_off_budget(off_budget_sweep):
+    """Issue 42 follow-up, item 2: the walkthrough under load marked its off-budget 1 s points in the
+    equal-time, region and viewer tables but not in "Bias and variance per point" nor in the regions'
+    variance / bias^2 tables. Every row or cell of the off-budget point says so, no other does."""
+    report = off_budget_sweep
+    stats = sorted(report.stats["s"], key=lambda p: p.point)
+    md = "\n".join(report.bias_table(stats))
+    rows = {line.split("|")[1].strip(): line for line in md.splitlines() if line.startswith("| s/")}
+    off = [point for point, line in rows.items() if "off its" in line]
+    print("\n".join(line for line in md.splitlines() if "t0.2s" in line))
+    assert off == ["s/noisy/independent/t0.2s (**off its 0.2 s budget: 0.13 s**)"]
+    ref = report.references["s"]
+    rect = report._regions("s", ref.image.shape[1], ref.image.shape[0])["light"]
+    region = report._region_bias_table("light", rect, ref, stats, lambda key: key[0])
+    print("\n".join(region))
+    row_02 = next(line for line in region if line.startswith("| 0.2 s"))
+    good, noisy = (cell.strip() for cell in row_02.strip("|").split("|")[1:])
+    assert noisy.endswith("(**off its 0.2 s budget: 0.13 s**)") and "off its" not in good
+    assert not any("off its" in line for line in region if line.startswith("| 0.1 s"))
+
+
 def test_the_viewer_labels_the_point_off_budget(off_budget_sweep):
     from mitsuba_lab.experiment.viewer import scene_data
 
@@ -239,3 +260,86 @@ def test_the_viewer_labels_the_point_off_budget(off_budget_sweep):
     assert "off its 0.2 s budget: 0.13 s" in off_set["entries"][2]["detail"]
     on_set = by_name["equal time 0.1 s (0.1 s measured)"]
     assert [e["label"] for e in on_set["entries"]] == ["reference", "good", "noisy"]
+
+
+# -- the image strip: one budget for all ------------------------------------------------------
+
+def test_the_image_strip_shows_every_strategy_at_one_budget(tmp_path):
+    """Issue 42 follow-up, item 1: the strip ("each strategy at about equal time") took each
+    strategy's point nearest the middle of the common time range, so one strategy showed at 2 s
+    beside another at 0.99 s. With budgets it shows every strategy at the largest budget all have,
+    and says so; the synthetic sweep has budgets 0.1 and 0.2 s and spp points (4, 16 spp) whose
+    times differ per strategy (the old rule picked good at 16 spp, 0.064 s, and noisy at 0.032 s)."""
+    from mitsuba_lab.experiment.report import build_report
+
+    synth.write_sweep(tmp_path)
+    paths = build_report(str(tmp_path))
+    summary = open(os.path.join(tmp_path, "report", "summary.md")).read()
+    line = next(x for x in summary.splitlines() if x.startswith("![reference, each strategy"))
+    print(line)
+    assert line.startswith("![reference, each strategy at the 0.2 s budget (0.2 s measured), error maps]")
+    from mitsuba_lab.experiment.report import Report, strip_points
+
+    groups, label = group_points(Report(str(tmp_path)).stats["s"])
+    picks, _ = strip_points(groups, label)
+    assert {label(k): p.budget_s for k, p in picks.items()} == {"good": 0.2, "noisy": 0.2}
+
+
+def test_the_image_strip_takes_the_largest_budget_all_strategies_have_and_marks_off_budget(tmp_path,
+                                                                                            off_budget_sweep):
+    from mitsuba_lab.experiment.report import Report, strip_points
+
+    groups, label = group_points(off_budget_sweep.stats["s"])
+    picks, title = strip_points(groups, label)
+    print(title)
+    assert {label(k): p.budget_s for k, p in picks.items()} == {"good": 0.2, "noisy": 0.2}
+    assert title == "reference, each strategy at the 0.2 s budget (0.13-0.2 s measured; off budget: noisy 0.13 s), error maps"
+    synth.write_sweep(tmp_path)                      # noisy without its 0.2 s point: both at 0.1 s
+    synth.edit_runs(tmp_path, lambda row: [] if row["point"] == "s/noisy/independent/t0.2s" else None)
+    groups, label = group_points(Report(str(tmp_path)).stats["s"])
+    picks, title = strip_points(groups, label)
+    assert {label(k): p.budget_s for k, p in picks.items()} == {"good": 0.1, "noisy": 0.1}
+    assert title.startswith("reference, each strategy at the 0.1 s budget")
+
+
+def test_without_budgets_the_image_strip_title_names_each_images_time(tmp_path):
+    from mitsuba_lab.experiment.report import Report, strip_points
+
+    synth.write_sweep(tmp_path, budgets=())
+    groups, label = group_points(Report(str(tmp_path)).stats["s"])
+    picks, title = strip_points(groups, label)
+    print(title)
+    times = {label(k): f"{p.time_s:.2g} s" for k, p in picks.items()}
+    assert title == f"reference, each strategy at about equal time (good {times['good']}, noisy {times['noisy']}), error maps"
+
+
+# -- progressive retries under a fixed cost per pass ---------------------------------------------
+
+def test_progressive_retries_reach_a_budget_that_the_pass_count_alone_exceeds():
+    """Issue 42 follow-up, item 3: under load path's 1 s point went 47 -> 34 spp but 1.424 ->
+    1.391 s: each of its 8 passes cost about 0.16 s whatever its size, and the retry kept the 8
+    passes and scaled only their sizes. Here every timed pass takes 0.16 s + 2.5 ms per spp (8
+    passes of 47 spp: 1.40 s for a 1 s budget). The retry fits that model to the passes'
+    measured times and drops passes until their fixed part is at most half the budget (3 passes,
+    0.48 s), the rest filled with samples: one retry, within the budget."""
+    renders = FakeRenders(lambda count, seed: 0.16 + 0.0025 * count)
+    point = Point("s/p/i/t1s", "s", "p", "i", None, 1.0, (1, 2, 3), WARMUP, progressive=True)
+    progressive = PointTask(point=point, scene=SceneSpec("s", "s.xml", None, {}, {}),
+                            sampler=PluginSpec("i", "independent", {}), strategy=PluginSpec("p", "path", {}),
+                            seeds=(1, 2, 3), spp=None, reference_image=REFERENCE, regions={}, metrics=(),
+                            variant="scalar_rgb", passes=(1, 1, 1, 2, 4, 8, 16, 14))
+    result = execute_progressive(progressive, renders)
+    tries = result.calibration["budget_tries"]
+    print([(t["passes"], round(t["measured_s"], 4)) for t in tries])
+    assert tries[0]["measured_s"] == pytest.approx(8 * 0.16 + 47 * 0.0025)
+    assert len(tries) == 2 and result.calibration["within_budget"] is True
+    assert tries[1]["passes"] == [69, 69, 70] and tries[1]["measured_s"] == pytest.approx(1.0)
+    assert [row["pass_spp"] for row, _ in result.runs] == [[69, 69, 70]] * 3
+    # the fit alone, from injected pass times: deterministic, and with no fixed part the passes stay
+    times = [(n, 0.16 + 0.0025 * n) for n in (1, 1, 1, 2, 4, 8, 16, 14)]
+    assert budget.rescaled_passes((1, 1, 1, 2, 4, 8, 16, 14), 1.3975, 1.0, times) == (69, 69, 70)
+    assert budget.rescaled_passes((1, 1, 1, 2, 4, 8, 16, 14), 2 * 1.3975, 1.0, times) == (136,)   # twice as slow: one pass
+    assert budget.rescaled_passes((10, 10, 20, 40), 2.0, 1.0, [(n, 0.025 * n) for n in (10, 10, 20, 40)]) == \
+        (5, 5, 10, 20)
+    assert budget.pass_times([{"checkpoints": [{"spp": 1, "wall_s": 0.2}, {"spp": 3, "wall_s": 0.5}]}]) == \
+        [(1, 0.2), (2, pytest.approx(0.3))]

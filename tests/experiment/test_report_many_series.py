@@ -127,6 +127,20 @@ def test_thumbnail_strip_wraps_and_has_colour_bars():
         pyplot().close(balanced)
 
 
+def test_a_slope_over_too_short_a_time_range_says_so():
+    """Issue 42 follow-up, item 7: under load a slope was fitted over an off-budget 1 s point at
+    1.4 s and the 2 s point at 1.7 s, 1.2x apart: -7.15 +- 0.57, starred only as "2 points: too
+    few to check the line". The real reason comes first: too short a time range."""
+    from mitsuba_lab.experiment.spectrum import slope_note
+
+    short = fit_slope([1.4, 1.7], [0.0263, 0.00821], [0.001, 0.0003], axis="time")
+    note = "\n".join(slope_note([("mis", short)], "slope column"))
+    print(short.problem, note, sep="\n")
+    assert short.problem.startswith("too short a time range (1.2x from first to last)")
+    assert "mis (2 points: too short a time range (1.2x from first to last)" in note
+    assert "too short" not in fit_slope([0.5, 2.0], [1.0, 0.25], [0.01, 0.005], axis="time").problem
+
+
 def test_fit_slope_gives_its_standard_error_and_flags_what_cannot_be_trusted():
     rng = np.random.default_rng(5)
     t = np.geomspace(0.1, 1.6, 5)

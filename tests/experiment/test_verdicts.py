@@ -141,6 +141,34 @@ def test_a_bias_far_below_zero_is_flagged_as_an_unreliable_variance_estimate():
     assert bias_verdict(-5e-5, 3.7e-5, 2)[0].startswith("not resolved")          # within two: no flag
 
 
+def test_a_negative_bias_within_two_errors_names_no_seed_count_and_prints_its_side_of_two():
+    """The walkthrough's bdpt 1 s point: bias^2 -3.207e-4 +- 1.639e-4 (1.96 standard errors below
+    zero) read "not resolved with 3 seeds (needs about 4)" and "-0.000321 +- 0.00016", which looks
+    like 2.006 errors, past the flag's threshold. A negative estimate never resolves into a bias
+    with more seeds, so no count is named, and the error carries the digit that shows 1.96."""
+    verdict, needed = bias_verdict(-3.207e-4, 1.639e-4, 3)
+    assert needed is None and verdict.startswith("not resolved with 3 seeds") and "needs" not in verdict
+    assert "below zero" in verdict
+    point = SimpleNamespace(scene="s", strategy="bdpt", point="s/bdpt/i/t1s", seeds=3, variance=5e-3,
+                            bias2=-3.207e-4, bias2_se=1.639e-4, rel_variance=1e-3, rel_bias2=-4.05e-4,
+                            rel_bias2_se=7.6e-4, rel_mse_corrected=0.035)
+    table = "\n".join(SectionTables().bias_table([point]))
+    print(table)
+    row = next(line for line in table.splitlines() if line.startswith("| s/bdpt"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    value, error = (float(x) for x in cells[3].split(" (")[0].split(" +- "))
+    assert abs(value) / error < 2, cells[3]                       # as printed: within two errors
+    assert cells[3].startswith("-0.000321 +- 0.000164 (not resolved with 3 seeds (below zero")
+    assert "needs about" not in cells[3] and "needs about" not in cells[5]
+    # above zero the same: 1.98 errors prints as under two (two digits of the error read 2.03)
+    assert fmt_pm(3.25e-4, 1.64e-4) == "0.000325 +- 0.00016"
+    assert fmt_pm(3.25e-4, 1.64e-4, separation=2.0) == "0.000325 +- 0.000164"
+    assert fmt_pm(3.33e-4, 1.64e-4, separation=2.0) == "0.000333 +- 0.00016"     # 2.03 either way
+    assert fmt_pm(1003.78, 0.05, separation=2.0) == "1003.78 +- 0.05"       # far from two: unchanged
+    # a positive estimate still names the seeds that would resolve it
+    assert "needs about" in bias_verdict(3.0e-4, 1.7e-4, 3)[0]
+
+
 def _correlated_sweep(folder, scale: float, seed: int) -> tuple[list[dict], Reference]:
     """Two seeds of a blurring estimator (white noise box-filtered over 5 x 5 pixels, as a photon
     map's kernel correlates neighbours) of a flat image, each seed's render times ``scale``."""
@@ -193,3 +221,37 @@ def test_the_image_mean_over_the_references_says_biased_only_outside_its_interva
     scaled = SimpleNamespace(time_s=1.0, spp=4, seeds=8, mean_ratio=1.1, mean_ratio_se=0.005)
     md = "\n".join(tables.mean_table({("photon", "i"): [scaled]}, lambda key: key[0]))
     assert "| biased: +10% |" in md
+
+
+# -- a biased strategy is not named most efficient -------------------------------------------------
+
+def test_a_biased_or_marked_strategy_is_left_out_of_the_efficiency_verdicts(tmp_path):
+    """Issue 42 follow-up, item 5: with path allowed on a scene whose medium it ignores, every
+    table marked "path (ignores media)", its bias was "biased", and yet the report named it "most
+    efficient" in every region. Here "good" is 8x cheaper than "noisy" but renders the image 10%
+    too bright (a resolved bias everywhere): every efficiency verdict leaves it out and says why.
+    Then, unbiased but marked as ignoring part of the scene, it is left out as well."""
+    synth.write_sweep(tmp_path / "biased", bias={"good": np.full((synth.HEIGHT, synth.WIDTH), 0.1)})
+    md = open(build_report(str(tmp_path / "biased"))["md"]).read()
+    overall = _verdict_line(md, "**Most efficient:**")
+    regions = _verdict_line(md, "Most efficient per region")
+    print(overall, regions, sep="\n")
+    assert "good left out: biased here" in overall and not overall.startswith("**Most efficient:** good")
+    for region in synth.REGIONS:
+        assert f"{region} at 0.2 s: noisy (the only one measured), good left out: biased here" in regions
+        lines = md.splitlines()
+        start = lines.index(f"### Region `{region}` at each time budget")
+        rows = [row for row in lines[start:start + 8] if row.startswith("| 0.")]
+        assert rows and all(row.rstrip(" |").endswith("good left out: biased here") for row in rows), rows
+
+    synth.write_sweep(tmp_path / "marked")
+    from mitsuba_lab.experiment.store import ResultStore
+
+    ResultStore(str(tmp_path / "marked")).append(
+        {"kind": "meta", "config": "synthetic.toml", "name": "synthetic", "machine": {},
+         "unsupported": [{"scene": "s", "strategy": "good", "mark": "ignores media", "reason": "a test"}]})
+    md = open(build_report(str(tmp_path / "marked"))["md"]).read()
+    regions = _verdict_line(md, "Most efficient per region")
+    print(regions)
+    assert "good (ignores media) left out: it ignores part of the scene" in regions
+    assert "good (ignores media) left out" in _verdict_line(md, "**Most efficient:**")

@@ -47,12 +47,47 @@ def rescaled_count(count: int, seconds: float, budget_s: float, fixed_s: float =
     return max(1, int(round(count * max(scale, 0.0))))
 
 
-def rescaled_passes(sizes, seconds: float, budget_s: float) -> tuple[int, ...]:
-    """A progressive budget point's pass sizes scaled so that their sum fills ``budget_s``, from
-    a run of ``sizes`` that took ``seconds`` (each pass at least 1 spp)."""
-    total = sum(sizes)
-    factor = rescaled_count(total, seconds, budget_s) / total
-    return tuple(max(1, int(round(size * factor))) for size in sizes)
+#: A rescaled progressive point keeps its passes while their fixed cost (per pass, fitted) takes
+#: at most this part of the budget; past it, passes are dropped until it does.
+FIXED_SHARE = 0.5
+
+
+def pass_times(runs) -> list[tuple[int, float]]:
+    """(spp, seconds) of every pass of progressive run rows (each row's ``checkpoints``: the
+    elapsed time after each pass, so a pass's time is the difference)."""
+    out = []
+    for row in runs:
+        spp, wall = 0, 0.0
+        for cp in row.get("checkpoints", []):
+            out.append((cp["spp"] - spp, cp["wall_s"] - wall))
+            spp, wall = cp["spp"], cp["wall_s"]
+    return out
+
+
+def rescaled_passes(sizes, seconds: float, budget_s: float, times=()) -> tuple[int, ...]:
+    """A progressive budget point's pass sizes that fill ``budget_s``, from a run of ``sizes``
+    whose measured time (median over seeds) was ``seconds``. ``times``: (spp, seconds) of the
+    passes rendered (``pass_times``), fitted to fixed seconds per pass + seconds per spp
+    (``progressive.fit_pass_time``) and scaled to ``seconds``; without them all the time is per
+    spp. Every pass pays the fixed part, so fewer samples cannot bring the time under it: while
+    the passes' fixed part exceeds FIXED_SHARE of the budget, passes are dropped (the last ones;
+    the first one always stays), then the spp that fill the rest of the budget are shared out in
+    the proportions of the passes kept (each at least 1 spp). Deterministic given the times."""
+    from .progressive import fit_pass_time
+
+    sizes = list(sizes)
+    fixed, per = fit_pass_time(list(times)) if times else (0.0, 1.0)
+    predicted = fixed * len(sizes) + per * sum(sizes)
+    if predicted > 0 and seconds > 0:                # the fit scaled to the measured median
+        fixed, per = fixed * seconds / predicted, per * seconds / predicted
+    count = len(sizes)
+    while count > 1 and fixed * count > FIXED_SHARE * budget_s:
+        count -= 1
+    kept = sizes[:count]
+    total = max(count, int(round((budget_s - fixed * count) / per))) if per > 0 else sum(kept)
+    out = [max(1, int(round(size * total / sum(kept)))) for size in kept]
+    out[-1] = max(1, out[-1] + total - sum(out))     # rounding: the last pass takes the rest
+    return tuple(out)
 
 
 def tolerance_text() -> str:

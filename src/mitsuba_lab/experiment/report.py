@@ -22,7 +22,7 @@ from ..reporting.figures import loglog_axes, pyplot, save_figure, series_styles
 from . import viewer
 from .analysis import (FLOOR_WARNING_FACTOR, PointStats, curve, equal_time_budgets, pilot_light_paths, point_stats,
                        run_image)
-from .budget import missed_budget
+from .budget import measured_range, missed_budget
 from .reference import Reference
 from .report_sections import OTHER_RAY_KINDS, SectionTables
 from .spectrum import plot_error_spectra, slope_table
@@ -36,7 +36,9 @@ VERDICT_RULE = (
     "97.5% for one taken over the seeds (12.7 standard errors with 2 seeds, 4.3 with 3); otherwise it reads "
     "\"not resolved with N seeds (needs about M)\", M from the standard error's 1/sqrt(N) scaling. Numbers "
     "carry the digits that tell apart values differing by more than their errors. A bias^2 more than two "
-    "standard errors below zero is flagged as an unreliable variance estimate (heavy tails).")
+    "standard errors below zero is flagged as an unreliable variance estimate (heavy tails). Efficiency ranks "
+    "consistent estimators: a strategy whose bias is resolved (over the image, or in a region) or that ignores "
+    "part of the scene is left out of a \"most efficient\" verdict there, and the verdict names it.")
 
 CSV_COLUMNS = ("point", "scene", "strategy", "sampler", "spp", "budget_s", "seed", "wall_s", "kernel_s",
                "compile_s", "mse", "rel_mse", "flip", "ciede2000", "finite", "negative", "peak_rss_mib", "host",
@@ -173,7 +175,7 @@ class Report(SectionTables):
         md += self.veach_table(scene, groups)
         strip = self.image_strip(scene, groups, label)
         if strip:
-            md += ["", f"![reference, each strategy at about equal time, error maps]({os.path.basename(strip)})",
+            md += ["", f"![{strip_points(groups, label)[1]}]({os.path.basename(strip)})",
                    "", "Under each render: its relative error |x - ref| / (|ref| + 0.01) (one seed), then the signed "
                        "difference of its mean over the seeds from the reference (red above, blue below, one "
                        "symmetric range for all): noise averages out of the mean, bias stays."]
@@ -222,12 +224,8 @@ class Report(SectionTables):
 
     def image_strip(self, scene, groups, label) -> str | None:
         ref = self.references[scene]
-        curves = {key: curve(points) for key, points in groups.items()}
-        budgets = equal_time_budgets(curves)
-        target = budgets[len(budgets) // 2] if budgets else None
         chosen = []
-        for key, points in groups.items():
-            pick = min(points, key=lambda p: abs(math.log(p.time_s / target)) if target else -p.time_s)
+        for key, pick in strip_points(groups, label)[0].items():
             mean = np.mean([run_image(self.folder, path) for path in pick.images], axis=0)
             title = strip_title(label(key), pick.spp, pick.time_s) + ("\n(off budget)" if missed_budget(pick) else "")
             chosen.append((title, run_image(self.folder, pick.images[0]),
@@ -235,6 +233,30 @@ class Report(SectionTables):
         height, width = ref.image.shape[:2]
         fig = strip_figure(ref.image, ref.variance, chosen, self._regions(scene, width, height))
         return save_figure(fig, os.path.join(self.out, f"{scene}_images.png"))
+
+
+def strip_points(groups, label) -> tuple[dict, str]:
+    """({group: the point the image strip shows}, the strip's title). With time budgets every
+    strategy at one budget, the largest that all of them have (an off-budget point marked);
+    otherwise each strategy's point nearest in log time to the middle of the time range all
+    curves cover (the longest where there is none), the title naming each one's time."""
+    common = set.intersection(*({p.budget_s for p in points if p.budget_s is not None}
+                                for points in groups.values())) if groups else set()
+    if common:
+        budget = max(common)
+        picks = {key: next(p for p in points if p.budget_s == budget) for key, points in groups.items()}
+        times = [p.time_s for p in picks.values()]
+        off = [f"{label(key)} {p.time_s:.2g} s" for key, p in picks.items() if missed_budget(p)]
+        title = (f"reference, each strategy at the {budget:g} s budget ({measured_range(min(times), max(times))}"
+                 + (f"; off budget: {', '.join(off)}" if off else "") + "), error maps")
+        return picks, title
+    curves = {key: curve(points) for key, points in groups.items()}
+    budgets = equal_time_budgets(curves)
+    target = budgets[len(budgets) // 2] if budgets else None
+    picks = {key: min(points, key=lambda p: abs(math.log(p.time_s / target)) if target else -p.time_s)
+             for key, points in groups.items()}
+    at = ", ".join(f"{label(key)} {p.time_s:.2g} s" for key, p in picks.items())
+    return picks, f"reference, each strategy at about equal time ({at}), error maps"
 
 
 #: The thumbnail grid's columns at most: six 2.2-inch cells fill a 1400 px page at 100 dpi.

@@ -15,15 +15,15 @@ from collections import defaultdict
 
 from .. import metrics
 from ..reporting import fmt, fmt_pm, fmt_pm_column, markdown_table
-from ..reporting.numbers import digits_for_error
 from ..reporting.figures import series_styles
 from .analysis import (MIN_TRUSTED_TIME_S, PointStats, bias_by_passes, budget_columns, curve, equal_time_budgets,
-                       region_at_budgets, region_bias_variance, region_floor, seed_cost,
+                       region_at_budgets, region_floor, seed_cost,
                        timing_trusted)
 from .budget import BUDGET_RETRIES, budget_label, missed_budget, off_budget_text, tolerance_text
 from .config import PASS_PARAMETER
+from .report_bias import BiasTables
 from .report_veach import VeachSection
-from .verdicts import UNRELIABLE, best_of, bias_verdict, not_resolved, seeds_needed, separated, separation_factor
+from .verdicts import SEPARATION, UNRELIABLE, best_of, bias_verdict
 from .spectrum import fit_slope, slope_cell, slope_note
 
 
@@ -69,7 +69,7 @@ def budget_rule() -> str:
             f"(the efficiency ranking uses its measured time, as for every point).")
 
 
-class SectionTables(VeachSection):
+class SectionTables(VeachSection, BiasTables):
     #: {(scene, strategy): mark}: ``Report`` sets its own (``shown``); none by default.
     marks: dict = {}
 
@@ -91,7 +91,7 @@ class SectionTables(VeachSection):
             trusted = timing_trusted(top)
             timed = [p for p in points if timing_trusted(p)]
             fit = fit_slope([p.time_s for p in timed], [p.mse_corrected for p in timed],
-                            [p.mse_std / math.sqrt(p.seeds) for p in timed])
+                            [p.mse_std / math.sqrt(p.seeds) for p in timed], axis="time")
             floor = math.isnan(top.efficiency)       # corrected MSE <= 0: at the reference's floor
             score = top.efficiency if trusted and not floor else -1.0
             rows.append(((trusted and not floor, score), key, top, fit))
@@ -109,9 +109,11 @@ class SectionTables(VeachSection):
                  rays_cell(p.rays_per_sample)]
                 for rank, (((ranked, _), key, p, s), efficiency) in enumerate(zip(rows, efficiencies), 1)]
         ranked = [(key, p) for (ok, _), key, p, _ in rows if ok]
+        left = {label(key): why for key, p in ranked if (why := self.left_out_why(p))}
+        kept = [(key, p) for key, p in ranked if label(key) not in left]
         best = best_of({label(key): (1.0 / p.efficiency, getattr(p, "efficiency_se", math.nan) / p.efficiency ** 2)
-                        for key, p in ranked},
-                       min((p.seeds for _, p in ranked), default=0))
+                        for key, p in kept},
+                       min((p.seeds for _, p in kept), default=0))
         caption = (f"Each strategy's longest point (median wall time of one render). Renders shorter than "
                    f"{short} are timing noise (launch overhead and scheduler jitter): such a point is not "
                    f"ranked and is listed last, and the slope is fitted only over points of at least {short}.")
@@ -129,7 +131,8 @@ class SectionTables(VeachSection):
             caption += (f" **Off budget:** {', '.join(off)} (median time outside {tolerance_text()} of its time "
                         f"budget): ranked by the time it took, not as a render at its budget.")
         verdict = [] if len(ranked) < 2 else [
-            "", f"**Most efficient:** {best.text()} (efficiency +- its standard error over the seeds; the cost "
+            "", f"**Most efficient:** {best.text()}{left_out_note(left)} (efficiency +- its standard error over "
+                f"the seeds; the cost "
                 f"ratio's interval at Student's t over the seeds)."]
         return ["", "### Efficiency (largest sample count), ranked", "", caption, "", *markdown_table(header, body),
                 *verdict,
@@ -193,48 +196,6 @@ class SectionTables(VeachSection):
                 "Column headers: the budget and the range of its points' median times. " + budget_rule(), "",
                 *markdown_table(header, body)]
 
-    def bias_table(self, stats) -> list[str]:
-        header = ["point", "seeds", "variance", "bias^2 (+- se)", "relative variance", "relative bias^2 (+- se)",
-                  "relMSE floor-corrected"]
-        body = [[self.shown(s.scene, s.strategy, s.point), s.seeds, fmt(s.variance),
-                 _bias_cell(s.bias2, s.bias2_se, s.seeds), fmt(s.rel_variance),
-                 _bias_cell(s.rel_bias2, s.rel_bias2_se, s.seeds), fmt(s.rel_mse_corrected)] for s in stats]
-        return ["", "### Bias and variance per point", "",
-                "Relative: the same in relMSE's units (pixels weighted by 1 / (ref^2 + 0.01)). bias^2 is an "
-                "estimate (the seed mean's squared error minus its expected noise), so for an unbiased "
-                "estimator it scatters around zero and is negative about as often as positive. Its standard "
-                "error is taken over blocks of pixels (neighbouring pixels of a blurring estimator are not "
-                "independent). Marked \"biased\" more than two standard errors above zero; more than two below "
-                f"zero, where no bias^2 can be, \"{UNRELIABLE}\": the seeds' variance estimate is off, not "
-                "the bias absent; otherwise \"not resolved with N seeds (needs about M)\", M the seeds at "
-                "which an estimate of this size would be two standard errors from zero (an unbiased "
-                "estimator's keeps shrinking, so no number of seeds resolves it).", "",
-                *markdown_table(header, body)]
-
-    def mean_table(self, groups, label) -> list[str]:
-        """Per strategy (its longest point) the image mean over the reference's, with its 95%
-        interval over the seeds: the quickest bias check, 1 within the interval for an unbiased
-        strategy."""
-        body = []
-        for key, points in groups.items():
-            p = max(points, key=lambda q: q.time_s)
-            half = separation_factor(p.seeds) * p.mean_ratio_se
-            gap = abs(p.mean_ratio - 1.0)
-            if separated(gap, p.mean_ratio_se, p.seeds):
-                verdict = f"biased: {100 * (p.mean_ratio - 1):+.2g}%"
-            else:
-                verdict = not_resolved(p.seeds, seeds_needed(p.seeds, gap, p.mean_ratio_se))
-            body.append([label(key), p.spp, fmt(p.time_s), p.seeds, _interval(p.mean_ratio, half), verdict])
-        if not body:
-            return []
-        return ["", "### Image mean over the reference's", "",
-                "Each strategy's longest point: the mean over its seeds of the image's mean over the "
-                "reference's image mean, with its 95% interval (Student's t over the seeds, the reference's "
-                "own noise included). Off 1 by more than the interval: biased (a bias that cancels over the "
-                "image does not show here; the bias table does).", "",
-                *markdown_table(["strategy", "spp", "time s", "seeds", "mean / reference mean (95% interval)",
-                                 "verdict"], body)]
-
     def region_tables(self, scene, groups, label) -> list[str]:
         """Per region each strategy's relMSE and efficiency at its longest point, and the most
         efficient strategy per region. Efficiency and verdict come from the estimate of the
@@ -274,17 +235,22 @@ class SectionTables(VeachSection):
         points = [p for group in groups.values() for p in group]
         budgets = sorted({p.budget_s for p in points if p.budget_s is not None})
         verdicts = []
+        at = {(label((p.strategy, p.sampler)), p.budget_s): p for p in points}
+        tops = {label(key): max(group, key=lambda p: p.time_s) for key, group in groups.items()}
         for n in names:
             if budgets:
                 table = region_at_budgets(points, lambda p: label((p.strategy, p.sampler)), n, rel_floors[n])
                 budget, cells_at = max(table.items()) if table else (None, {})
-                best = best_of({k: (c["cost"], c["cost_se"]) for k, c in cells_at.items() if not c["off_budget"]},
+                left = self.left_out_in(scene, rects.get(n), {k: at[(k, budget)] for k in cells_at})
+                best = best_of({k: (c["cost"], c["cost_se"]) for k, c in cells_at.items()
+                                if not c["off_budget"] and k not in left},
                                min((c["seeds"] for c in cells_at.values()), default=0))
                 where = f"{n} at {budget:g} s" if budget is not None else n
             else:
-                best, where = best_of(costs[n], min(seeds[n])), n
-            if best.winner is not None:
-                verdicts.append(f"{where}: {best.text()}")
+                left = self.left_out_in(scene, rects.get(n), tops)
+                best, where = best_of({k: c for k, c in costs[n].items() if k not in left}, min(seeds[n])), n
+            if best.winner is not None or left:
+                verdicts.append(f"{where}: {best.text()}{left_out_note(left)}")
         if verdicts:
             md += ["", "Most efficient per region (least cost; " + (
                 "at the largest time budget, as in the region's table at each budget" if budgets else
@@ -305,10 +271,13 @@ class SectionTables(VeachSection):
                 continue
             names = sorted({n for cells in table.values() for n in cells})
             columns = budget_columns(stats)
+            at = {(label((p.strategy, p.sampler)), p.budget_s): p for p in stats}
+            left = {b: self.left_out_in(scene, rect, {k: at[(k, b)] for k in cells}) for b, cells in table.items()}
             body = [[budget_label(budget, columns[budget]["low"], columns[budget]["high"]),
                      *(budget_cell(c) if (c := cells.get(n)) else "n/a" for n in names),
-                     best_of({k: (c["cost"], c["cost_se"]) for k, c in cells.items() if not c["off_budget"]},
-                             min(c["seeds"] for c in cells.values())).text()]
+                     best_of({k: (c["cost"], c["cost_se"]) for k, c in cells.items()
+                              if not c["off_budget"] and k not in left[budget]},
+                             min(c["seeds"] for c in cells.values())).text() + left_out_note(left[budget])]
                     for budget, cells in table.items()]
             md += ["", f"### Region `{name}` at each time budget", "",
                    f"Cells: relMSE minus the region's reference floor ({fmt(floor['rel_mse'])}) +- one "
@@ -348,24 +317,6 @@ class SectionTables(VeachSection):
                 *markdown_table(["strategy", "budget", "spp", "chosen per seed", "render s per seed",
                                  "pilot s (median)"], body)]
 
-    def _region_bias_table(self, name, rect, ref, stats, label) -> list[str]:
-        """Per budget, each strategy's relative variance and bias^2 inside one region: whether
-        its error there is noise (more time removes it) or bias (a consistent estimator's blur,
-        which its schedule removes more slowly)."""
-        cells = {}
-        for p in stats:
-            if p.budget_s is not None and len(p.images) >= 2:
-                cells.setdefault(p.budget_s, {})[label((p.strategy, p.sampler))] = \
-                    (*region_bias_variance(p, self.folder, ref, rect), p.seeds)
-        if not cells:
-            return []
-        names = sorted({n for row in cells.values() for n in row})
-        body = [[f"{budget:g} s", *(f"{fmt(c[0])} / {_bias_cell(c[1], c[2], c[3])}" if (c := row.get(n)) else "n/a"
-                                    for n in names)] for budget, row in sorted(cells.items())]
-        return ["", f"Region `{name}`: relative variance / bias^2 +- its standard error (relMSE's units; "
-                    f"with the floor they add up to the region's relMSE; bias^2 is an estimate, near zero "
-                    f"or below for an unbiased strategy; its verdict as in the bias table).", "", *markdown_table(["budget", *names], body)]
-
     def passes_section(self, scene, groups, label) -> list[str]:
         """Bias^2 and variance against passes for the biased, consistent strategies (lab_photon's
         passes, lab_vcm's iterations when it merges, one per spp): bias^2 should fall as they grow."""
@@ -385,11 +336,11 @@ class SectionTables(VeachSection):
             result = bias_by_passes(points, lambda p: int(self._param(p, unit, p.spp)))
             resolved = [r for r in result["rows"] if r["resolved"]]
             fit = fit_slope([r["passes"] for r in resolved], [r["bias2"] for r in resolved],
-                            [r["bias2_se"] for r in resolved])
+                            [r["bias2_se"] for r in resolved], axis=unit)
             curves[label(key)] = result
             header = [unit, "seeds", "time s", "relMSE", "variance", "bias^2 (+- se)", "resolved", "bias^2 / relMSE"]
             body = [[r["passes"], r["seeds"], fmt(r["time_s"]), fmt(r["rel_mse"]), fmt(r["variance"]),
-                     fmt_pm(r["bias2"], r["bias2_se"]), "yes" if r["resolved"] else r["verdict"],
+                     fmt_pm(r["bias2"], r["bias2_se"], separation=SEPARATION), "yes" if r["resolved"] else r["verdict"],
                      fmt(r["bias2"] / r["rel_mse"] if r["rel_mse"] > 0 else math.nan, 2)] for r in result["rows"]]
             md += ["", f"### {label(key)}: bias^2 and variance against {unit}", "",
                    f"In relMSE's units (pixels weighted by 1 / (ref^2 + 0.01), so the light's edge pixels do "
@@ -436,6 +387,22 @@ class SectionTables(VeachSection):
                 "own; a progressive pass count and count_rays are left out).", "",
                 *markdown_table(["kind", "name", "plugin", "parameters", "scenes"], body)]
 
+    def left_out_why(self, p, rect=None) -> str:
+        """Why point ``p`` is left out of a "most efficient" verdict (in region ``rect``, or over
+        the image): "biased here" where its bias^2 is resolved there, else "it ignores part of the
+        scene" where it is marked so ("ignores media"); "" for a strategy that may be named."""
+        if rect is None:           # (getattr: a point that carries no bias estimate has none resolved)
+            bias2, se = getattr(p, "rel_bias2", math.nan), getattr(p, "rel_bias2_se", math.nan)
+        else:
+            _, bias2, se = self.region_bias(p, self.references[p.scene], rect)
+        if math.isfinite(bias2) and bias_verdict(bias2, se, p.seeds)[0] == "biased":
+            return "biased here"
+        return "it ignores part of the scene" if (p.scene, getattr(p, "strategy", None)) in self.marks else ""
+
+    def left_out_in(self, scene, rect, points: dict) -> dict:
+        """{label: why} of ``points`` ({label: PointStats} on ``scene``) left out of a region's verdict."""
+        return {name: why for name, p in points.items() if (why := self.left_out_why(p, rect))}
+
     def _run_row(self, stats: PointStats) -> dict:
         """A run row of the point (rows in force only; the store does not change while the
         report is built, so the point -> row map is made once)."""
@@ -455,25 +422,15 @@ class SectionTables(VeachSection):
         return {n: tuple(r) for n, r in self.references[scene].meta.get("regions", {}).items()}
 
 
+def left_out_note(left: dict) -> str:
+    """", path (ignores media) left out: biased here" after a verdict, for each strategy
+    ``left`` ({name: why}) kept out of it: an efficiency ranks consistent estimators only."""
+    return "".join(f", {name} left out: {why}" for name, why in left.items())
+
+
 def _params_text(params: dict | None) -> str:
     """Parameters as one table cell: ``name = value`` pairs, sorted; "(defaults)" when none,
     "(not stored)" when the rows do not say (None)."""
     if params is None:
         return "(not stored)"
     return ", ".join(f"{k} = {v}" for k, v in sorted(params.items())) or "(defaults)"
-
-
-def _bias_cell(bias2: float, se: float, seeds: int) -> str:
-    """A bias^2 estimate with its standard error and its verdict (``verdicts.bias_verdict``)."""
-    if math.isnan(bias2):
-        return fmt(bias2)
-    return f"{fmt_pm(bias2, se)} ({bias_verdict(bias2, se, seeds)[0]})"
-
-
-def _interval(value: float, half: float) -> str:
-    """"value (low to high)", all three with the digits ``value``'s error needs (the bare value
-    where there is no interval)."""
-    if not math.isfinite(half):
-        return fmt(value)
-    digits = digits_for_error(value, half / 2)
-    return f"{fmt(value, digits)} ({fmt(value - half, digits)} to {fmt(value + half, digits)})"

@@ -141,6 +141,10 @@ SLOPE_SE_LIMIT = 0.5
 SLOPE_RANGE = (-3.0, 0.0)
 
 
+#: ... nor from points whose x (time, spp) spans less than this factor.
+SLOPE_MIN_SPREAD = 2.0
+
+
 class SlopeFit(NamedTuple):
     slope: float
     se: float                       # NaN when neither the scatter nor the points' errors give one
@@ -148,15 +152,17 @@ class SlopeFit(NamedTuple):
     problem: str                    # why it cannot be trusted; "" when it can
 
 
-def fit_slope(x, y, y_se=None) -> SlopeFit:
+def fit_slope(x, y, y_se=None, axis: str | None = None) -> SlopeFit:
     """Least-squares slope of log y against log x, with a standard error and a verdict.
 
     The standard error is the larger of two: from the scatter about the line (3 points or
     more) and from the points' own standard errors ``y_se`` (propagated through the fit,
     sigma(log y) = se / y, the points taken as independent). Not trusted (``problem``): fewer
     than 3 points (a line through 2 always fits: "too few to check the line"), a standard
-    error above SLOPE_SE_LIMIT, or a slope more than two standard errors outside SLOPE_RANGE. Pairs with x or y <= 0 are
-    left out (log axes); under 2 distinct x the slope is NaN."""
+    error above SLOPE_SE_LIMIT, a slope more than two standard errors outside SLOPE_RANGE, or
+    points whose largest x is less than SLOPE_MIN_SPREAD times their smallest ("too short a
+    time range", ``axis`` naming x: 2 points 1.2x apart in time give a slope that is mostly
+    noise). Pairs with x or y <= 0 are left out (log axes); under 2 distinct x the slope is NaN."""
     x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
     s = np.full(x.shape, np.nan) if y_se is None else np.asarray(y_se, np.float64)
     keep = (x > 0) & (y > 0) & np.isfinite(y)
@@ -176,6 +182,9 @@ def fit_slope(x, y, y_se=None) -> SlopeFit:
     se = max(candidates) if candidates else math.nan
     reach = 2 * se if not math.isnan(se) else 0.0
     problems = []
+    spread = math.exp(float(np.ptp(lx)))
+    if spread < SLOPE_MIN_SPREAD * (1 - 1e-9):        # (2x exactly is enough: log round-off aside)
+        problems.append(f"too short a{f' {axis}' if axis else ''} range ({spread:.2g}x from first to last)")
     if n < 3:
         problems.append("too few to check the line")
     if se > SLOPE_SE_LIMIT:
@@ -229,7 +238,7 @@ def slope_table(groups, label) -> list[str]:
         if len({p.spp for p in pts}) < 2:
             continue
         fit = fit_slope([p.spp for p in pts], [p.mse_corrected for p in pts],
-                        [getattr(p, "mse_std", math.nan) / math.sqrt(getattr(p, "seeds", 1)) for p in pts])
+                        [getattr(p, "mse_std", math.nan) / math.sqrt(getattr(p, "seeds", 1)) for p in pts], axis="spp")
         rows.append((fit.slope, label(key), f"{pts[0].spp}-{pts[-1].spp}", len(pts), fit))
     if not rows:
         return []

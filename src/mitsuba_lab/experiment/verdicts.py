@@ -110,6 +110,8 @@ def best_of(costs: dict, seeds: int) -> Best:
 
 #: The verdict on a bias^2 estimate more than two standard errors below zero.
 UNRELIABLE = "unreliable variance estimate (heavy tails)"
+#: Why a bias^2 estimate below zero (within two standard errors) names no number of seeds.
+BELOW_ZERO = "below zero: more seeds would not show a bias"
 
 
 def bias_verdict(bias2: float, se: float, seeds: int) -> tuple[str, int | None]:
@@ -117,10 +119,13 @@ def bias_verdict(bias2: float, se: float, seeds: int) -> tuple[str, int | None]:
     pixels): "biased" more than two standard errors above zero; UNRELIABLE more than two
     below, where bias^2 cannot be (the seeds' variance estimate is off: heavy tails, a few
     fireflies); else ``not_resolved``, with the seeds at which an estimate of this size would
-    be two standard errors from zero."""
+    be two standard errors from zero; without a seed count for a negative estimate (BELOW_ZERO):
+    with more seeds it would be flagged UNRELIABLE, never resolved as a bias."""
     if separated(bias2, se):
         return "biased", None
     if separated(-bias2, se):
         return UNRELIABLE, None
+    if bias2 < 0:
+        return f"{not_resolved(seeds, None)} ({BELOW_ZERO})", None
     needed = seeds_needed(seeds, abs(bias2), se, over_seeds=False)
     return not_resolved(seeds, needed), needed

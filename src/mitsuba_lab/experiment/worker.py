@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import metrics
-from .budget import BUDGET_RETRIES, measured_time, rescaled_count, rescaled_passes, within_budget
+from .budget import BUDGET_RETRIES, measured_time, pass_times, rescaled_count, rescaled_passes, within_budget
 from .config import PluginSpec, SceneSpec, sample_count_plugin
 from .plan import Point, point_id, warmup_sizes
 from .progressive import Checkpoint, run_passes
@@ -276,8 +276,9 @@ def progressive_runs(task: PointTask, render_at, result: PointResult, sizes, see
 
 def keep_passes_to_budget(task: PointTask, render_at, result: PointResult, sizes) -> None:
     """``keep_to_budget`` for a progressive budget point: while the median of its runs' elapsed
-    times is off the budget, every pass size is scaled by the measured time
-    (``budget.rescaled_passes``) and every seed of the point rendered again."""
+    times is off the budget, the passes are refitted to it from their measured times (fixed cost
+    per pass + cost per spp, ``budget.rescaled_passes``: fewer passes where their fixed cost
+    alone would fill the budget) and every seed of the point rendered again."""
     point = task.point
     base = result.calibration or dict(task.calibration or {})
     stored = list(task.stored_times)
@@ -287,7 +288,8 @@ def keep_passes_to_budget(task: PointTask, render_at, result: PointResult, sizes
         tries.append({"spp": result.spp, "passes": list(sizes), "measured_s": measured_time(times), "times": times})
         if within_budget(tries[-1]["measured_s"], point.budget_s) or retry == BUDGET_RETRIES:
             break
-        sizes = rescaled_passes(sizes, tries[-1]["measured_s"], point.budget_s)
+        sizes = rescaled_passes(sizes, tries[-1]["measured_s"], point.budget_s,
+                                pass_times(row for row, _ in result.runs))
         for size in warmup_sizes(sizes):                                    # compile, untimed
             render_at(size, point.warmup_seed)
         progressive_runs(task, render_at, result, sizes, point.seeds if stored else task.seeds)

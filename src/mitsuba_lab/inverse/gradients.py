@@ -200,9 +200,10 @@ def _point(name, spp, grads: np.ndarray, times, reference, ref_norm2) -> Gradien
 
 
 def best_sampler(points: list[GradientPoint]) -> tuple[str, float] | None:
-    """(sampler, efficiency) of the most efficient measured point."""
+    """(sampler, efficiency) of the most efficient measured point; None unless at least two
+    samplers were measured (with one there is nothing to compare, so no verdict)."""
     ok = [p for p in points if p.status == "ok" and math.isfinite(p.efficiency)]
-    if not ok:
+    if len({p.sampler for p in ok}) < 2:
         return None
     best = max(ok, key=lambda p: p.efficiency)
     return best.sampler, best.efficiency

@@ -81,17 +81,31 @@ def fmt_column(values, errors=None, digits: int = 3, missing: str = "n/a") -> li
             for v in values]
 
 
-def fmt_pm(value, error, digits: int = 3, others=(), missing: str = "n/a") -> str:
+def fmt_pm(value, error, digits: int = 3, others=(), missing: str = "n/a", separation: float | None = None) -> str:
     """"value +- error": the value to its error's second significant digit (``digits_for_error``)
     and apart from ``others``, (value, error) pairs it is compared with (``separating_digits``);
-    the error to two significant digits. The bare value where the error is missing."""
+    the error to two significant digits. The bare value where the error is missing.
+
+    ``separation``: the number of errors at which a verdict is given on this value (2 for a
+    bias^2); both are then printed with the digits that put the printed |value| / error on the
+    same side of it as the exact one (-3.207e-4 +- 1.639e-4 is 1.96 errors: "-0.000321 +- 0.000164",
+    not "-0.000321 +- 0.00016", which reads as 2.006)."""
     if not _usable(error):
         return fmt(value, digits, missing)
     n = digits_for_error(value, error, digits)
     if others:
         pairs = [(value, error), *others]
         n = max(n, separating_digits([v for v, _ in pairs], [e for _, e in pairs], digits))
-    return f"{fmt(value, n, missing)} +- {fmt(error, 2)}"
+    error_digits = 2
+    if separation is not None and _usable(value) and error > 0:
+        side = abs(value) > separation * error
+        while error_digits < MOST_DIGITS:
+            shown_value, shown_error = float(fmt(value, n)), float(fmt(error, error_digits))
+            if shown_error > 0 and (abs(shown_value) > separation * shown_error) == side:
+                break
+            error_digits += 1
+            n = min(MOST_DIGITS, max(n, _exponent(value) - _exponent(error) + error_digits))
+    return f"{fmt(value, n, missing)} +- {fmt(error, error_digits)}"
 
 
 def fmt_pm_column(values, errors, digits: int = 3, missing: str = "n/a") -> list[str]:
