@@ -27,6 +27,8 @@ from agreement import SEEDS_LAB, SEEDS_REF, Z_BOUND, assert_agrees, renders, sce
 from mitsuba_lab.errors import one_line
 from mitsuba_lab.scene import load_scene, make_integrator
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 RES = 24
 MAX_DEPTH = 8
 N = 1 << 20      # directions per mean check

@@ -29,6 +29,8 @@ from agreement import Z_BOUND, pixel_problem, renders, z_scores
 from backend import HOME, variant
 from mitsuba_lab.scene import load_scene, make_integrator
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 RES = 24
 SEEDS_LAB = range(16)

@@ -14,6 +14,8 @@ from mitsuba_lab.plugins.integrators.bdpt.light_subpath import render_light_trac
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights
 from agreement import Z_BOUND, renders, z_scores
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 SEEDS_LAB = range(16)
 SEEDS_REF = range(1000, 1016)
 SPP = 16

@@ -25,6 +25,8 @@ from agreement import assert_blocks_agree, block_test, renders
 from mitsuba_lab.scene import make_integrator
 from user_scenes import write_assets
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 SEEDS = 64
 SEEDS_LAB = range(SEEDS)
 SEEDS_REF = range(1000, 1000 + SEEDS)

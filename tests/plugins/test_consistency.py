@@ -13,6 +13,8 @@ import pytest
 from agreement import Z_BOUND, renders, z_scores
 from mitsuba_lab.scene import load_scene, make_integrator
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 RES = 32
 SEEDS = 16

@@ -27,6 +27,8 @@ from mitsuba_lab.plugins.params import VCM_MODES
 from mitsuba_lab.scene import load_scene, make_integrator
 from test_vcm import render, scene_path
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 #: Passes sized by what a render learns: a small vertex budget and short light subpaths.
 LEARNT_PASSES = {"max_depth": 3, "max_vertices": 1024}
 CASES = [

@@ -10,6 +10,8 @@ import pytest
 from agreement import Z_BOUND, renders, z_scores
 from mitsuba_lab.scene import make_integrator
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 SEEDS = 16
 
 

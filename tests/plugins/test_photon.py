@@ -20,6 +20,8 @@ from mitsuba_lab.plugins.integrators.photon.records import PhotonRecords
 from mitsuba_lab.plugins.integrators.photon.tracer import PhotonTracer
 from mitsuba_lab.scene import load_scene
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 RES = 32
 
 

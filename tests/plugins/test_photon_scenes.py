@@ -21,6 +21,8 @@ from mitsuba_lab.errors import one_line
 from mitsuba_lab.metrics import rel_mse
 from mitsuba_lab.plugins.integrators.photon.gather import DELTA_MASK
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 RES = 32
 PLASTIC = {"type": "plastic", "diffuse_reflectance": {"type": "rgb", "value": [0.2, 0.3, 0.7]}}
 CLEARCOAT = {"type": "principled", "base_color": {"type": "rgb", "value": [0.7, 0.2, 0.15]},

@@ -29,6 +29,8 @@ import pytest
 from agreement import assert_agrees, renders, z_scores
 from mitsuba_lab.scene import SceneTraits, make_integrator, strategy_applicability
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 WIDTH, HEIGHT = 32, 24
 SEEDS_LAB = range(16)
 SEEDS_REF = range(1000, 1016)

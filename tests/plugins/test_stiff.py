@@ -30,6 +30,8 @@ from agreement import Z_BOUND, renders, z_scores
 from mitsuba_lab.render import render
 from mitsuba_lab.scene import SceneTraits, load_scene, make_integrator, strategy_applicability
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 STIFF = sorted(os.path.basename(p) for p in glob.glob(os.path.join(ROOT, "scenes", "stiff", "*.xml")))
 RES = 24

@@ -48,6 +48,8 @@ from agreement import Z_BOUND, pixel_problem, renders, z_scores
 from mitsuba_lab.metrics import rel_mse
 from mitsuba_lab.scene import SceneTraits, make_integrator, strategy_applicability
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 SEEDS = 32
 REF_FACTOR = 8
 #: Re-run the statistics on other seeds: LAB_TEST_SEED_OFFSET=100000 pytest ... (default 0).

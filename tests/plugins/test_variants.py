@@ -19,6 +19,8 @@ import mitsuba_lab
 from agreement import Z_BOUND, pixel_problem, renders, z_scores
 from mitsuba_lab.scene import make_integrator
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 SEEDS = 16
 REF_SEEDS = range(1000, 1000 + SEEDS)
 LAB_SEEDS = range(SEEDS)

@@ -18,6 +18,8 @@ from mitsuba_lab.plugins.integrators.vcm import selection
 from mitsuba_lab.scene import load_scene, make_integrator
 from test_vcm import MAX_DEPTH, RES, SEEDS_LAB, Z_BOUND, assert_agrees, path_stack, render, scene_path, vcm
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 #: experiments/vcm.toml's vcm_auto: one setting for every scene, the pilot choosing.
 AUTO = {"radius": 0.022, "light_paths": 1, "light_paths_max": 16, "aim": 0.9, "pilot": True}
 

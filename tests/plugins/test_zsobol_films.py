@@ -25,6 +25,8 @@ from mitsuba_lab.metrics import z_score
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout, film_block_size
 from mitsuba_lab.render import render
 
+pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
+
 SPP = 16
 SEEDS = 16
 REF_SEEDS = range(1000, 1000 + SEEDS)
