@@ -4,9 +4,12 @@ Timings are not checked (the machine is shared); the memory bound is determinist
 import importlib.util
 import os
 
+import pytest
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+@pytest.mark.slow
 def test_bench_bdpt_quick(capsys):
     spec = importlib.util.spec_from_file_location("bench_bdpt", os.path.join(ROOT, "benchmarks", "bench_bdpt.py"))
     bench = importlib.util.module_from_spec(spec)

@@ -8,6 +8,7 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("extra", [[], ["--merge-first"], ["--light-paths", "0.25"], ["--aim", "0.5"],
                                    ["--merge-vertices", "caustic"]])
 def test_bench_vcm_quick(capsys, extra):
@@ -28,6 +29,7 @@ def test_bench_vcm_quick(capsys, extra):
     assert row[-1] == "0"                                     # no kernel compiled while timed
 
 
+@pytest.mark.slow
 def test_bench_vcm_pass_sizes_quick(capsys):
     """--pass-sizes prints lab_vcm's ms per iteration with its own pass sizes and fixed ones, and
     puts the integrator's constants back."""

@@ -47,6 +47,7 @@ def read_rows(prefix):
         return list(csv.DictReader(handle))
 
 
+@pytest.mark.slow
 def test_passing_scenes_write_csv_and_html(tmp_path):
     prefix = str(tmp_path / "report")
     scenes = [os.path.join(STIFF, n) for n in ("delta_lights_only.xml", "all_specular.xml")]
@@ -69,6 +70,7 @@ def test_passing_scenes_write_csv_and_html(tmp_path):
     assert "lab_naive cannot reach delta lights" in text
 
 
+@pytest.mark.slow
 def test_a_light_never_found_is_a_heavy_tail_warning(tmp_path, monkeypatch):
     # BSDF sampling never hits a light of radius 5e-4 (about once in 1e7 paths): lab_naive's
     # mean is 0 at every budget. Unbiased but unconverged: a warning, not a failure.
@@ -88,6 +90,7 @@ def test_a_light_never_found_is_a_heavy_tail_warning(tmp_path, monkeypatch):
     assert "class='warn'" in open(f"{prefix}.html").read()
 
 
+@pytest.mark.slow
 def test_nee_on_a_near_delta_lobe_is_a_heavy_tail_warning(tmp_path, monkeypatch):
     """An emitter sample lands in the GGX alpha 1e-4 lobe about once in 1e5: lab_nee is 60% low
     at 64 spp (z < -5), and its rare hits show at 16x the budget as split means of skewness
@@ -123,6 +126,7 @@ def perturbed_strategies(monkeypatch):
                                               "x1.03": ("check_test_x103", {}), "x0.97": ("check_test_x097", {})})
 
 
+@pytest.mark.slow
 def test_a_3_percent_weight_error_fails(tmp_path, perturbed_strategies):
     """The power of check's z-test with the tail classifier in the loop: lab_mis x1.03 and
     x0.97 on the environment-lit stage, 24x24, 64 spp against 256 spp: |z| > 5 and both fail
@@ -146,6 +150,7 @@ def test_a_3_percent_weight_error_fails(tmp_path, perturbed_strategies):
     assert "FAIL  environment_only.xml  x0.97: bias" in text
 
 
+@pytest.mark.slow
 def test_scene_warnings(tmp_path):
     prefix = str(tmp_path / "report")
     status, text = run_check([os.path.join(STIFF, "scaled_1e4.xml"), *SMALL, "-D", "far_clip=1e4",
@@ -171,6 +176,7 @@ USER_SCENE = """<scene version="3.0.0">
 """
 
 
+@pytest.mark.slow
 def test_a_user_scene_without_a_res_default(tmp_path):
     # No <default name="res">: --res sets the film's larger side, keeping its aspect ratio (300x200
     # -> 8x5), instead of failing with "unused parameters: $res".
@@ -278,6 +284,7 @@ def synthetic_ladder(rng, bias=0.0, tail_share=0.0, p=1e-6, n0=32768):
 REF_MEAN, REF_VARIANCE = 1.0, 0.002 ** 2
 
 
+@pytest.mark.slow
 def test_judge_tells_a_bias_from_a_heavy_tail():
     """300 trials each, fixed seed. A 3% low bias with a light tail is flagged (|z| > 5) in at
     least 95% of trials and then always called a bias, never a heavy tail; an unbiased estimator
@@ -337,6 +344,7 @@ def test_twin_status_in_both_states():
     assert not Twin.compare("t", 0.1566, 1e-6, 0.1565, 1e-6).path_off(5.0)
 
 
+@pytest.mark.slow
 def test_scaled_scenes_against_their_twin(tmp_path, monkeypatch):
     """scaled_1e-4: Mitsuba's path is 8% dark against path on the unscaled box, the lab's
     scale-robust lab_nee agrees with the box (ok), and Mitsuba's path run as a strategy (what
@@ -371,6 +379,7 @@ def test_a_missing_twin_is_one_line(tmp_path):
         run_check([str(scene), *SMALL])
 
 
+@pytest.mark.slow
 @pytest.mark.all_strategies
 def test_bidirectional_and_consistent_strategies_are_checked(tmp_path, monkeypatch):
     """lab_bdpt and lab_vcm's bpt pass the z-test (the same image: lab_vcm's bpt is lab_bdpt's

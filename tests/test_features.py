@@ -36,6 +36,7 @@ def scenes():
     return _scenes
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", sorted(MITSUBA_IGNORES))
 def test_what_ignores_media_renders_the_same_without_it(integrator):
     """Same seed, with and without the medium: bit-identical images exactly for the integrators

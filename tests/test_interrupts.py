@@ -24,6 +24,7 @@ def cornell():
     return mi.load_file("scenes/cornell_box.xml", res=16)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["path", "lab_mis", "lab_photon", "lab_bdpt", "lab_vcm"])
 def test_sigint_raises_keyboard_interrupt_after_a_render(cornell, kind):
     # through mi.render itself, as a user's script renders with the lab's plugins

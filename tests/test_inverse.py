@@ -30,6 +30,7 @@ def _config(**over):
     return inv.parse_config(data, os.path.join(ROOT, "experiments", "test.toml"))
 
 
+@pytest.mark.slow
 def test_demo1_reduces_parameter_error_tenfold(tmp_path):
     """Demo 1 at 32x32, 8 spp, Adam lr 0.05: from grey, the red wall's RGB reflectance is
     recovered; the RMS parameter error must drop at least 10x in 40 iterations. Measured
@@ -54,6 +55,7 @@ def test_demo1_reduces_parameter_error_tenfold(tmp_path):
     assert "data:image/png;base64," in open(paths["html"]).read()
 
 
+@pytest.mark.slow
 def test_prb_gradient_matches_central_finite_differences():
     """d(mean image)/d(red reflectance): prb (1024 spp) against central differences of
     primal renders (h = 0.01, common random numbers, 1024 spp), Cornell box 16x16,
@@ -72,6 +74,7 @@ def test_prb_gradient_matches_central_finite_differences():
     np.testing.assert_allclose(inv.to_numpy(params[RED]), [0.570068, 0.0430135, 0.0443706], rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_prb_loss_gradient_matches_finite_differences():
     """The L2 loss against a target rendered at other values (0.9, 0.3, 0.3): prb's gradient
     (primal and gradient pass decorrelated) against central differences of the loss (common
@@ -95,6 +98,7 @@ def test_prb_loss_gradient_matches_finite_differences():
     np.testing.assert_allclose(grad, fd, rtol=0.12)
 
 
+@pytest.mark.slow
 def test_gradient_sweep_runs_end_to_end(tmp_path):
     """Tiny sweep: 8x8, two spp, three seeds, Mitsuba's and a lab (Python) sampler, which prb
     clones on every render; the table and report are written."""
@@ -171,6 +175,7 @@ def test_texture_scene_has_the_true_texture():
     assert np.all(init["back.bsdf.reflectance.data"] == 0.5)
 
 
+@pytest.mark.slow
 def test_run_command_end_to_end(tmp_path):
     """`mitsuba-lab invert` through add_arguments / run: a 3-iteration optimisation and a
     tiny gradient sweep write the CSVs, images and the report; an unknown key is a LabError."""

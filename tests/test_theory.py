@@ -23,11 +23,13 @@ def _measured(rows):
 
 
 # ------------------------------------------------------------- simulated run
+@pytest.mark.slow
 def test_quick_run_matches_every_prediction(quick_rows):
     failures = theory.check(quick_rows)
     assert failures == [], theory.format_table(failures)
 
 
+@pytest.mark.slow
 def test_rows_are_well_formed(quick_rows):
     keys = {"problem", "quantity", "predicted", "measured", "tolerance", "note"}
     assert {row["problem"] for row in quick_rows} == {"P1", "P2", "P3", "P4", "P5"}

@@ -140,6 +140,7 @@ def image(scene, kind, params, seed=3, spp=8):
     return render(scene, make_integrator(kind, {"max_depth": 8, **params}), spp=spp, seed=seed)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene_name", ["all_specular.xml", "delta_lights_only.xml"])
 def test_equivalent_strategies_render_identical_images(scene_name):
     """The equivalence classes hold per seed: the kernels are the same code."""
@@ -169,6 +170,7 @@ def test_no_shadow_rays_where_no_vertex_can_use_them():
     assert counts["lab_nee"] == counts["lab_mis"] == counts["lab_naive"]
 
 
+@pytest.mark.slow
 def test_kernels_leave_out_what_the_scene_lacks():
     """Smaller kernels: lab_mis on the all-specular scene compiles no emitter sampling or
     emitter-pdf code, on the delta-light scene no emitter-hit code."""
@@ -222,6 +224,7 @@ def test_russian_roulette_for_camera_paths_and_photons():
     np.testing.assert_allclose(np.array(out)[0], [1.0, 0.5 / 0.5, 2.0], rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_a_grey_rgb_emitter_is_not_dark_in_a_spectral_variant():
     """In spectral variants an RGB emission becomes sigmoid-polynomial coefficients times D65,
     and a grey of 0.5 has all-zero coefficients: that is light, not a zero factor."""

@@ -27,6 +27,7 @@ def run(argv):
     return code, out.getvalue(), err.getvalue()
 
 
+@pytest.mark.slow
 def test_render_writes_exr_with_metadata_and_png(tmp_path):
     target = tmp_path / "cb.exr"
     code, out, err = run(["render", CORNELL, "-D", "res=32", "--spp", "4", "--integrator", "lab_mis",
@@ -47,6 +48,7 @@ def test_render_writes_exr_with_metadata_and_png(tmp_path):
     assert "compile" in out and "kernels" in out and "shadow" in out
 
 
+@pytest.mark.slow
 def test_render_reports_what_lab_vcms_pilot_chose(tmp_path):
     """The summary names a bidirectional integrator's statistics, lab_vcm's pilot choice among
     them: whether path tracing alone, the light subpaths chosen (0 for path tracing) and each
@@ -104,6 +106,7 @@ def test_unwritable_output_is_refused_before_rendering(tmp_path):
     assert code == 2 and "output folder" in err and out == "" and len(err.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_console_script_end_to_end(tmp_path):
     """The installed command, as a user runs it (one real process)."""
     exe = os.path.join(os.path.dirname(sys.executable), "mitsuba-lab")
@@ -124,6 +127,7 @@ def test_help_documents_every_render_option():
         assert option in out
 
 
+@pytest.mark.slow
 def test_theory_json_rows():
     code, out, err = run(["theory", "--quick", "--json"])
     assert code == 0, err

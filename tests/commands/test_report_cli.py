@@ -117,6 +117,7 @@ def synthetic(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_veach_table_compares_weightings_within_one_sampler_and_emitter_count(synthetic):
     paths = build_report(str(synthetic))
     section = veach_section(open(paths["md"]).read())
@@ -199,6 +200,7 @@ def test_markdown_table_and_its_html(tmp_path):
         "<p><strong>Best:</strong> <code>lab_mis</code>.</p>"]
 
 
+@pytest.mark.slow
 def test_a_page_embeds_its_images_and_honours_the_umask(tmp_path):
     from mitsuba_lab.reporting import write_markdown_page
 

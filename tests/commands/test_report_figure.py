@@ -26,6 +26,7 @@ def one_error_line(capsys, argv) -> str:
     return err
 
 
+@pytest.mark.slow
 def test_figure_files_are_written(sweep, tmp_path, capsys):
     out = tmp_path / "fig"
     assert main(["report", str(sweep), "--figure-dir", str(out)]) == 0

@@ -118,6 +118,7 @@ def test_errors_inside_dr_jit_name_their_cause(tmp_path):
     ("llvm_ad_mono_polarized", "lab_photon", "lab_photon: variant 'llvm_ad_mono_polarized' is not supported"),
     ("scalar_rgb", "lab_mis", "lab_mis: variant 'scalar_rgb' is not supported"),
 ])
+@pytest.mark.slow
 def test_unsupported_variants_are_one_line(variant, integrator, expected, tmp_path):
     import mitsuba as mi
 
@@ -205,6 +206,7 @@ def test_sweep_reports_every_config_problem_before_rendering(dry_run, tmp_path):
     assert stdout == "" and not out.exists() and not (tmp_path / "cache").exists()     # nothing ran
 
 
+@pytest.mark.slow
 def test_a_closed_pipe_ends_quietly(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "mitsuba_lab", "sweep", "experiments/quick.toml", "--dry-run"],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)

@@ -264,6 +264,7 @@ def test_the_viewer_labels_the_point_off_budget(off_budget_sweep):
 
 # -- the image strip: one budget for all ------------------------------------------------------
 
+@pytest.mark.slow
 def test_the_image_strip_shows_every_strategy_at_one_budget(tmp_path):
     """Issue 42 follow-up, item 1: the strip ("each strategy at about equal time") took each
     strategy's point nearest the middle of the common time range, so one strategy showed at 2 s

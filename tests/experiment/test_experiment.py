@@ -96,6 +96,7 @@ def test_config_defaults_and_plan_ids(tiny_config):
     assert all(p.seeds == (1, 2) and p.warmup_seed == 0 for p in plan.points)
 
 
+@pytest.mark.slow
 def test_a_scene_may_have_its_own_reference(tmp_path):
     """[scenes.X.reference] replaces what it names of [reference] for that scene (a hard region
     whose floor needs a better estimator or more samples); the cache stays the experiment's,
@@ -186,6 +187,7 @@ def tiny_sweep(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_sweep_end_to_end_and_report_rebuild(tiny_sweep):
     out = tiny_sweep
     rows = [json.loads(line) for line in open(out / "results.jsonl")]
@@ -210,6 +212,7 @@ def test_sweep_end_to_end_and_report_rebuild(tiny_sweep):
     assert (out / "report" / "index.html").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(browser.chromium() is None, reason="Debian's chromium is not installed")
 def test_report_loads_in_headless_chromium(tiny_sweep, tmp_path):
     shot = tmp_path / "report.png"
@@ -218,6 +221,7 @@ def test_report_loads_in_headless_chromium(tiny_sweep, tmp_path):
     assert shot.stat().st_size > 10_000                      # a real screenshot, not a blank page
 
 
+@pytest.mark.slow
 def test_sweep_resumes_after_kill_9(tmp_path):
     config = tmp_path / "longer.toml"      # 8 points x 2 seeds, so the kill lands mid-sweep
     config.write_text(TINY.format(cache=tmp_path / "cache", root=ROOT).replace("spp = [2, 8]", "spp = [2, 4, 8, 16]"))
@@ -244,12 +248,14 @@ def test_sweep_resumes_after_kill_9(tmp_path):
     assert not [f for f in os.listdir(out / "images") if f.startswith(".")]   # no temp files left
 
 
+@pytest.mark.slow
 def test_dry_run_prints_plan_and_estimate(tiny_config):
     proc = run_cli("sweep", tiny_config, "--dry-run")
     assert proc.returncode == 0, proc.stderr
     assert "cornell/mis/independent/spp8" in proc.stdout and "estimated total" in proc.stdout
 
 
+@pytest.mark.slow
 def test_bad_config_exits_2_with_one_line(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[experiment]\nspp = 'many'\n")
@@ -272,6 +278,7 @@ def test_veach_bound_verdicts():
     assert veach_bound(balance, {"variance": 0.0, "variance_se": 0.0}, 3, 4)["slack"] == pytest.approx(0.75)
 
 
+@pytest.mark.slow
 def test_sweep_on_a_dask_cluster_survives_a_killed_worker(tmp_path):
     """Two worker processes; one is killed with SIGKILL after the first point comes back."""
     distributed = pytest.importorskip("distributed")

@@ -31,6 +31,7 @@ def config(tmp_path, resolution, grid=False) -> dict:
     return data
 
 
+@pytest.mark.slow
 def test_a_sweep_renders_16x12_and_says_so(tmp_path):
     import mitsuba_lab
 

@@ -59,6 +59,7 @@ def sweep(tmp_path, capsys, **changes):
     return redone, err
 
 
+@pytest.mark.slow
 def test_each_identity_field_redoes_exactly_its_runs(tmp_path, capsys, monkeypatch):
     shutil.copy(os.path.join(ROOT, "scenes", "cornell_box.xml"), tmp_path / "box.xml")
     redone, _ = sweep(tmp_path, capsys)

@@ -256,6 +256,7 @@ mis = {{ type = "lab_mis" }}
 """
 
 
+@pytest.mark.slow
 def test_tiny_photon_sweep_runs_passes_and_reports_bias_against_passes(tmp_path):
     from mitsuba_lab.experiment.config import load_config
     from mitsuba_lab.experiment.plan import build_plan

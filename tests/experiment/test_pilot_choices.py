@@ -5,6 +5,8 @@ import json
 import math
 import os
 
+import pytest
+
 from mitsuba_lab.experiment.analysis import PointStats, pilot_choice
 from mitsuba_lab.experiment.report_sections import SectionTables
 
@@ -49,6 +51,7 @@ def tiny_config(cache) -> dict:
                            "bdpt": {"type": "lab_bdpt"}}}
 
 
+@pytest.mark.slow
 def test_a_sweep_keeps_each_renders_statistics_and_reports_the_pilots_choices(tmp_path):
     """Through ``mitsuba_lab.sweep`` (its render process builds the rows): lab_vcm's rows keep its
     pilot's statistics, lab_bdpt's its own, and the report's table lists each seed's choice."""

@@ -119,6 +119,7 @@ def cornell():
     return scene, reference.astype(np.float64)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", ["lab_mis", "path"])
 def test_progressive_mse_agrees_with_separate_renders(cornell, integrator):
     """Cornell box 64x64, max_depth 4, 16 seeds each: the mean MSE and relMSE (against a 1024-spp
@@ -181,6 +182,7 @@ def sweep(folder, cache, strategies=None, **experiment):
     return ResultStore(str(folder)), events
 
 
+@pytest.mark.slow
 def test_progressive_sweep_rows_resume_and_switch_off(tmp_path):
     from mitsuba_lab.experiment.report import build_report
 
@@ -230,6 +232,7 @@ def test_progressive_sweep_rows_resume_and_switch_off(tmp_path):
     assert [(s["strategy"], s["sampler"]) for s in store.of_kind("meta")[-1]["separate"]] == [("ph", "independent")]
 
 
+@pytest.mark.slow
 def test_budget_run_fixes_its_passes_on_the_first_seed(tmp_path):
     store, _ = sweep(tmp_path / "out", tmp_path / "cache", {"mis": {"type": "lab_mis"}}, spp=[],
                      time_budgets=[0.05])

@@ -116,6 +116,7 @@ def test_a_strategy_that_ignores_the_medium_is_left_out_with_its_reason(tmp_path
     assert [p.strategy for p in plan.points] == ["volpath"] and plan.unsupported == []
 
 
+@pytest.mark.slow
 def test_dry_run_lists_what_it_leaves_out(tmp_path):
     code, out, err = run(["sweep", write_config(tmp_path), "--dry-run"])
     assert code == 0, err
@@ -139,6 +140,7 @@ def test_nothing_to_run_renders_nothing_and_exits_2(tmp_path):
     assert cached_references(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_allowed_strategies_run_and_every_table_marks_them(tmp_path):
     # (strategy names unlike any plugin name, so that a table cell names the strategy)
     path = write_config(tmp_path, experiment='allow_unsupported = ["pt", "lab"]',
@@ -168,6 +170,7 @@ def test_allow_unsupported_names_strategies(tmp_path):
            "got ['nope']" in str(err.value)
 
 
+@pytest.mark.slow
 def test_the_reference_command_follows_the_same_rule(tmp_path, monkeypatch):
     monkeypatch.setenv("MITSUBA_LAB_CACHE", str(tmp_path / "cache"))
     (tmp_path / "fog.xml").write_text(FOG_XML)
@@ -181,6 +184,7 @@ def test_the_reference_command_follows_the_same_rule(tmp_path, monkeypatch):
     assert "(volpathmis, 16x16) rendered" in out
 
 
+@pytest.mark.slow
 def test_check_measures_against_a_reference_that_renders_the_medium(tmp_path, monkeypatch):
     monkeypatch.setenv("MITSUBA_LAB_CACHE", str(tmp_path / "cache"))
     (tmp_path / "fog.xml").write_text(FOG_XML)

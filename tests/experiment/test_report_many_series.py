@@ -58,6 +58,7 @@ def _overlap(fig, legend, ax) -> bool:
     return legend.get_window_extent().overlaps(ax.get_window_extent())
 
 
+@pytest.mark.slow
 def test_curves_plot_styles_series_and_keeps_the_legend_off_the_data():
     fig, ax = curves_figure(_groups(), _label)
     try:
@@ -86,6 +87,7 @@ def test_a_long_legend_gets_columns_and_stays_outside():
         pyplot().close("all")
 
 
+@pytest.mark.slow
 def test_thumbnail_strip_wraps_and_has_colour_bars():
     reference = synth.reference_image()
     rng = np.random.default_rng(3)
@@ -212,6 +214,7 @@ def _table(md: str, heading: str) -> dict[str, list[str]]:
     return {row[1]: row for row in rows[1:]}
 
 
+@pytest.mark.slow
 def test_the_report_marks_the_rising_slope_and_not_the_clean_ones(report):
     folder, md = report
     rows = _table(md, "### Efficiency (largest sample count), ranked")

@@ -57,6 +57,7 @@ def report(tmp_path_factory):
     return open(paths["md"]).read(), open(paths["html"]).read()
 
 
+@pytest.mark.slow
 def test_the_html_report_shows_no_raw_markdown(report):
     md, html = report
     assert "`" in md and "<code>s</code>" in html            # the scene heading's name

@@ -90,6 +90,7 @@ def test_grid_on_a_scene_the_planner_leaves_out_is_refused(grid_text, tmp_path):
     check_grid(load_config(write(tmp_path, grid_text)), plan)          # the grid on cornell: fine
 
 
+@pytest.mark.slow
 def test_grid_images_sum_to_the_full_image_and_resume(grid_text, tmp_path):
     config = load_config(write(tmp_path, grid_text))
     assert config.strategy_grid.max_length == 2 and config.strategy_grid.resolution is None

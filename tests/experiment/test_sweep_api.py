@@ -62,6 +62,7 @@ def read_csv(path):
         return reader.fieldnames, list(reader)
 
 
+@pytest.mark.slow
 def test_api_returns_the_rows_of_results_csv(tiny):
     table = tiny["table"]
     assert isinstance(table, ResultRows) and len(table) == 8          # 2 strategies x 2 spp x 2 seeds
@@ -77,6 +78,7 @@ def test_api_returns_the_rows_of_results_csv(tiny):
     assert os.path.isfile(table.attrs["report"]["html"]) and os.path.isfile(table.attrs["report"]["md"])
 
 
+@pytest.mark.slow
 def test_cli_on_the_same_config_gives_the_same_points(tiny, capsys):
     out = tiny["tmp"] / "cli_out"
     assert cli.main(["sweep", tiny["toml"], "-o", str(out)]) == 0, capsys.readouterr().err
@@ -90,6 +92,7 @@ def test_cli_on_the_same_config_gives_the_same_points(tiny, capsys):
     assert cli_mse == pytest.approx(api_mse, rel=1e-6)
 
 
+@pytest.mark.slow
 def test_resumed_sweep_returns_a_dataframe_and_shows_plain_progress(tiny, capsys):
     pd = pytest.importorskip("pandas")
     frame = mitsuba_lab.sweep(tiny["dict"], output=tiny["tmp"] / "api_out")       # everything is stored
@@ -195,6 +198,7 @@ def test_progress_is_plain_lines_in_a_log_and_a_tqdm_bar_on_a_terminal():
     assert "\r" in text and "between\n" in text and "2/2" in text and text.endswith("\n")
 
 
+@pytest.mark.slow
 def test_import_stays_cheap_and_sweep_is_exported():
     code = ("import sys, mitsuba_lab; lazy = [m for m in ('mitsuba_lab.experiment.api', 'pandas') "
             "if m in sys.modules]; print(lazy, mitsuba_lab.sweep.__module__, 'sweep' in mitsuba_lab.__all__)")
@@ -212,6 +216,7 @@ def isolation_config(tmp_path, integrator="lab_mis"):
     return config
 
 
+@pytest.mark.slow
 def test_the_sweep_renders_in_a_process_of_its_own(tmp_path):
     """Each render traces a virtual call for every Mitsuba object alive in its process, so the
     sweep renders in a process that holds only its own scene (measured once: 20 small scenes held by
@@ -229,6 +234,7 @@ def test_the_sweep_renders_in_a_process_of_its_own(tmp_path):
         assert len(pids) == 1 and (pids == {os.getpid()}) == in_process, (in_process, pids)
 
 
+@pytest.mark.slow
 def test_a_plugin_registered_only_in_the_calling_process_is_named(tmp_path):
     """The render process imports mitsuba_lab's plugins, not the caller's registrations: such a
     plugin is refused with one line naming it and the way out, and in_process=True renders it."""
@@ -250,6 +256,7 @@ def test_a_plugin_registered_only_in_the_calling_process_is_named(tmp_path):
     assert len(rows) == 3 and all(r["mse"] > 0 for r in rows)
 
 
+@pytest.mark.slow
 def test_an_error_in_the_render_process_arrives_as_its_one_line(tmp_path):
     """A parameter the plugin can only check against the scene (aim_at naming a shape the scene
     lacks) fails in the render process; the sweep's process raises that error's one line."""
@@ -262,6 +269,7 @@ def test_an_error_in_the_render_process_arrives_as_its_one_line(tmp_path):
     assert "Traceback" in caught.value.traceback and "\n" not in str(caught.value)
 
 
+@pytest.mark.slow
 def test_what_the_render_process_prints_reaches_this_process(tmp_path, capsys):
     """lab_sobol warns that 3 samples per pixel is not a power of two; that warning, printed in
     the render process, is passed on to this process's stderr (a notebook shows it)."""
@@ -272,6 +280,7 @@ def test_what_the_render_process_prints_reaches_this_process(tmp_path, capsys):
     assert "lab_sobol: sample_count=3 is not a power of two" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_bidirectional_sweep_fills_the_rays_per_sample_column(tmp_path):
     """lab_vcm counts its rays by kind (count_rays): results.csv has a column for each kind it
     counted, and the report's rays/sample cell names the bidirectional ones after extension and

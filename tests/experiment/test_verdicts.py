@@ -108,6 +108,7 @@ def region_report(request, tmp_path_factory):
     return request.param, open(build_report(folder)["md"]).read()
 
 
+@pytest.mark.slow
 def test_the_region_verdict_is_the_region_tables_verdict(region_report):
     """The region verdict ("Most efficient per region") is the verdict of the largest budget's
     row of the region's equal-time table, from the same cost; with the costs overlapping it
@@ -225,6 +226,7 @@ def test_the_image_mean_over_the_references_says_biased_only_outside_its_interva
 
 # -- a biased strategy is not named most efficient -------------------------------------------------
 
+@pytest.mark.slow
 def test_a_biased_or_marked_strategy_is_left_out_of_the_efficiency_verdicts(tmp_path):
     """Issue 42 follow-up, item 5: with path allowed on a scene whose medium it ignores, every
     table marked "path (ignores media)", its bias was "biased", and yet the report named it "most

@@ -62,6 +62,7 @@ def test_block_markers_and_the_page_script():
         html_page("t", "b", script="s = '</SCRIPT>'")
 
 
+@pytest.mark.slow
 def test_comparison_sets_pair_equal_time_and_equal_spp(sweep):
     groups, label = group_points(Report(str(sweep)).stats["s"])
     sets = comparison_sets(groups, label)
@@ -138,6 +139,7 @@ def at(x, y):
     return int((x + 0.5) * SCALE), int((y + 0.5) * SCALE)
 
 
+@pytest.mark.slow
 def test_keys_labels_and_sets_switch_the_image(sweep, tmp_path):
     with open_page(sweep / "report" / "index.html") as page:
         assert page.viewer_count() == 1 and page.broken_images() == 0
@@ -164,6 +166,7 @@ def test_keys_labels_and_sets_switch_the_image(sweep, tmp_path):
         assert page.errors == [] and page.broken_images() == 0
 
 
+@pytest.mark.slow
 def test_exposure_is_applied_to_hdr_data(sweep):
     bright, dim = at(4, 3), at(16, 11)                  # inside "light" (4.0) and "dim" (0.05)
     with open_page(sweep / "report" / "index.html") as page:
@@ -180,6 +183,7 @@ def test_exposure_is_applied_to_hdr_data(sweep):
         assert page.errors == []
 
 
+@pytest.mark.slow
 def test_error_and_variance_maps(sweep):
     (data,) = page_data((sweep / "report" / "index.html").read_text())
     entry = data["sets"][data["start"]]["entries"][1]
@@ -205,6 +209,7 @@ def test_error_and_variance_maps(sweep):
         assert page.errors == []
 
 
+@pytest.mark.slow
 def test_zoom_and_drag_keep_one_view_for_all_images(sweep):
     with open_page(sweep / "report" / "index.html") as page:
         page.hover()
@@ -247,6 +252,7 @@ def single(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_signed_difference_has_a_symmetric_range_and_costs_no_data(biased, sweep):
     from mitsuba_lab.experiment.viewer import signed_difference
 
@@ -277,6 +283,7 @@ def expected_diff_colour(data, entry, x, y):
     return stops[k] * (1 - (t - k)) + stops[k + 1] * (t - k)
 
 
+@pytest.mark.slow
 def test_signed_difference_is_red_where_brighter_and_blue_where_darker(biased):
     (data,) = page_data((biased / "report" / "index.html").read_text())
     entry = data["sets"][data["start"]]["entries"][1]
@@ -313,6 +320,7 @@ def test_signed_difference_is_red_where_brighter_and_blue_where_darker(biased):
         assert page.errors == []
 
 
+@pytest.mark.slow
 def test_split_view_shows_a_left_of_the_divider_and_b_right(biased):
     with open_page(biased / "report" / "index.html") as page:
         page.press("2")
@@ -375,6 +383,7 @@ def test_split_view_shows_a_left_of_the_divider_and_b_right(biased):
         assert page.errors == []
 
 
+@pytest.mark.slow
 def test_one_strategy_signed_view_works_and_split_is_disabled(single):
     with open_page(single / "report" / "index.html") as page:
         split = page.viewer().locator(".vw-split-on")

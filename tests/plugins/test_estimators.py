@@ -155,6 +155,7 @@ def test_plugin_modules_are_found_and_ordered():
                 prefix + "integrators.mis", prefix + "integrators.photon.estimator"} & bound
 
 
+@pytest.mark.slow
 def test_photon_follows_a_variant_switch():
     import numpy as np
 

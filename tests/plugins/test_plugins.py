@@ -83,6 +83,7 @@ def test_changing_the_seed_reuses_the_kernel():
     assert all(biggest in h for h in hashes)
 
 
+@pytest.mark.slow
 def test_no_nan_inf_or_negative_pixels():
     for name in ("cornell_box.xml", "veach_mis.xml", "glossy_small_light.xml"):
         scene = load_scene(f"scenes/{name}", res=24)
@@ -91,6 +92,7 @@ def test_no_nan_inf_or_negative_pixels():
             assert np.isfinite(image).all() and (image >= 0).all(), (name, kind)
 
 
+@pytest.mark.slow
 def test_plugins_follow_a_variant_switch():
     original = mi.variant()
     try:

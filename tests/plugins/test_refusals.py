@@ -29,6 +29,7 @@ def render_error(scene, integrator) -> str:
     return one_line(err.value)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind, params", [("lab_naive", {}), ("lab_nee", {}), ("lab_mis", {}),
                                           ("lab_photon", {"photons_per_pass": 1000, "passes": 1})])
 def test_participating_media_render_with_one_logged_warning(kind, params, capfd):

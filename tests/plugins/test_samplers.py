@@ -343,6 +343,7 @@ def reference_mean():
     return float(np.mean(np.array(img)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", LAB)
 @pytest.mark.parametrize("integrator", ("path", "lab_mis"))
 def test_render_with_sampler(kind, integrator, reference_mean):
@@ -389,6 +390,7 @@ def test_halton_permute_digits_uniform_and_unbiased():
 # The fast paths: float digit extraction, table-free digit permutations
 # ---------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_halton_float_digits_are_exact():
     """floor((n + 1/2) / b) in float32 equals n div b for every n < 2^21 (MAX_SPP) and prime."""
     from mitsuba_lab.plugins.samplers.halton import MAX_SPP, PRIMES
