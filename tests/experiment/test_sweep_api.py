@@ -256,6 +256,24 @@ def test_a_plugin_registered_only_in_the_calling_process_is_named(tmp_path):
     assert len(rows) == 3 and all(r["mse"] > 0 for r in rows)
 
 
+def test_the_render_process_sends_each_failure_back_as_one_line():
+    """What the sweep's process raises for a point that failed in the render process (a unit
+    test of render_process.portable: the subprocess itself runs in the slow tier)."""
+    from types import SimpleNamespace
+
+    from mitsuba_lab.errors import LabError
+    from mitsuba_lab.experiment.render_process import RenderProcessError, portable
+
+    task = SimpleNamespace(point=SimpleNamespace(id="s/x/independent/spp4"))
+    bad_input = portable(LabError("lab_mis: parameter 'rr_depth' must be an integer >= 1, got 0"), task)
+    assert type(bad_input) is LabError and str(bad_input).startswith("lab_mis: parameter 'rr_depth'")
+    try:
+        raise RuntimeError("drjit.custom(<_RenderOp>): error") from ValueError("the kernel failed")
+    except RuntimeError as err:
+        crash = portable(err, task)
+    assert isinstance(crash, RenderProcessError) and "\n" not in str(crash) and "Traceback" in crash.traceback
+
+
 @pytest.mark.slow
 def test_an_error_in_the_render_process_arrives_as_its_one_line(tmp_path):
     """A parameter the plugin can only check against the scene (aim_at naming a shape the scene

@@ -166,7 +166,6 @@ def test_keys_labels_and_sets_switch_the_image(sweep, tmp_path):
         assert page.errors == [] and page.broken_images() == 0
 
 
-@pytest.mark.slow
 def test_exposure_is_applied_to_hdr_data(sweep):
     bright, dim = at(4, 3), at(16, 11)                  # inside "light" (4.0) and "dim" (0.05)
     with open_page(sweep / "report" / "index.html") as page:
