@@ -42,7 +42,7 @@ import drjit as dr
 import mitsuba as mi
 
 import mitsuba_lab  # noqa: F401  (selects the variant, registers the lab plugins)
-from mitsuba_lab.plugins.integrators import spawn
+from mitsuba_lab.plugins.integrators.common import spawn
 from mitsuba_lab.plugins.integrators.bdpt.light_subpath import LightTracer, render_light_tracing
 from mitsuba_lab.plugins.integrators.bdpt.vertices import vertex_bytes
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout

@@ -11,7 +11,7 @@ wrong:
   one records Mitsuba's own handler as the one to put back, and the lab's Python integrators
   do this on every render: their ``render`` calls Mitsuba's, which calls the Python ``render``
   back, which calls Mitsuba's again. After that, Ctrl-C only prints that line twice and is lost
-  for the rest of the process. The plugins' ``integrators.support.base_render`` calls ``restore``
+  for the rest of the process. The plugins' ``integrators.common.support.base_render`` calls ``restore``
   before the inner call, so it finds Python's handler.
 * It puts a handler back with C ``signal()``, which restarts interrupted system calls. A
   process blocked in ``recv``, like a sweep waiting for its render process, then does not see

@@ -142,7 +142,7 @@ LAB_MIS = PATH_TRACER + (
     Param("emitter_samples", int, 1, "shadow rays per vertex, n_L", **_int_at_least(1)),
 )
 
-#: Aimed emission (``integrators/aim.py``): lab_photon, lab_bdpt and lab_vcm. Aiming changes nothing in
+#: Aimed emission (``integrators/common/aim.py``): lab_photon, lab_bdpt and lab_vcm. Aiming changes nothing in
 #: a scene without aim_at shapes (the light emits as Mitsuba samples it), so lab_bdpt and lab_photon aim
 #: by default. lab_vcm does not: its merges of aimed light vertices are biased in modes ppm and bpm
 #: (tests/plugins/test_vcm.py::test_merging_aimed_light_vertices_is_biased, a known fault).
@@ -245,7 +245,7 @@ VCM_MODES = {
     "pt": ("hit", "nee"),                    # camera side only: lab_mis's estimator
 }
 
-#: Density-estimation kernels (``integrators/kernels.py``), lab_vcm's ``kernel``.
+#: Density-estimation kernels (``integrators/common/kernels.py``), lab_vcm's ``kernel``.
 KERNELS = ("epanechnikov", "constant")
 
 #: How lab_vcm's pilot prices an iteration (``pilot_costs``).

@@ -209,3 +209,25 @@ def test_every_package_is_listed_in_pyproject():
                 rel = os.path.relpath(folder, top)
                 found.add(package if rel == "." else package + "." + rel.replace(os.sep, "."))
     assert found == listed
+
+
+def test_the_integrator_families_share_only_common():
+    """photon/, bdpt/ and the path family (path, naive, nee, mis) use what they share from
+    integrators/common/, never each other's modules; vcm/ builds on bdpt/ as a whole."""
+    base = "mitsuba_lab.plugins.integrators."
+    families = {"path": {base + m for m in ("path", "naive", "nee", "mis")}}
+    for name in module_files():
+        for family in ("photon", "bdpt", "vcm"):
+            if name.startswith(base + family + ".") or name == base + family:
+                families.setdefault(family, set()).add(name)
+    allowed = {"vcm": {"bdpt"}}
+    graph = import_graph(module_files(), deferred=True)
+    crossing = {}
+    for family, members in families.items():
+        for name in members:
+            others = {target for other, theirs in families.items()
+                      if other != family and other not in allowed.get(family, ())
+                      for target in graph[name] & theirs}
+            if others:
+                crossing[name] = sorted(others)
+    assert set(families) == {"path", "photon", "bdpt", "vcm"} and crossing == {}

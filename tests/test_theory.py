@@ -169,7 +169,7 @@ def test_mis_weights_reject_bad_input(args):
 
 def test_theory_uses_the_plugins_mis_weight(monkeypatch):
     """theory.mis_weights is the plugins' one MIS weight on n_i p_i, not a copy of it."""
-    from mitsuba_lab.plugins.integrators import mis_weight as shared
+    from mitsuba_lab.plugins.integrators.common import mis_weight as shared
 
     calls = []
 

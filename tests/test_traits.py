@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from backend import HOME, variant
-from mitsuba_lab.plugins.integrators.mis_weight import mis_weight
+from mitsuba_lab.plugins.integrators.common.mis_weight import mis_weight
 from mitsuba_lab.plugins.integrators.path import KernelPlan
-from mitsuba_lab.plugins.integrators.roulette import rr_scale, russian_roulette, survival_probability
+from mitsuba_lab.plugins.integrators.common.roulette import rr_scale, russian_roulette, survival_probability
 from mitsuba_lab.render import render
 from mitsuba_lab.scene import (SceneTraits, equivalent_strategies, load_scene, make_integrator,
                                strategy_applicability)

@@ -1,11 +1,8 @@
-"""The lab's integrators, and the pieces of light transport they share.
+"""The lab's integrators.
 
-Plugins: ``path`` (``lab_naive``, ``lab_nee``, ``lab_mis``: one path loop), ``photon``
-(``lab_photon``) and ``bdpt`` (``lab_bdpt``). Estimators, which need no Mitsuba variant:
-``estimator`` (the base class: what an integrator knows about scenes and sample counts,
-``Densities``), ``naive``, ``nee``, ``mis`` (the path tracers' weights), ``photon.estimator``,
-``bdpt.estimator``. Shared pieces: ``mis_weight`` (the MIS heuristics, on Dr.Jit or numpy
-arrays), ``direct`` (emitter sampling and emitter hits with the densities of both techniques),
-``roulette`` (Russian roulette), ``counters`` (ray counts), ``spawn`` (ray offsets), ``spectral``
-(spectral variants: one set of wavelengths per pass for light and camera paths).
+Families: ``path`` (``lab_naive``, ``lab_nee``, ``lab_mis``: one path loop whose weights are the
+estimators ``naive``, ``nee``, ``mis``), ``photon`` (``lab_photon``), ``bdpt`` (``lab_bdpt``) and
+``vcm`` (``lab_vcm``, built on ``bdpt``). What they share is in ``common``. ``estimator``: the
+estimators' base class (what an integrator knows about scenes and sample counts, ``Densities``)
+and their registry, needing no Mitsuba variant.
 """

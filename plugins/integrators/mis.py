@@ -2,11 +2,9 @@
 ``path.py``)."""
 from __future__ import annotations
 
-import drjit as dr
-
 from mitsuba_lab.plugins import params as declarations
 from mitsuba_lab.plugins.integrators.estimator import Densities, PathEstimator
-from mitsuba_lab.plugins.integrators.mis_weight import mis_weight
+from mitsuba_lab.plugins.integrators.common.mis_weight import hit_weight, sample_weight
 
 
 class MIS(PathEstimator):
@@ -14,7 +12,7 @@ class MIS(PathEstimator):
 
         w_B(x) = h(p_B(x), n_L p_L(x)),  w_L(x) = h(n_L p_L(x), p_B(x)),
 
-    h the heuristic (``mis_weight``), 1 for a sample only its own technique can produce.
+    h the heuristic (``common.mis_weight``), 1 for a sample only its own technique can produce.
     """
     plugin_name = "lab_mis"
     SIMPLICITY = 2
@@ -23,16 +21,13 @@ class MIS(PathEstimator):
     PARAMETERS = declarations.LAB_MIS
     OWN_PARAMETERS = ("heuristic", "beta", "emitter_samples")
 
-    def h(self, pdf_self, pdf_other):
-        return mis_weight(pdf_self, pdf_other, self.heuristic, self.beta)
-
     # ----------------------- Direct emission -----------------------
     def hit_weight(self, d: Densities):
-        return dr.select(d.delta, 1.0, self.h(d.bsdf, d.emitter))
+        return hit_weight(d, self.heuristic, self.beta)
 
     # ----------------------- Emitter sampling ----------------------
     def sample_weight(self, d: Densities):
-        return dr.select(d.delta, 1.0, self.h(d.emitter, d.bsdf))
+        return sample_weight(d, self.heuristic, self.beta)
 
     # -- Knowledge ------------------------------------------------------------------------
     @staticmethod

@@ -21,14 +21,14 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import params
-from mitsuba_lab.plugins.integrators import direct, spawn
-from mitsuba_lab.plugins.integrators.counters import RayCounters
+from mitsuba_lab.plugins.integrators.common import direct, spawn
+from mitsuba_lab.plugins.integrators.common.counters import RayCounters
 from mitsuba_lab.plugins.integrators.estimator import PathEstimator
 from mitsuba_lab.plugins.integrators.mis import MIS
 from mitsuba_lab.plugins.integrators.naive import Naive
 from mitsuba_lab.plugins.integrators.nee import NEE
-from mitsuba_lab.plugins.integrators.roulette import russian_roulette
-from mitsuba_lab.plugins.integrators.support import base_render, warn_if_unsupported
+from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
+from mitsuba_lab.plugins.integrators.common.support import base_render, warn_if_unsupported
 from mitsuba_lab.plugins.params import UNBOUNDED
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings

@@ -25,7 +25,7 @@ from collections.abc import Callable
 import numpy as np
 
 from . import metrics
-from .plugins.integrators.mis_weight import mis_weight
+from .plugins.integrators.common.mis_weight import mis_weight
 
 __all__ = [
     "mis_weights",
@@ -65,7 +65,7 @@ def mis_weights(p_a, p_b, heuristic: str = "balance", beta: float = 2.0,
                 n_a: int = 1, n_b: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """MIS weights ``(w_a, w_b)`` for two techniques taking ``n_a``, ``n_b`` samples.
 
-    The lab's one MIS weight (``mitsuba_lab.plugins.integrators.mis_weight``, the formula
+    The lab's one MIS weight (``mitsuba_lab.plugins.integrators.common.mis_weight``, the formula
     ``lab_mis`` traces into its kernels) applied to ``a = n_a p_a`` and ``b = n_b p_b``
     (Veach 1997, ch. 9): ``'balance'`` ``a / (a + b)``; ``'power'`` ``a^beta / (a^beta + b^beta)``;
     ``'max'`` 1 for the larger, 1/2 on ties; ``'average'`` 1/2 each wherever both densities are

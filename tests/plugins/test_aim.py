@@ -1,4 +1,4 @@
-"""Aimed emission (``aim``, ``aim_at``; plugins/integrators/aim.py): an area light sends a share
+"""Aimed emission (``aim``, ``aim_at``; plugins/integrators/common/aim.py): an area light sends a share
 of its directions at the bounding spheres of chosen shapes.
 
 * The mixture's weight factor (cos / pi) / p(d | y) has expectation exactly 1 under p (the
@@ -38,7 +38,7 @@ N = 1 << 20      # directions per mean check
 def aim_class():
     """aim.py's class as the plugins use it now: a variant switch (an earlier test's) reloads the
     module, so a class imported before it would take monkeypatches the plugins never see."""
-    return importlib.import_module("mitsuba_lab.plugins.integrators.aim").AimedEmission
+    return importlib.import_module("mitsuba_lab.plugins.integrators.common.aim").AimedEmission
 
 def light_points(scene, n, seed=1):
     """n points (and normals) on the scene's first area light, uniform by area."""

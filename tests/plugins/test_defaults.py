@@ -16,7 +16,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mitsuba_lab.plugins.integrators.footprint import pixel_footprint
+from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
 from mitsuba_lab.scene import load_scene, make_integrator
 
 WALL_DISTANCE = 5.0

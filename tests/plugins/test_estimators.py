@@ -144,14 +144,14 @@ def test_plugin_modules_are_found_and_ordered():
     prefix = "mitsuba_lab.plugins."
     assert set(registering) == set(plugins.PLUGIN_MODULES) >= {
         prefix + "integrators.path", prefix + "integrators.photon.integrator", prefix + "samplers.sobol"}
-    for helper, user in (("integrators.direct", "integrators.path"),
-                         ("integrators.roulette", "integrators.photon.tracer"),
+    for helper, user in (("integrators.common.direct", "integrators.path"),
+                         ("integrators.common.roulette", "integrators.photon.tracer"),
                          ("integrators.photon.gather", "integrators.photon.integrator"),
                          ("samplers.common", "samplers.halton")):
         assert order.index(prefix + helper) < order.index(prefix + user)          # dependencies first
     assert {prefix + "integrators.path", prefix + "integrators.photon.gather",
             prefix + "samplers.common"} <= bound                                  # re-run on a switch
-    assert not {prefix + "params", prefix + "integrators.estimator", prefix + "integrators.mis_weight",
+    assert not {prefix + "params", prefix + "integrators.estimator", prefix + "integrators.common.mis_weight",
                 prefix + "integrators.mis", prefix + "integrators.photon.estimator"} & bound
 
 

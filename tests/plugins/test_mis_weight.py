@@ -1,4 +1,4 @@
-"""The one MIS weight (plugins/integrators/mis_weight.py) at extreme densities, on Dr.Jit arrays
+"""The one MIS weight (plugins/integrators/common/mis_weight.py) at extreme densities, on Dr.Jit arrays
 as the plugins trace it and on numpy arrays as mitsuba_lab.theory uses it."""
 import itertools
 
@@ -7,7 +7,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mitsuba_lab.plugins.integrators.mis_weight import HEURISTICS, mis_weight
+from mitsuba_lab.plugins.integrators.common.mis_weight import HEURISTICS, mis_weight
 
 # Dr.Jit flushes float32 denormals (< 1.18e-38) to zero, so the smallest density tested is normal.
 EXTREMES = [0.0, 1.2e-38, 1e-30, 1e-3, 0.5, 1.0, 3.0, 7e3, 1e7, 1.8e19, 1e30, 3.4e38, float("inf")]

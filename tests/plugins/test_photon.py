@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 
 from mitsuba_lab.metrics import rel_mse
-from mitsuba_lab.plugins.integrators.photon.gather import NORMAL_COS, density_estimate
-from mitsuba_lab.plugins.integrators.photon.grid import PhotonGrid, cell_of, hash_cell
+from mitsuba_lab.plugins.integrators.common.grid import cell_of, hash_cell
+from mitsuba_lab.plugins.integrators.common.kernels import NORMAL_COS
+from mitsuba_lab.plugins.integrators.photon.gather import density_estimate
+from mitsuba_lab.plugins.integrators.photon.grid import PhotonGrid
 from mitsuba_lab.plugins.integrators.photon.integrator import radius_schedule
 from mitsuba_lab.plugins.integrators.photon.records import PhotonRecords
 from mitsuba_lab.plugins.integrators.photon.tracer import PhotonTracer

@@ -207,7 +207,7 @@ def test_photon_converges_to_path(variant, assets, name):
     # (the radius these bounds were set for: the scene's size over the film's, the automatic radius
     # before it became the pixel footprint, which on spot_and_directional is smaller and noisier at
     # 40000 photons: relMSE 0.114 mono, 0.102 spectral at 8 passes)
-    from mitsuba_lab.plugins.integrators.footprint import bbox_radius
+    from mitsuba_lab.plugins.integrators.common.footprint import bbox_radius
 
     the_scene = scene(assets, name, sampler)
     radius = bbox_radius(the_scene, the_scene.sensors()[0])

@@ -25,13 +25,14 @@ from dataclasses import dataclass, replace
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators import spawn
-from mitsuba_lab.plugins.integrators.counters import tally
-from mitsuba_lab.plugins.integrators.direct import spectrum_or_zero
-from mitsuba_lab.plugins.integrators.roulette import kept, russian_roulette
+from mitsuba_lab.plugins.integrators.common import spawn
+from mitsuba_lab.plugins.integrators.common.counters import tally
+from mitsuba_lab.plugins.integrators.common.adjoint import transported
+from mitsuba_lab.plugins.integrators.common.direct import spectrum_or_zero
+from mitsuba_lab.plugins.integrators.common.roulette import kept, russian_roulette
 
 from .endpoints import EmitterTable, direction_is_delta, nee_density
-from .light_subpath import carried, float_or_zero, reverse_pdf, strategy_mask, transported
+from .light_subpath import carried, float_or_zero, reverse_pdf, strategy_mask
 from .vertices import NONE, LightVertices
 from .weights import BdptWeights, SubpathMis
 

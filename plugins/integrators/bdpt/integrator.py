@@ -9,10 +9,10 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import interrupts
-from mitsuba_lab.plugins.integrators import spawn, spectral
-from mitsuba_lab.plugins.integrators.aim import AimedEmission
-from mitsuba_lab.plugins.integrators.counters import RayCounters
-from mitsuba_lab.plugins.integrators.support import base_render, render_arguments, warn_if_unsupported
+from mitsuba_lab.plugins.integrators.common import spawn, spectral
+from mitsuba_lab.plugins.integrators.common.aim import AimedEmission
+from mitsuba_lab.plugins.integrators.common.counters import RayCounters
+from mitsuba_lab.plugins.integrators.common.support import base_render, render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.params import UNBOUNDED, bdpt_only_strategy
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings

@@ -35,10 +35,10 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators import spawn, spectral
-from mitsuba_lab.plugins.integrators.counters import tally
-from mitsuba_lab.plugins.integrators.photon.tracer import adjoint_correction
-from mitsuba_lab.plugins.integrators.roulette import russian_roulette
+from mitsuba_lab.plugins.integrators.common import spawn, spectral
+from mitsuba_lab.plugins.integrators.common.adjoint import adjoint_correction, transported
+from mitsuba_lab.plugins.integrators.common.counters import tally
+from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
 
 from . import splats
 from .endpoints import EmitterTable, camera_direction_pdf, direction_is_delta, nee_density
@@ -59,28 +59,6 @@ def check_variant(plugin: str = "lab_bdpt") -> None:
         variant = mi.variant()
         raise ValueError(f"{plugin}: variant '{variant}' is not supported: bidirectional paths carry "
                          f"unpolarized light; use {variant.replace('_polarized', '')}")
-
-
-def transported(bsdf, si: mi.SurfaceInteraction3f, wo, active):
-    """(value, reverse density) of a light-subpath vertex sending flux along ``wo`` (local).
-
-    value: what goes out along ``wo`` per unit of the flux that reached the vertex from
-    ``si.wi``, the shading-normal correction included (Veach 1997, sec. 5.3):
-
-        f(wi -> wo) |wi . n_s| |wo . n_g| / |wi . n_g|
-
-    The first two factors are the radiance-mode BSDF evaluated with the directions swapped
-    (``si.wi`` = wo), so n_s is whatever normal the BSDF itself uses, a normal or bump map's
-    perturbed one included; an importance-mode evaluation times a correction built from
-    ``si.sh_frame`` would use the unperturbed normal there (2% too dark a floor under a bump
-    map, as Mitsuba's ptracer renders it). The same call gives the reverse density: that of
-    sampling ``si.wi`` from ``wo`` (what ``reverse_pdf`` would return in radiance mode)."""
-    swapped = mi.SurfaceInteraction3f(si)
-    swapped.wi = wo
-    value, pdf_rev = bsdf.eval_pdf(mi.BSDFContext(mi.TransportMode.Radiance), swapped, si.wi, active)
-    cos_in = dr.abs(dr.dot(si.n, si.to_world(si.wi)))
-    ratio = dr.abs(dr.dot(si.n, si.to_world(wo))) / cos_in
-    return dr.select(cos_in > 0, value * ratio, 0.0), pdf_rev
 
 
 def carried(merging: bool, value, old):

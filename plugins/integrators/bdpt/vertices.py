@@ -30,7 +30,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators.photon.records import spectrum_channels
+from mitsuba_lab.plugins.integrators.common.spectral import spectrum_channels
 
 from .weights import SubpathMis
 

@@ -50,18 +50,15 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators import direct, spawn
-from mitsuba_lab.plugins.integrators.counters import RayCounters
-from mitsuba_lab.plugins.integrators.kernels import kernel
-from mitsuba_lab.plugins.integrators.mis import MIS
-from mitsuba_lab.plugins.integrators.roulette import russian_roulette
+from mitsuba_lab.plugins.integrators.common import direct, spawn
+from mitsuba_lab.plugins.integrators.common.counters import RayCounters
+from mitsuba_lab.plugins.integrators.common.grid import NEIGHBOURS, cell_of, hash_cell, neighbour_cell
+from mitsuba_lab.plugins.integrators.common.kernels import NORMAL_COS, kernel
+from mitsuba_lab.plugins.integrators.common.mis_weight import hit_weight, sample_weight
+from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
 
-from .grid import NEIGHBOURS, PhotonGrid, cell_of, hash_cell, neighbour_cell
+from .grid import PhotonGrid
 
-#: Photons whose geometric normal is more than ~37 degrees off x's are rejected.
-NORMAL_COS = 0.8
-#: Direct light in ``direct = nee`` mode: one emitter sample and one BSDF sample, power heuristic.
-DIRECT_MIS = MIS({"heuristic": "power", "beta": 2.0, "emitter_samples": 1})
 #: BSDFContext type mask of the delta lobes alone (null pass-through, delta reflection and
 #: transmission, with every side and property flag).
 DELTA_MASK = int(mi.BSDFFlags.All) & ~int(mi.BSDFFlags.Smooth)
@@ -214,14 +211,14 @@ class CameraPass(mi.SamplingIntegrator):
         emitter its BSDF sample finds (one segment: the photons hold the rest), power heuristic.
         A BSDF sample of a delta lobe is dropped: the camera path follows those lobes itself."""
         L, bs, bsdf_weight = direct.emitter_sampling(scene, sampler, ctx, si, bsdf, beta, L,
-                                                     DIRECT_MIS.sample_weight, 1, active, active,
+                                                     sample_weight, 1, active, active,
                                                      offset_floor=floor)
         b_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
         active_b = active & ~b_delta & (dr.max(mi.unpolarized_spectrum(bsdf_weight)) > 0)
         si_b = scene.ray_intersect(spawn.spawn_ray(si, si.to_world(bs.wo), floor), ray_flags=mi.RayFlags.All,
                                    coherent=False, active=active_b)
         ds_b = mi.DirectionSample3f(scene, si=si_b, ref=si)
-        w_b = DIRECT_MIS.hit_weight(direct.hit_densities(scene, si, ds_b, bs.pdf, b_delta, 1, active_b))
+        w_b = hit_weight(direct.hit_densities(scene, si, ds_b, bs.pdf, b_delta, 1, active_b))
         L += dr.select(active_b, beta * bsdf_weight * w_b * ds_b.emitter.eval(si_b, active_b), 0.0)
         return L, active_b
 

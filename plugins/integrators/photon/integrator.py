@@ -10,20 +10,21 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins import interrupts
 from mitsuba_lab.plugins import params
-from mitsuba_lab.plugins.integrators import spawn
-from mitsuba_lab.plugins.integrators.aim import AimedEmission
-from mitsuba_lab.plugins.integrators.footprint import pixel_footprint
-from mitsuba_lab.plugins.integrators.support import render_arguments, warn_if_unsupported
+from mitsuba_lab.plugins.integrators.common import spawn
+from mitsuba_lab.plugins.integrators.common.aim import AimedEmission
+from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
+from mitsuba_lab.plugins.integrators.common.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
 from mitsuba_lab.plugins.scene_traits import SceneTraits
 from mitsuba_lab.plugins.params import DIRECT_MODES, UNBOUNDED  # noqa: F401 (re-exported)
 
-from mitsuba_lab.plugins.integrators import spectral
+from mitsuba_lab.plugins.integrators.common import spectral
+from mitsuba_lab.plugins.integrators.common.spectral import spectrum_channels
 from .estimator import PhotonMapping
 from .gather import CameraPass
 from .grid import PhotonGrid
-from .records import record_bytes, spectrum_channels
+from .records import record_bytes
 from .tracer import PhotonTracer
 
 #: max_depth = -1 (unbounded) is stored as this many segments (sums of depths stay in uint32).

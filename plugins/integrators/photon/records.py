@@ -17,12 +17,9 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from mitsuba_lab.plugins.integrators.common.spectral import spectrum_channels
+
 FIELDS = ("p", "wi", "n", "power", "depth")
-
-
-def spectrum_channels() -> int:
-    """Channels of the variant's unpolarized spectrum: 3 (RGB), 1 (mono), 4 (spectral)."""
-    return dr.size_v(mi.UnpolarizedSpectrum)
 
 
 def record_bytes() -> int:

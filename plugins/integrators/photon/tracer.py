@@ -14,19 +14,13 @@ component. Every photon has its own PCG32 stream,
 seeded from (pass seed, global photon index), so a batch split in two reproduces
 exactly the photons of the unsplit batch.
 
-**Shading normals.** Mitsuba's BSDFs in ``TransportMode.Importance`` only drop the 1/eta^2
-radiance scaling at refractions; the asymmetry that shading normals add is left to the
-integrator (Mitsuba's ``ptracer`` applies it itself). A photon scattered from direction wi
-(towards where it came from) into the sampled direction wo is therefore weighted by
-Veach's adjoint correction (Veach 1997, sec. 5.3, eq. 5.19)
-
-    |wi . n_s| |wo . n_g| / (|wi . n_g| |wo . n_s|)
-
-with n_s the interaction's shading normal (``si.sh_frame``; the interpolated vertex normal: a
-``normalmap`` / ``bumpmap`` perturbs it inside the BSDF, where the integrator cannot see it,
-so there the correction uses the unperturbed one, as ``ptracer`` does) and n_g its geometric
-normal. No photon is dropped for lying on the "wrong" side of one normal and not the other,
-so photon paths cover what the path tracers' camera paths cover.
+**Shading normals.** A photon scattered from wi into the sampled direction wo is weighted by
+Veach's adjoint correction (``common.adjoint.adjoint_correction``), built from the
+interaction's shading frame (the interpolated vertex normal: a ``normalmap`` / ``bumpmap``
+perturbs it inside the BSDF, where the integrator cannot see it, so there the correction uses
+the unperturbed one, as ``ptracer`` does). No photon is dropped for lying on the "wrong" side
+of one normal and not the other, so photon paths cover what the path tracers' camera paths
+cover.
 
 In spectral variants every photon of a pass is emitted at the pass's wavelengths
 (``spectral.emit``). Rays leave surfaces at the lab's scale-robust offsets (``spawn``); in a
@@ -37,10 +31,10 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators import spawn
-from mitsuba_lab.plugins.integrators.roulette import russian_roulette
+from mitsuba_lab.plugins.integrators.common import spawn, spectral
+from mitsuba_lab.plugins.integrators.common.adjoint import adjoint_correction
+from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
 
-from mitsuba_lab.plugins.integrators import spectral
 from .records import PhotonRecords
 
 #: Emission samples per emitter for the power estimate that drives emitter selection.
@@ -81,15 +75,6 @@ def channel_mean(spectrum):
     for i in range(1, n):
         total = total + value[i]
     return total * (1.0 / n)
-
-
-def adjoint_correction(si: mi.SurfaceInteraction3f, wi_world, wo_local):
-    """|wi.n_s| |wo.n_g| / (|wi.n_g| |wo.n_s|) for a photon arriving from ``wi_world`` (towards
-    its origin) and leaving along ``wo_local`` (shading frame); 0 where a cosine is 0."""
-    wo_world = si.to_world(wo_local)
-    num = dr.abs(mi.Frame3f.cos_theta(si.wi) * dr.dot(si.n, wo_world))
-    den = dr.abs(mi.Frame3f.cos_theta(wo_local) * dr.dot(si.n, wi_world))
-    return dr.select(den > 0, num / dr.maximum(den, 1e-30), 0.0)
 
 
 def area_origin_fixes(scene: mi.Scene, floor: float) -> list:

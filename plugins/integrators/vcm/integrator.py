@@ -11,9 +11,9 @@ import numpy as np
 
 from mitsuba_lab.plugins.integrators.bdpt.integrator import BdptStats, LabBDPTIntegrator, pass_seed
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, iteration_sizes
-from mitsuba_lab.plugins.integrators.footprint import pixel_footprint
+from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
 from mitsuba_lab.plugins.params import VCM_LIGHT_PATHS_MAX
-from mitsuba_lab.plugins.integrators.support import render_arguments
+from mitsuba_lab.plugins.integrators.common.support import render_arguments
 
 from .estimator import VertexMerging, merges_first
 from .merging import VertexGrid, table

@@ -36,11 +36,10 @@ from mitsuba_lab.plugins.integrators.bdpt.light_subpath import float_or_zero, re
 from mitsuba_lab.plugins.integrators.bdpt.vertices import (NO_MERGE, POINT, POINT_WIDTH, RECORD, RECORD_WIDTH,
                                                            read, spectrum_at, unbits, vector)
 from mitsuba_lab.plugins.integrators.bdpt.weights import SubpathMis
-from mitsuba_lab.plugins.integrators.counters import tally
-from mitsuba_lab.plugins.integrators.kernels import kernel
-from mitsuba_lab.plugins.integrators.photon.gather import NORMAL_COS
-from mitsuba_lab.plugins.integrators.photon.grid import cell_of, counting_sort, hash_cell, table_size_for
-from mitsuba_lab.plugins.integrators.roulette import kept
+from mitsuba_lab.plugins.integrators.common.counters import tally
+from mitsuba_lab.plugins.integrators.common.grid import cell_of, counting_sort, hash_cell, table_size_for
+from mitsuba_lab.plugins.integrators.common.kernels import NORMAL_COS, kernel
+from mitsuba_lab.plugins.integrators.common.roulette import kept
 
 
 #: Merging's Russian roulette: at a camera vertex whose merge weight cannot exceed a bound b

@@ -9,7 +9,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators.estimator import Densities
-from mitsuba_lab.plugins.integrators.spawn import sample_visible_emitter
+from mitsuba_lab.plugins.integrators.common.spawn import sample_visible_emitter
 
 
 def spectrum_or_zero(value):

@@ -15,6 +15,10 @@ from __future__ import annotations
 
 import drjit as dr
 
+#: A light vertex (photon) whose geometric normal is more than ~37 degrees off the query
+#: point's is left out of the estimate (another wall at a corner, the far side of a thin slab).
+NORMAL_COS = 0.8
+
 
 def kernel(name: str, t2):
     """K(t) for t^2 = ``t2`` in [0, 1) (callers reject t >= 1): the kernel ``name`` times r^2

@@ -36,6 +36,11 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+def spectrum_channels() -> int:
+    """Channels of the variant's unpolarized spectrum: 3 (RGB), 1 (mono), 4 (spectral)."""
+    return dr.size_v(mi.UnpolarizedSpectrum)
+
+
 #: 1 / golden ratio: u_i = frac(u_0 + i / phi) fills [0, 1) evenly for any number of passes.
 INV_PHI = (math.sqrt(5.0) - 1.0) / 2.0
 

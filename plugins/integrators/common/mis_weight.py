@@ -1,7 +1,8 @@
 """The MIS weight of one technique's sample (Veach 1997, ch. 9), on Dr.Jit or numpy arrays.
 
 One formula serves the lab's estimators (Dr.Jit arrays, traced into their kernels) and the
-toy problems of ``mitsuba_lab.theory`` (numpy arrays): ``mis_weight`` is written against a
+toy problems of ``mitsuba_lab.theory`` (numpy arrays); ``hit_weight`` and ``sample_weight``
+are its two uses in a path: an emitter hit and an emitter sample. ``mis_weight`` is written against a
 tiny namespace of array operations (``_Ops``) chosen by the type of its arguments. It imports
 neither Mitsuba nor Dr.Jit itself, so it needs no variant and is never re-run on a switch.
 """
@@ -99,3 +100,16 @@ def mis_weight(pdf_self, pdf_other, heuristic: str = "power", beta: float = 2.0)
         else:  # average
             w = ops.select(pdf_other > 0, 0.5, 1.0)
         return ops.select(pdf_self > 0, w, 0.0)
+
+
+def hit_weight(d, heuristic: str = "power", beta: float = 2.0):
+    """Weight of emission found by BSDF sampling, from the ``Densities`` ``d`` of both
+    techniques (n_L p_L in ``d.emitter``): 1 after a delta lobe, which emitter sampling cannot
+    produce."""
+    return _ops_for(d.bsdf, d.emitter, d.delta).select(d.delta, 1.0, mis_weight(d.bsdf, d.emitter, heuristic, beta))
+
+
+def sample_weight(d, heuristic: str = "power", beta: float = 2.0):
+    """Weight of an emitter sample, from the ``Densities`` ``d``: 1 for a delta light, which
+    BSDF sampling cannot hit."""
+    return _ops_for(d.bsdf, d.emitter, d.delta).select(d.delta, 1.0, mis_weight(d.emitter, d.bsdf, heuristic, beta))
