@@ -1,122 +1,73 @@
 """The lab's Mitsuba plugins, installed as ``mitsuba_lab.plugins``.
 
-Every module of this package is found by walking its folder (nothing is listed by hand)
-and read without being imported, to learn which package modules it imports when it runs
-(``import`` statements outside function bodies) and whether it registers plugins
-(``mi.register_integrator`` / ``mi.register_sampler`` at module level).
+The package's modules are listed below by hand, in the order they are imported (as Mitsuba
+lists its own Python integrators in ``mitsuba/python/ad/integrators/__init__.py``);
+``tests/test_layout.py`` checks that the list names every module once, after every package
+module it imports, and that the two groups below are what the sources say.
 
 Mitsuba classes bind to a variant when a Python class deriving from one is defined, so a
 module that imports ``mitsuba``, or a module that imports one that does, is *variant-bound*:
-``register_all`` runs it again after a variant switch, dependencies first (a reload replaces
-the module's globals in place, so its registrations and classes are rebuilt for the new
-variant in step). The other modules (``params``, the estimators' knowledge, the MIS weight)
-import no Mitsuba variant: they are imported once, never re-run, and can be used before any
-variant is set (``import_variant_free``).
+``register_all`` runs it again after a variant switch, in list order, so dependencies first (a
+reload replaces the module's globals in place, so its registrations and classes are rebuilt
+for the new variant in step). The other modules (``params``, the estimators' knowledge, the
+MIS weight) import no Mitsuba variant: they are imported once, never re-run, and can be used
+before any variant is set (``import_variant_free``).
 """
 from __future__ import annotations
 
-import ast
-import functools
 import importlib
-import os
 import sys
 
+#: Every module of the package but itself, each after the package modules it imports.
+_ORDER = (
+    "integrators", "integrators.common", "integrators.bdpt", "integrators.photon",
+    "integrators.vcm", "samplers",
+    # needing no variant
+    "params", "variant", "interrupts", "integrators.estimator", "integrators.common.kernels",
+    "integrators.common.mis_weight", "integrators.naive", "integrators.nee", "integrators.mis",
+    "integrators.photon.estimator", "integrators.bdpt.weights", "integrators.bdpt.estimator",
+    "integrators.vcm.estimator", "integrators.vcm.selection",
+    # variant-bound: what the plugins share
+    "scene_traits", "samplers.layout", "integrators.common.spectral",
+    "integrators.common.adjoint", "integrators.common.counters", "integrators.common.roulette",
+    "integrators.common.spawn", "integrators.common.direct", "integrators.common.aim",
+    "integrators.common.support", "integrators.common.footprint", "integrators.common.grid",
+    # the path tracers
+    "integrators.path",
+    # lab_photon
+    "integrators.photon.records", "integrators.photon.grid", "integrators.photon.gather",
+    "integrators.photon.tracer", "integrators.photon.integrator",
+    # lab_bdpt, then lab_vcm on it
+    "integrators.bdpt.endpoints", "integrators.bdpt.splats", "integrators.bdpt.vertices",
+    "integrators.bdpt.light_subpath", "integrators.bdpt.camera_subpath",
+    "integrators.bdpt.integrator",
+    "integrators.vcm.merging", "integrators.vcm.integrator",
+    # the samplers
+    "samplers.common", "samplers.halton", "samplers.independent", "samplers.sobol",
+    "samplers.stratified", "samplers.zsobol",
+)
+#: The modules of ``_ORDER`` that import no Mitsuba variant, not even through another module.
+_VARIANT_FREE = frozenset(_ORDER[:_ORDER.index("scene_traits")])
+#: The modules that register plugins (``mi.register_integrator`` / ``mi.register_sampler``).
+_REGISTERING = ("integrators.path", "integrators.photon.integrator", "integrators.bdpt.integrator",
+                "integrators.vcm.integrator", "samplers.halton", "samplers.independent",
+                "samplers.sobol", "samplers.stratified", "samplers.zsobol")
+
+#: Every module of the package (full names), in import order.
+MODULES = tuple(f"{__name__}.{name}" for name in _ORDER)
+#: The modules that need no Mitsuba variant (full names).
+VARIANT_FREE = frozenset(f"{__name__}.{name}" for name in _VARIANT_FREE)
+#: Every module that registers plugins (full names), in registration order.
+PLUGIN_MODULES = tuple(f"{__name__}.{name}" for name in _REGISTERING)
+
 _module_variant: dict[str, str] = {}
-
-
-def _module_names() -> dict[str, str]:
-    """Module name -> file, for every module of this package (itself excluded)."""
-    root = os.path.dirname(os.path.abspath(__file__))
-    found = {}
-    for here, dirs, files in os.walk(root):
-        dirs[:] = sorted(d for d in dirs if d != "__pycache__" and os.path.isfile(os.path.join(here, d, "__init__.py")))
-        rel = os.path.relpath(here, root)
-        parts = [__name__] + ([] if rel == "." else rel.split(os.sep))
-        for name in sorted(f for f in files if f.endswith(".py")):
-            stem = name[:-3]
-            module = ".".join(parts if stem == "__init__" else parts + [stem])
-            if module != __name__:
-                found[module] = os.path.join(here, name)
-    return found
-
-
-def _runtime_statements(tree: ast.Module):
-    """The statements that run when the module is imported (function bodies left out)."""
-    stack = list(tree.body)
-    while stack:
-        node = stack.pop()
-        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
-            continue
-        yield node
-        stack.extend(ast.iter_child_nodes(node))
-
-
-def _scan(name: str, path: str, modules) -> tuple[set[str], bool, bool]:
-    """(package modules imported, imports mitsuba, registers plugins) of one module's source."""
-    with open(path, encoding="utf-8") as handle:
-        tree = ast.parse(handle.read(), path)
-    package = name if path.endswith("__init__.py") else name.rpartition(".")[0]
-    imports, mitsuba, registers = set(), False, False
-    for node in _runtime_statements(tree):
-        if isinstance(node, ast.Import):
-            targets = [alias.name for alias in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                anchor = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
-                base = f"{anchor}.{base}" if base else anchor
-            targets = [base] + [f"{base}.{alias.name}" for alias in node.names]
-        else:
-            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
-                    and node.func.attr in ("register_integrator", "register_sampler")):
-                registers = True
-            continue
-        mitsuba = mitsuba or any(t == "mitsuba" or t.startswith("mitsuba.") for t in targets)
-        imports.update(t for t in targets if t in modules and t != name)
-    return imports, mitsuba, registers
-
-
-@functools.lru_cache(maxsize=1)
-def _plan() -> tuple[tuple[str, ...], frozenset[str], tuple[str, ...]]:
-    """(every module, dependencies first; the variant-bound ones; those that register plugins)."""
-    files = _module_names()
-    scanned = {name: _scan(name, path, files) for name, path in files.items()}
-    order: list[str] = []
-    seen: set[str] = set()
-
-    def visit(name):
-        if name in seen:
-            return
-        seen.add(name)
-        for dependency in sorted(scanned[name][0]):
-            visit(dependency)
-        order.append(name)
-
-    for name in sorted(scanned):
-        visit(name)
-    bound: set[str] = set()
-    for name in order:                   # dependencies come first, so one pass settles it
-        imports, mitsuba, _ = scanned[name]
-        if mitsuba or imports & bound:
-            bound.add(name)
-    registering = tuple(name for name in order if scanned[name][2])
-    return tuple(order), frozenset(bound), registering
-
-
-def __getattr__(name: str):
-    """``PLUGIN_MODULES``: every module that registers plugins, in registration order (found
-    by ``_plan`` on first use, so importing ``params`` alone reads no source)."""
-    if name == "PLUGIN_MODULES":
-        return _plan()[2]
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def import_variant_free() -> None:
     """Import every module that needs no Mitsuba variant (estimator classes register
     themselves as they are defined); safe to call again, and before any variant is set."""
-    order, bound, _ = _plan()
-    for name in order:
-        if name not in bound and name not in sys.modules:
+    for name in MODULES:
+        if name in VARIANT_FREE and name not in sys.modules:
             importlib.import_module(name)
 
 
@@ -127,13 +78,12 @@ def register_all() -> list[str]:
     variant = mi.variant()
     if variant is None:
         raise RuntimeError("set a Mitsuba variant before registering the lab plugins")
-    order, bound, registering = _plan()
-    for name in order:
+    for name in MODULES:
         module = sys.modules.get(name)
         if module is None:
             importlib.import_module(name)
-        elif name in bound and _module_variant.get(name) != variant:
+        elif name not in VARIANT_FREE and _module_variant.get(name) != variant:
             importlib.reload(module)
-        if name in bound:
+        if name not in VARIANT_FREE:
             _module_variant[name] = variant
-    return list(registering)
+    return list(PLUGIN_MODULES)

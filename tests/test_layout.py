@@ -231,3 +231,47 @@ def test_the_integrator_families_share_only_common():
             if others:
                 crossing[name] = sorted(others)
     assert set(families) == {"path", "photon", "bdpt", "vcm"} and crossing == {}
+
+
+def _scan_runtime(path: str) -> tuple[bool, bool]:
+    """(imports mitsuba, registers plugins) of a module, from the statements that run when it
+    is imported (``mi.register_integrator`` / ``mi.register_sampler`` outside functions)."""
+    with open(path, encoding="utf-8") as handle:
+        tree = ast.parse(handle.read(), path)
+    mitsuba = any(name == "mitsuba" or name.startswith("mitsuba.")
+                  for node in _import_nodes(tree, deferred=False)
+                  for name in ([a.name for a in node.names] if isinstance(node, ast.Import)
+                               else [node.module or ""] if not node.level else []))
+    stack, registers = list(tree.body), False
+    while stack:
+        node = stack.pop()
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            continue
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and node.func.attr in ("register_integrator", "register_sampler")):
+            registers = True
+        stack.extend(ast.iter_child_nodes(node))
+    return mitsuba, registers
+
+
+def test_the_plugins_list_every_module_in_import_order():
+    """plugins/__init__.py lists the package's modules by hand: every module once, each after
+    the package modules it imports; the variant-free ones are those that import Mitsuba
+    neither themselves nor through another module; the registering ones are those that call
+    ``mi.register_*`` when imported."""
+    from mitsuba_lab import plugins
+
+    files = {name: path for name, path in module_files().items() if name.startswith("mitsuba_lab.plugins.")}
+    assert len(plugins.MODULES) == len(set(plugins.MODULES)) and set(plugins.MODULES) == set(files)
+    graph = import_graph(module_files())
+    position = {name: i for i, name in enumerate(plugins.MODULES)}
+    late = {name: sorted(t for t in graph[name] if t in position and position[t] > position[name])
+            for name in plugins.MODULES}
+    assert {name: targets for name, targets in late.items() if targets} == {}
+    scanned = {name: _scan_runtime(path) for name, path in files.items()}
+    bound = set()
+    for name in plugins.MODULES:                       # dependencies first: one pass settles it
+        if scanned[name][0] or graph[name] & bound:
+            bound.add(name)
+    assert plugins.VARIANT_FREE == set(files) - bound
+    assert set(plugins.PLUGIN_MODULES) == {name for name in files if scanned[name][1]}

@@ -11,7 +11,6 @@ import pytest
 
 import mitsuba_lab
 from backend import variant
-from mitsuba_lab import plugins
 from mitsuba_lab.experiment.config import PASS_PARAMETER, PluginSpec, parse_config, sample_count_plugin
 from mitsuba_lab.experiment.plan import build_plan
 from mitsuba_lab.plugins.integrators.estimator import lookup
@@ -137,23 +136,7 @@ def test_every_lab_integrator_has_an_estimator_its_plugin_class_uses():
     assert lookup("path") is None
 
 
-# -- Registration -----------------------------------------------------------------------------
-
-def test_plugin_modules_are_found_and_ordered():
-    order, bound, registering = plugins._plan()
-    prefix = "mitsuba_lab.plugins."
-    assert set(registering) == set(plugins.PLUGIN_MODULES) >= {
-        prefix + "integrators.path", prefix + "integrators.photon.integrator", prefix + "samplers.sobol"}
-    for helper, user in (("integrators.common.direct", "integrators.path"),
-                         ("integrators.common.roulette", "integrators.photon.tracer"),
-                         ("integrators.photon.gather", "integrators.photon.integrator"),
-                         ("samplers.common", "samplers.halton")):
-        assert order.index(prefix + helper) < order.index(prefix + user)          # dependencies first
-    assert {prefix + "integrators.path", prefix + "integrators.photon.gather",
-            prefix + "samplers.common"} <= bound                                  # re-run on a switch
-    assert not {prefix + "params", prefix + "integrators.estimator", prefix + "integrators.common.mis_weight",
-                prefix + "integrators.mis", prefix + "integrators.photon.estimator"} & bound
-
+# -- Registration (the module list itself: tests/test_layout.py) ----------------------------
 
 @pytest.mark.slow
 def test_photon_follows_a_variant_switch():
