@@ -167,8 +167,8 @@ def test_the_command_line_layer_imports_no_mitsuba():
     """cli and each command module, each first in a fresh interpreter as the command starts it:
     they import, and none pulls in Mitsuba, Dr.Jit or numpy (``--help`` stays fast)."""
     names = ["mitsuba_lab.cli"] + sorted(n for n in module_files() if n.startswith("mitsuba_lab.commands."))
-    code = ("import importlib, sys\n"
-            "sys.argv[0] = 'mitsuba-lab'\n"          # as the console script: no activate()
+    code = ("import importlib, os, sys\n"
+            "os.environ['MITSUBA_LAB_ACTIVATE'] = '0'\n"   # as the mitsuba-lab command imports it
             "importlib.import_module(sys.argv[1])\n"
             "print(sorted(m for m in ('mitsuba', 'drjit', 'numpy') if m in sys.modules))\n")
     for name in names:

@@ -69,7 +69,7 @@ def test_old_llvm_forced_by_user_never_aborts():
     # Dr.Jit with libLLVM 15 dies with "LLVM ERROR: Cannot select ... fminimum"
     # at the first kernel; the lab must stop before that, with one line.
     env = {**os.environ, "DRJIT_LIBLLVM_PATH": old_llvm()}
-    proc = subprocess.run([sys.executable, "-m", "mitsuba_lab", "render", "scenes/cornell_box.xml"],
+    proc = subprocess.run([sys.executable, "-m", "mitsuba_lab_command", "render", "scenes/cornell_box.xml"],
                           env=env, capture_output=True, text=True, timeout=120,
                           cwd=os.path.dirname(os.path.dirname(__file__)))
     assert proc.returncode == 2, proc.stderr
@@ -82,3 +82,23 @@ def test_one_line_strips_source_tags_and_tracebacks():
     text = ('[parser.cpp:1718] At dictionary node "root": failed to instantiate: Traceback (most recent '
             'call last):\n  File "x.py", line 5, in <module>\nValueError: bad beta')
     assert one_line(text) == 'At dictionary node "root": failed to instantiate: bad beta'
+
+
+def test_importing_the_package_selects_a_variant_unless_told_not_to():
+    """Importing mitsuba_lab selects a variant whatever the script is called; with
+    MITSUBA_LAB_ACTIVATE=0 (what the mitsuba-lab command's entry point sets) it imports no Mitsuba."""
+    import mitsuba_lab
+    import mitsuba_lab_command
+
+    assert mitsuba_lab.ACTIVATE_ENV == mitsuba_lab_command.ACTIVATE_ENV
+    code = ("import sys\n"
+            "sys.argv[0] = 'mitsuba-lab'\n"
+            "import mitsuba_lab\n"
+            "print('mitsuba' in sys.modules and bool(sys.modules['mitsuba'].variant()))\n")
+    root = os.path.dirname(os.path.dirname(__file__))
+    env = {k: v for k, v in os.environ.items() if k != mitsuba_lab.ACTIVATE_ENV}
+    runs = [subprocess.run([sys.executable, "-c", code], env=extra, capture_output=True, text=True,
+                           timeout=120, cwd=root)
+            for extra in (env, {**env, mitsuba_lab.ACTIVATE_ENV: "0"})]
+    assert [proc.returncode for proc in runs] == [0, 0], runs[0].stderr + runs[1].stderr
+    assert [proc.stdout.strip() for proc in runs] == ["True", "False"]

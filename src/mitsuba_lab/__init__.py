@@ -3,9 +3,11 @@
 Importing the package makes the lab plugins usable from any Mitsuba scene:
 it points Dr.Jit at a usable libLLVM, selects a variant when none is set yet
 (``$MITSUBA_LAB_VARIANT``, else ``llvm_ad_rgb``), and registers every ``lab_*``
-integrator and sampler for that variant. The ``mitsuba-lab`` command defers
-this to after it has read ``--variant``, so that a bad environment is reported
-in one line and a GPU-only machine never has to start the LLVM backend.
+integrator and sampler for that variant. With ``MITSUBA_LAB_ACTIVATE=0`` in the
+environment it does none of that until ``activate`` is called: the ``mitsuba-lab``
+command (``mitsuba_lab_command``) imports it so, and selects the variant after it has
+read ``--variant``, so that a bad environment is reported in one line and a GPU-only
+machine never has to start the LLVM backend.
 
 ``mitsuba_lab.sweep(config)`` runs a strategy sweep from Python and returns its results
 table (``mitsuba_lab.experiment.api``; imported on first use).
@@ -13,9 +15,10 @@ table (``mitsuba_lab.experiment.api``; imported on first use).
 from __future__ import annotations
 
 import os as _os
-import sys as _sys
 
 __version__ = "0.1.0"
+#: Set to "0" to import the package without selecting a variant (then call ``activate``).
+ACTIVATE_ENV = "MITSUBA_LAB_ACTIVATE"
 __all__ = ["activate", "use_variant", "register_all", "bind_film_layout", "sweep"]
 
 
@@ -61,13 +64,5 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def _invoked_as_cli() -> bool:
-    """True for the ``mitsuba-lab`` script and for ``python -m mitsuba_lab``."""
-    if _sys.argv and _os.path.basename(_sys.argv[0]) == "mitsuba-lab":
-        return True
-    argv = getattr(_sys, "orig_argv", [])
-    return "-m" in argv[:-1] and argv[argv.index("-m") + 1] == "mitsuba_lab"
-
-
-if not _invoked_as_cli():
+if _os.environ.get(ACTIVATE_ENV) != "0":
     activate()

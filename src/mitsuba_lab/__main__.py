@@ -1,4 +1,6 @@
-"""``python -m mitsuba_lab``: the same as the ``mitsuba-lab`` command."""
+"""``python -m mitsuba_lab``: the ``mitsuba-lab`` command, after the package's own import has
+selected its variant (``$MITSUBA_LAB_VARIANT``, else ``llvm_ad_rgb``; ``--variant`` then
+switches). ``python -m mitsuba_lab_command`` is the command exactly as installed."""
 import sys
 
 from .cli import main

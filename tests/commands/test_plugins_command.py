@@ -91,15 +91,16 @@ def test_unknown_name_is_one_line_exit_2(name, hint):
 
 def test_needs_no_mitsuba_variant():
     """Reads declarations only: no Mitsuba, Dr.Jit or numpy import; a bad --variant is not read."""
-    code = ("import sys\n"
-            "sys.argv[0] = 'mitsuba-lab'\n"
-            "from mitsuba_lab import cli\n"
-            "assert cli.main(['--variant', 'nope', 'plugins']) == 0\n"
-            "assert cli.main(['plugins', 'lab_photon']) == 0\n"
-            "print(sorted(m for m in ('mitsuba', 'drjit', 'numpy') if m in sys.modules))\n")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    code = ("import os, sys\n"
+            "import mitsuba_lab_command\n"
+            "assert mitsuba_lab_command.main(['--variant', 'nope', 'plugins']) == 0\n"
+            "assert mitsuba_lab_command.main(['plugins', 'lab_photon']) == 0\n"
+            "print(sorted(m for m in ('mitsuba', 'drjit', 'numpy') if m in sys.modules),\n"
+            "      os.environ.get('MITSUBA_LAB_ACTIVATE'))\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
+                          env={k: v for k, v in os.environ.items() if k != "MITSUBA_LAB_ACTIVATE"})
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip().splitlines()[-1] == "[]"
+    assert proc.stdout.strip().splitlines()[-1] == "[] None"      # the environment is left as it was
 
 
 def test_console_script():

@@ -117,8 +117,8 @@ def test_sample_count_parameter_is_the_plugins():
 def test_estimators_need_no_variant():
     """The report and the `plugins` command run without a Mitsuba variant: the estimators'
     knowledge (here the sample-count parameter) is there without importing Mitsuba."""
-    code = ("import sys\n"
-            "sys.argv[0] = 'mitsuba-lab'\n"            # as the console script: no activate()
+    code = ("import os, sys\n"
+            "os.environ['MITSUBA_LAB_ACTIVATE'] = '0'\n"   # as the mitsuba-lab command imports it
             "from mitsuba_lab.experiment.config import PASS_PARAMETER\n"
             "from mitsuba_lab.plugins.integrators.estimator import lookup\n"
             "print(dict(PASS_PARAMETER), lookup('lab_naive').SIMPLICITY, 'mitsuba' in sys.modules)\n")
