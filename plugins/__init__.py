@@ -41,7 +41,7 @@ _ORDER = (
     "integrators.bdpt.endpoints", "integrators.bdpt.splats", "integrators.bdpt.vertices",
     "integrators.bdpt.light_subpath", "integrators.bdpt.camera_subpath",
     "integrators.bdpt.integrator",
-    "integrators.vcm.merging", "integrators.vcm.integrator",
+    "integrators.vcm.merging", "integrators.vcm.pilot", "integrators.vcm.integrator",
     # the samplers
     "samplers.common", "samplers.halton", "samplers.independent", "samplers.sobol",
     "samplers.stratified", "samplers.zsobol",

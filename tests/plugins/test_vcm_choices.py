@@ -52,11 +52,11 @@ def test_the_pilots_own_choice_agrees_with_mitsuba_path():
 def test_path_tracing_chosen_is_lab_mis_with_the_pilots_iterations(monkeypatch):
     """A pilot that chooses path tracing: the render is lab_mis's image (the same seed) averaged
     with the pilot's path tracing by iterations, and traces no light subpath."""
-    from mitsuba_lab.plugins.integrators.vcm.integrator import LabVCMIntegrator
+    from mitsuba_lab.plugins.integrators.vcm.pilot import Pilot
 
     scene = load_scene(scene_path("cornell_box.xml"), res=RES)
     pilot_image = np.full((RES, RES, 3), 0.5)
-    monkeypatch.setattr(LabVCMIntegrator, "_pilot", lambda self, *a: (None, pilot_image, 12, {None: 0.0}))
+    monkeypatch.setattr(Pilot, "run", lambda self, *a: (None, pilot_image, 12, {None: 0.0}))
     integrator = vcm(pilot=True)
     image = render(scene, integrator, spp=4)
     mis = render(scene, make_integrator("lab_mis", {"max_depth": MAX_DEPTH}), spp=4)
@@ -172,10 +172,10 @@ def test_the_pilot_chooses_light_subpaths_by_variance_times_time():
 def test_the_chosen_light_subpaths_render_lab_vcm_at_them(monkeypatch):
     """A pilot that chooses 4x light_paths: the render is lab_vcm's at 4 light subpaths per camera
     subpath (the same seed, the same image), its statistics say so."""
-    from mitsuba_lab.plugins.integrators.vcm.integrator import LabVCMIntegrator
+    from mitsuba_lab.plugins.integrators.vcm.pilot import Pilot
 
     scene = load_scene(scene_path("caustic.xml"), res=RES)
-    monkeypatch.setattr(LabVCMIntegrator, "_pilot", lambda self, *a: (4.0, None, 0, {4.0: 1.0, None: 2.0}))
+    monkeypatch.setattr(Pilot, "run", lambda self, *a: (4.0, None, 0, {4.0: 1.0, None: 2.0}))
     integrator = vcm(radius=0.03, pilot=True, light_paths_max=16)
     image = render(scene, integrator, spp=4, seed=7)
     direct = render(scene, vcm(radius=0.03, light_paths=4), spp=4, seed=7)
@@ -197,10 +197,11 @@ def test_the_pilot_finds_where_more_light_subpaths_lower_the_variance():
     for name, low in (("stiff/light_in_glass.xml", True), ("caustic.xml", False)):
         scene = load_scene(scene_path(name), res=64)
         integrator = vcm(**AUTO)
-        integrator._radius = AUTO["radius"]           # (what render() sets before its pilot)
+        integrator.first_radius = AUTO["radius"]      # (what render() sets before its pilot)
+        pilot = integrator.pilot
         for seed in range(3):
-            integrator._pilot(scene, scene.sensors()[0], seed, 512, integrator._companion(), integrator._path_tracer())
-            v = integrator.pilot_variances
+            pilot.run(scene, scene.sensors()[0], seed, 512, pilot.companion(), pilot.path_tracer())
+            v = pilot.variances
             share = v.camera_side / v.every
             assert (share < 0.2) if low else (share > 0.5), (name, seed, v)
     scene = load_scene(scene_path("cornell_box.xml"), res=64)

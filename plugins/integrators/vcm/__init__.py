@@ -5,5 +5,7 @@ merging terms) and on ``common``'s counting-sort grid, as ``lab_photon``'s photo
 
 * ``merging``: the grid over a pass's light vertices and the merging estimate at a camera vertex;
 * ``integrator``: the plugin (one pass per sample, the radius schedule, the modes);
+* ``pilot``: the pilot's renders and the render it chooses; ``selection``: its choice, without a
+  variant;
 * ``estimator``: what lab_vcm can render, without a variant.
 """

@@ -3,21 +3,18 @@ from __future__ import annotations
 
 import math
 import time
-from collections import Counter
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
-from mitsuba_lab.plugins.integrators.bdpt.integrator import BdptStats, LabBDPTIntegrator, pass_seed
+from mitsuba_lab.plugins.integrators.bdpt.integrator import LabBDPTIntegrator
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, iteration_sizes
 from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
 from mitsuba_lab.plugins.params import VCM_LIGHT_PATHS_MAX
-from mitsuba_lab.plugins.integrators.common.support import render_arguments
 
 from .estimator import VertexMerging, merges_first
 from .merging import VertexGrid, table
-from .selection import PATH_TRACING_SIZE, PILOT_RENDERS, PilotCosts, choose, light_path_ratios, pilot_iterations, pilot_variances
+from .pilot import Pilot
 
 
 def vcm_radius(r1: float, iteration: int, alpha: float) -> float:
@@ -194,7 +191,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     last render (``bdpt_stats()``): light, grid and camera time, the radii; with ``pilot`` the
     pilot's time, whether it chose path tracing alone, the light subpaths it chose, each
     choice's score (relative variance x seconds per iteration) and ``pilot_costs``; with counted
-    costs the pilot's counts are in ``pilot_work`` (every technique's and path tracing's).
+    costs the pilot's counts are in ``pilot.work`` (every technique's and path tracing's).
 
     .. code-block:: python
 
@@ -221,8 +218,11 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             self.weights_class = PpmWeights
         # (no first merge: merging from the camera's second vertex on; ``BdptWeights.merge_from``)
         self.merge_from = 1 if merges_first(self.values) or not self.merging else 2
-        self._radius = 0.0
+        #: r_1, the first iteration's merging radius (set by ``render``: ``radius``, or automatic)
+        self.first_radius = 0.0
         self._pilot_defaults(props)
+        #: the pilot's choice and the renders it makes (``pilot.Pilot``)
+        self.pilot = Pilot(self)
         if self.values["light_paths_max"] and not self.values["pilot"]:
             raise ValueError("lab_vcm: light_paths_max is the most light subpaths the pilot may choose: it needs "
                              "pilot = true")
@@ -257,143 +257,20 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             if not r1 > 0:
                 chosen = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
                 r1 = pixel_footprint(scene, chosen)
-            self._radius = r1
+            self.first_radius = r1
         if self._pass is None and self.values["pilot"]:
             self.refuse_undeveloped(develop)
-            return self._render_chosen(scene, sensor, seed, spp, develop, evaluate)
+            return self.pilot.render(scene, sensor, seed, spp, develop, evaluate)
         return super().render(scene, sensor, seed, spp, develop, evaluate)
 
-    # -- pilot: every technique or path tracing alone, whichever a pilot finds more efficient --------
-
-    #: The pilot renders' seeds: the render's seed with this mixed in, then one per render; the
-    #: light seed of the renders that share camera seeds mixes in one more.
-    PILOT_SALT = 0x2545F491
-    PILOT_LIGHT_SALT = 0x68E31DA4
-
-    def _companion(self, ratio: float = 1.0):
-        """lab_vcm with every technique of this one, without the pilot, at ``ratio`` x its
-        light_paths."""
-        # (counting rays always: the counted pilot prices its renders by them)
-        params = dict(self.values, pilot=False, light_paths_max=0.0, light_paths=self.values["light_paths"] * ratio,
-                      count_rays=True)
-        if self.merging:
-            params["radius"] = self._radius
-        return mi.load_dict({"type": "lab_vcm", **params})
-
-    def _path_tracer(self):
-        """lab_mis with this one's path length, roulette, hidden emitters and heuristic: path
-        tracing alone, the estimator of lab_vcm's mode pt."""
-        shared = ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta")
-        return mi.load_dict({"type": "lab_mis", "count_rays": True, **{k: self.values[k] for k in shared}})
-
-    @staticmethod
-    def _timed(integrator, scene, sensor, seed: int, spp: int, develop=True, evaluate=True):
-        """(image, seconds) of a render, after Dr.Jit has finished it."""
-        start = time.perf_counter()
-        image = integrator.render(scene, sensor, seed, spp, develop, evaluate)
-        dr.eval(image)
-        dr.sync_thread()
-        return image, time.perf_counter() - start
-
-    @staticmethod
-    def _pass_times(integrator) -> tuple[float, float]:
-        """(light pass + grid, camera pass) seconds of the integrator's last render."""
-        stats = integrator.bdpt_stats()
-        return stats["light_s"] + stats["grid_s"], stats["camera_s"]
-
-    def _pilot(self, scene, sensor, seed: int, spp: int, every, camera):
-        """(the choice: a multiple of light_paths, or None for path tracing alone; path tracing's
-        pilot image, the mean of its iterations; their number; each choice's relative variance x
-        seconds per iteration), from pilot renders of both (``selection``): priced by the work
-        they count (``pilot_costs = counted``) or by their times (``measured``)."""
-        iterations = pilot_iterations(spp)
-        ratios = light_path_ratios(self.values["light_paths"], self.values["light_paths_max"])
-        counted = self.values["pilot_costs"] == "counted"
-        channels = 1 if mi.is_monochromatic else 3
-        base = seed ^ self.PILOT_SALT
-        images = {"every": [], "shared": [], "camera": []}
-        large, camera_times = [], []
-        every_work = Counter()
-        camera.ray_counts()                     # (path tracing's rays from here on)
-        for r in range(PILOT_RENDERS):
-            for name, integrator in (("every", every), ("camera", camera)):
-                image, seconds = self._timed(integrator, scene, sensor, pass_seed(base, r + 1), iterations)
-                images[name].append(np.array(image)[..., :channels])
-                if name == "every":
-                    large.append(self._pass_times(every))
-                    every_work.update(every.work_counts())
-                else:
-                    camera_times.append(seconds)
-        if len(ratios) > 1:       # render 0's camera seed, a light seed of its own
-            every.light_seed = pass_seed(base ^ self.PILOT_LIGHT_SALT, 1)
-            image, _ = self._timed(every, scene, sensor, pass_seed(base, 1), iterations)
-            images["shared"].append(np.array(image)[..., :channels])
-            every.light_seed = None
-        if not counted:
-            # marginal costs of an iteration: every technique's from one iteration more than none,
-            # path tracing's (cheaper, its times noisier) from PATH_TRACING_SIZE x the iterations;
-            # the one-iteration render twice, the second timed (on a fresh clone a first one took
-            # 1.1 s, not ~20 ms, and every iteration looked costless)
-            for _ in range(2):
-                self._timed(every, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), 1)
-        longer = PATH_TRACING_SIZE * iterations
-        image, camera_long = self._timed(camera, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), longer)
-        film = sensor.film()
-        pass_iterations = every.pass_iterations(int(film.size()[0]) * int(film.size()[1]))
-        if counted:
-            path_work = camera.ray_counts(reset=False)
-            costs = PilotCosts.from_counts(every_work, PILOT_RENDERS * iterations, pass_iterations, path_work,
-                                           PILOT_RENDERS * iterations + longer, self.values)
-            self.pilot_work = {"every": dict(every_work), "path tracing": path_work}
-        else:
-            costs = PilotCosts.from_sizes(self._pass_times(every), tuple(np.median(np.array(large), axis=0)),
-                                          iterations, pass_iterations,
-                                          (float(np.median(camera_times)), camera_long), iterations, longer)
-            self.pilot_work = {}
-        camera_images = np.array(images["camera"])
-        variances = pilot_variances(np.array(images["every"]), np.array(images["shared"]) if images["shared"] else None,
-                                    camera_images, iterations, np.array(image)[..., :channels], longer)
-        choice, scores = choose(variances, costs, ratios)
-        # (path tracing's images, the longer one included, are this render's estimator if chosen)
-        camera_spp = PILOT_RENDERS * iterations + longer
-        pilot_image = (camera_images.sum(axis=0) * iterations + np.array(image)[..., :channels] * longer) / camera_spp
-        self.pilot_variances, self.pilot_costs = variances, costs
-        return choice, pilot_image, camera_spp, scores
-
-    def _render_chosen(self, scene, sensor, seed, spp, develop, evaluate):
-        sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
-        start = time.perf_counter()
-        camera, every = self._path_tracer(), self._companion()
-        choice, pilot_image, pilot_spp, scores = self._pilot(scene, sensor, seed, spp, every, camera)
-        pilot_s = time.perf_counter() - start
-        chosen = None
-        if choice is None:
-            image, seconds = self._timed(camera, scene, sensor, seed, spp, develop, evaluate)
-            self.stats = BdptStats(passes=1, camera_s=seconds)
-            # the pilot's path tracing is this render's estimator: its iterations count too
-            out = np.array(image)
-            channels = pilot_image.shape[-1]
-            out[..., :channels] = (spp * out[..., :channels] + pilot_spp * pilot_image) / (spp + pilot_spp)
-            image = mi.TensorXf(out)
-        elif choice == 1.0:
-            image = super().render(scene, sensor, seed, spp, develop, evaluate)
-        else:
-            chosen = self._companion(choice)
-            image = chosen.render(scene, sensor, seed, spp, develop, evaluate)
-            self.stats = chosen.stats
-        for integrator in (camera, every, chosen):    # (the pilot's rays are this render's cost too)
-            if integrator is not None and self.values["count_rays"]:
-                self.counters.add_counts(integrator.ray_counts())
-        self.stats.pilot_s, self.stats.chose_path_tracing = pilot_s, choice is None
-        self.stats.pilot_costs = self.values["pilot_costs"]
-        self.stats.light_paths_chosen = 0.0 if choice is None else self.values["light_paths"] * choice
-        self.stats.pilot_scores = {("path tracing" if r is None else self.values["light_paths"] * r): float(v)
-                                   for r, v in scores.items()}
-        return image
+    def render_every(self, scene, sensor, seed, spp, develop=True, evaluate=True):
+        """A render with every technique of this one's mode, without the pilot (what the pilot
+        renders when it chooses them at this one's light_paths)."""
+        return super().render(scene, sensor, seed, spp, develop, evaluate)
 
     def _radii(self, plan) -> list[float]:
         """The merging radius of each iteration of a pass (iterations done + 1 .. done + spp)."""
-        return [vcm_radius(self._radius, plan.done + k + 1, self.values["alpha"]) for k in range(plan.spp)]
+        return [vcm_radius(self.first_radius, plan.done + k + 1, self.values["alpha"]) for k in range(plan.spp)]
 
     def pass_spp_limit(self, film_pixels: int) -> int:
         if not self.merging:
@@ -438,7 +315,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         return weights
 
     def merge_area(self, plan) -> float:
-        return math.pi * self._radius ** 2 * plan.light_subpaths / plan.spp if self.merging else 0.0
+        return math.pi * self.first_radius ** 2 * plan.light_subpaths / plan.spp if self.merging else 0.0
 
     def pass_grid(self, vertices, stored: int, plan, stats):
         if not self.merging:
