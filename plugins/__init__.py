@@ -39,7 +39,7 @@ _ORDER = (
     "integrators.photon.tracer", "integrators.photon.integrator",
     # lab_bdpt, then lab_vcm on it
     "integrators.bdpt.endpoints", "integrators.bdpt.splats", "integrators.bdpt.vertices",
-    "integrators.bdpt.light_subpath", "integrators.bdpt.camera_subpath",
+    "integrators.bdpt.light_subpath", "integrators.bdpt.camera_subpath", "integrators.bdpt.passes",
     "integrators.bdpt.integrator",
     "integrators.vcm.merging", "integrators.vcm.pilot", "integrators.vcm.integrator",
     # the samplers

@@ -69,7 +69,7 @@ def test_a_sweep_keeps_each_renders_statistics_and_reports_the_pilots_choices(tm
         stats = r["integrator_stats"]
         assert stats["pilot_s"] > 0 and set(stats["pilot_scores"]) == {"1.0", "2.0", "path tracing"}
         assert pilot_choice(stats) is not None
-    assert all(r["integrator_stats"]["pilot_s"] == 0 and r["integrator_stats"]["passes"] >= 1 for r in runs["bdpt"])
+    assert all("pilot_s" not in r["integrator_stats"] and r["integrator_stats"]["passes"] >= 1 for r in runs["bdpt"])
     table = open(out / "report" / "summary.md").read().split("### What the pilots chose")[1]
     line = next(line for line in table.splitlines() if line.startswith("| auto"))
     chosen = [c.strip() for c in line.split("|")[4].split(",")]

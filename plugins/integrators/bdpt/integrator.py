@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
 
 import drjit as dr
 import mitsuba as mi
@@ -23,6 +22,7 @@ from .camera_subpath import CameraPass, sensor_constants, trace_camera_subpaths
 from .endpoints import direction_is_delta
 from .estimator import Bidirectional
 from .light_subpath import LightTracer, check_variant
+from .passes import PassPlan, Passes, pass_seed
 from .vertices import NONE, LightVertices, vertex_bytes
 from .weights import BdptWeights
 
@@ -31,50 +31,6 @@ DEPTH_UNBOUNDED = 0xFFFFFFFF
 #: First guess of stored light vertices per light subpath, at the start of every render (then
 #: learnt from each of its passes: what one render learns never sizes the next one's passes).
 FIRST_GUESS_VERTICES = 3.0
-
-
-@dataclass
-class BdptStats:
-    """What the last render did (times in seconds, after dr.eval + dr.sync_thread)."""
-    passes: int = 0
-    retraces: int = 0
-    light_subpaths: int = 0
-    light_vertices_reached: int = 0
-    light_vertices_stored: int = 0
-    peak_vertex_bytes: int = 0
-    light_s: float = 0.0
-    camera_s: float = 0.0
-    grid_s: float = 0.0               # lab_vcm: building the light vertices' grids
-    merging_vertices: int = 0         # lab_vcm: light vertices in the grids (merge_vertices: all or caustic)
-    radius_first: float = 0.0         # lab_vcm: the merging radius of the first and last pass
-    radius_last: float = 0.0
-    pilot_s: float = 0.0              # lab_vcm pilot: the pilot's time
-    chose_path_tracing: bool = False  # lab_vcm pilot: the pilot chose path tracing alone
-    light_paths_chosen: float = 0.0   # lab_vcm pilot: the light subpaths per camera subpath chosen (0: none)
-    pilot_scores: dict = field(default_factory=dict)   # lab_vcm pilot: relative variance x s per iteration
-    pilot_costs: str = ""             # lab_vcm pilot: how it priced an iteration (counted or measured work)
-
-    def as_dict(self) -> dict:
-        return asdict(self)
-
-
-@dataclass
-class PassPlan:
-    """One pass of a render: its ``index``, the samples per pixel before it (``done``) and in it
-    (``spp``: lab_vcm's iterations, sample k of every pixel in iteration done + k + 1), its light
-    subpaths and camera lanes (light and camera lane i belong to sample i mod spp)."""
-    index: int
-    done: int
-    spp: int
-    light_subpaths: int
-    camera_lanes: int
-
-
-def pass_seed(seed: int, index: int) -> int:
-    """Seed of pass ``index`` (pass 0 keeps the render's seed)."""
-    if index == 0:
-        return seed & 0xFFFFFFFF
-    return int(mi.sample_tea_32(mi.UInt32(seed & 0xFFFFFFFF), mi.UInt32(index))[0][0])
 
 
 class LabBDPTIntegrator(mi.SamplingIntegrator):
@@ -185,10 +141,13 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         self.kinds = self.estimator.kinds()             # the enabled strategy kinds
         self.only = bdpt_only_strategy(values.get("only_strategy", ""))
         self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
-        self.stats = BdptStats()
+        #: what the driver does beyond lab_bdpt's parameters (``passes.Passes``: lab_bdpt's own)
+        self.passes = Passes()
+        self.stats = self.passes.stats_class()
         self.counters = RayCounters(self.RAY_KINDS)
         self._counted_before = {}             # ray counts when the last render began (work_counts)
         self.vertices_per_path = FIRST_GUESS_VERTICES
+        self.connectable_per_path = FIRST_GUESS_VERTICES
         self._pass = None                     # CameraPass while a pass's camera subpaths run
 
     # -- Driver -------------------------------------------------------------------
@@ -223,27 +182,28 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                              self.ESTIMATOR.plugin_name)
         tracer.counters = counters = self.counters if v["count_rays"] else None
         inv_area, axis = sensor_constants(sensor, self.ESTIMATOR.plugin_name)
-        self.stats = stats = BdptStats()
+        passes = self.passes
+        self.stats = stats = passes.stats_class()
         # what the passes learn lives in this render: the same first guesses in every render
         self.vertices_per_path = FIRST_GUESS_VERTICES
         self.connectable_per_path = FIRST_GUESS_VERTICES
         self._counted_before = self.counters.read(reset=False) if counters is not None else {}
         total, done, index = None, 0, 0
-        light_paths = v.get("light_paths", 1.0)         # (lab_vcm: 1)
+        light_paths = v.get("light_paths", 1.0)
         u_passes = spectral.pass_samples(seed, spp) if mi.is_spectral else None   # a pass is one spp there
         while done < spp:
             # light subpaths that fit in max_vertices: film pixels x spp_pass, or fewer, shared
             fit = self.light_subpaths_that_fit()
             spp_pass = max(1, min(spp - done, self.pass_iterations(film_px),
                                   1 if mi.is_spectral else spp))        # spectral: one set of wavelengths per pass
-            count = self.pass_light_subpaths(max(1, min(round(film_px * spp_pass * light_paths), fit)), spp_pass,
-                                             crop_px * spp_pass)
+            count = passes.light_subpaths(max(1, min(round(film_px * spp_pass * light_paths), fit)), spp_pass,
+                                          crop_px * spp_pass)
             plan = PassPlan(index, done, spp_pass, count, crop_px * spp_pass)
             tracer.weights = self.pass_weights(plan)
             u = u_passes[index] if u_passes else None
             if u is not None:
                 tracer.pass_spectrum = spectral.sensor_spectrum(sensor, u)
-            light_seed = pass_seed(seed if self.light_seed is None else self.light_seed, index)
+            light_seed = pass_seed(seed if passes.light_seed is None else passes.light_seed, index)
             light = self._light_pass(tracer, film, count, crop_px / count, light_seed, stats,
                                      traits.tangent_bsdf, plan.camera_lanes)
             if light is None:                          # did not fit: fewer light subpaths
@@ -252,8 +212,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             self._pass = CameraPass(vertices, last, tracer.weights, tracer.table, inv_area, axis,
                                     self.max_depth, v["rr_depth"], v["hide_emitters"], floor,
                                     traits.hittable_emitters, only, count,
-                                    self.pass_grid(vertices, stored, plan, stats), self.connect_share,
-                                    self.connect_one, counters, direction_is_delta(sensor))
+                                    passes.grid(vertices, stored, plan, stats), passes.connect_share,
+                                    passes.connect_one, counters, direction_is_delta(sensor))
             start = time.perf_counter()
             try:
                 if u is None:
@@ -275,61 +235,30 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             stats.passes += 1
         return total
 
-    # -- What a pass uses (lab_vcm overrides these) -------------------------------------
+    # -- What a pass uses -------------------------------------------------------------
 
-    #: The MIS weights' class, None: this module's ``BdptWeights`` (lab_vcm's ppm: weight 1 for
-    #: its one technique per path).
-    weights_class = None
-    #: The first camera depth that merges (lab_vcm's merge_first; ``BdptWeights.merge_from``).
-    merge_from = 1
-    #: Connections' Russian roulette against this share of the lane's estimate so far
-    #: (``camera_subpath.connection_roulette``); 0: every connection runs (lab_bdpt).
-    connect_share = 0.0
-    #: Each camera vertex connects to one vertex of its light subpath (lab_vcm's ``connections``).
-    connect_one = False
-    #: Merging only with light vertices reached through a delta lobe (lab_vcm's ``merge_vertices``).
-    caustic_merges = False
-    #: The light subpaths' own seed; None: the render's (lab_vcm's pilot crosses light and camera
-    #: seeds to tell their shares of the variance apart).
-    light_seed = None
     def light_subpaths_that_fit(self) -> int:
         """Light subpaths whose vertices fit in ``max_vertices`` (from the passes so far)."""
         return max(1, int(self.values["max_vertices"] / (1.25 * self.vertices_per_path)))
 
     def pass_iterations(self, film_pixels: int) -> int:
         """Samples per pixel a pass holds at ``film_pixels`` (before the render's remaining count):
-        what fits in ``max_vertices`` at ``light_paths``, and ``pass_spp_limit``."""
+        what fits in ``max_vertices`` at ``light_paths``, and ``Passes.spp_limit``."""
         per_iteration = film_pixels * self.values.get("light_paths", 1.0)
-        return max(1, min(int(self.light_subpaths_that_fit() // per_iteration), self.pass_spp_limit(film_pixels)))
-
-    def pass_spp_limit(self, film_pixels: int) -> int:
-        """Most samples per pixel in one pass besides ``max_vertices`` (lab_vcm: a bound)."""
-        return 1 << 30
-
-    def pass_light_subpaths(self, count: int, spp_pass: int, camera_lanes: int) -> int:
-        """The light subpaths a pass of ``spp_pass`` samples per pixel and ``camera_lanes`` camera
-        subpaths traces, given the ``count`` that ``light_paths`` and ``max_vertices`` ask for
-        (lab_vcm: a multiple of the pass's iterations)."""
-        return count
+        return max(1, min(int(self.light_subpaths_that_fit() // per_iteration),
+                          self.passes.spp_limit(film_pixels, self.stats)))
 
     def pass_weights(self, plan: PassPlan) -> BdptWeights:
-        """The MIS weights of a pass (lab_vcm adds merging)."""
-        v = self.values
+        """The MIS weights of a pass."""
+        v, passes = self.values, self.passes
         ratio = plan.light_subpaths / plan.camera_lanes
-        weights = (self.weights_class or BdptWeights)(v["heuristic"], v["beta"], self.kinds, light_paths=ratio,
-                                                      merge_area=self.merge_area(plan), merge_from=self.merge_from,
-                                                      caustic_merges=self.caustic_merges)
+        weights = (passes.weights_class or BdptWeights)(v["heuristic"], v["beta"], self.kinds, light_paths=ratio,
+                                                        merge_area=passes.merge_area(plan),
+                                                        merge_from=passes.merge_from,
+                                                        caustic_merges=passes.caustic_merges)
         # (opaque: a ratio that changes from pass to pass must not be compiled into the kernels)
         weights.light_paths = dr.opaque(mi.Float, ratio)
-        return weights
-
-    def merge_area(self, plan: PassPlan) -> float:
-        """pi r^2 N of the pass's merging (lab_vcm; per iteration: its ``lane_tables``), else 0."""
-        return 0.0
-
-    def pass_grid(self, vertices, stored: int, plan: PassPlan, stats):
-        """What the camera subpaths merge with (lab_vcm); None: no merging."""
-        return None
+        return passes.equip(weights, plan, self.connectable_per_path)
 
     def _light_pass(self, tracer, film, count: int, sample_scale: float, seed: int, stats, tangents: bool,
                     camera_lanes: int):
@@ -387,7 +316,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     # -- Reporting --------------------------------------------------------------------
 
     def error(self, text: str) -> ValueError:
-        """A one-line error naming this plugin (lab_bdpt, or lab_vcm built on it)."""
+        """A one-line error naming this plugin (lab_bdpt, or the plugin built on it)."""
         return ValueError(f"{self.ESTIMATOR.plugin_name}: {text}")
 
     def ray_counts(self, reset: bool = True) -> dict[str, int]:
@@ -399,7 +328,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         return self.stats.as_dict()
 
     def work_counts(self) -> dict[str, int]:
-        """The last render's work by kind (lab_vcm's pilot prices a render by it): its rays as
+        """The last render's work by kind (a pilot can price a render by it): its rays as
         ``ray_counts()`` counts them (needs ``count_rays``; else {}), and from its passes
         ``light_vertices`` (stored, for connections and the grids) and ``passes``. The same
         scene, settings, seed and variant count the same."""

@@ -3,11 +3,13 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field
 
 import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators.bdpt.integrator import LabBDPTIntegrator
+from mitsuba_lab.plugins.integrators.bdpt.passes import BdptStats, Passes
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, iteration_sizes
 from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
 from mitsuba_lab.plugins.params import VCM_LIGHT_PATHS_MAX
@@ -49,6 +51,100 @@ class PpmWeights(BdptWeights):
 
     def merge(self, light, camera, pdf_cam_fwd, pdf_cam_rev):
         return self.e["merge"]
+
+
+@dataclass
+class VcmStats(BdptStats):
+    """lab_bdpt's statistics of the last render, and merging's and the pilot's."""
+    grid_s: float = 0.0               # building the light vertices' grids
+    merging_vertices: int = 0         # light vertices in the grids (merge_vertices: all or caustic)
+    radius_first: float = 0.0         # the merging radius of the first and last pass
+    radius_last: float = 0.0
+    pilot_s: float = 0.0              # pilot: the pilot's time
+    chose_path_tracing: bool = False  # pilot: the pilot chose path tracing alone
+    light_paths_chosen: float = 0.0   # pilot: the light subpaths per camera subpath chosen (0: none)
+    pilot_scores: dict = field(default_factory=dict)   # pilot: relative variance x s per iteration
+    pilot_costs: str = ""             # pilot: how it priced an iteration (counted or measured work)
+
+
+class VcmPasses(Passes):
+    """What lab_vcm asks of lab_bdpt's driver (``bdpt.passes.Passes``): its MIS weights, merging
+    with each iteration's radius, pass sizes for the grids, and its connection settings, from the
+    plugin ``plugin`` (its values and, once ``render`` has set it, ``first_radius``)."""
+    stats_class = VcmStats
+
+    def __init__(self, plugin, merging: bool, merge_from: int, connect_share: float, connect_one: bool,
+                 caustic_merges: bool, ppm: bool):
+        self.plugin, self.merging, self.ppm = plugin, merging, ppm
+        self.merge_from, self.connect_share, self.connect_one = merge_from, connect_share, connect_one
+        self.caustic_merges = caustic_merges
+        if ppm:
+            self.weights_class = PpmWeights
+
+    def radii(self, plan) -> list[float]:
+        """The merging radius of each iteration of a pass (iterations done + 1 .. done + spp)."""
+        return [vcm_radius(self.plugin.first_radius, plan.done + k + 1, self.plugin.values["alpha"])
+                for k in range(plan.spp)]
+
+    def spp_limit(self, film_pixels: int, stats) -> int:
+        if not self.merging:
+            return super().spp_limit(film_pixels, stats)
+        # stored vertices per subpath from this render's own passes (the same seed, the same passes)
+        traced = stats.light_subpaths
+        per_path = stats.light_vertices_stored / traced if traced else None
+        subpaths = FIRST_PASS_LIGHT_SUBPATHS if per_path is None else min(
+            MAX_PASS_LIGHT_SUBPATHS, max(MIN_PASS_LIGHT_SUBPATHS, int(PASS_LIGHT_VERTICES / max(per_path, 1e-3))))
+        iterations = int(subpaths / (film_pixels * self.plugin.values["light_paths"]))
+        return max(1, min(iterations, MAX_PASS_CAMERA_LANES // film_pixels))
+
+    def light_subpaths(self, count: int, spp_pass: int, camera_lanes: int) -> int:
+        """Below one light subpath per camera subpath (``light_paths`` < 1), camera lane i uses
+        light subpath i mod N; with N a multiple of the pass's iterations K, both lie in the same
+        iteration, i mod K (``BdptWeights.lane_iteration``), so a lane connects only to light
+        vertices of its own iteration, whose radius and N_k its weights carry."""
+        if not self.merging or spp_pass == 1 or count >= camera_lanes:
+            return count
+        return spp_pass * max(1, count // spp_pass)
+
+    @staticmethod
+    def iteration_light_subpaths(plan) -> list[int]:
+        """N_k, the light subpaths of each iteration of a pass (at least 1: an iteration without
+        any has no camera lanes either, as camera lane i pairs with light subpath i)."""
+        return [max(n, 1) for n in iteration_sizes(plan.light_subpaths, plan.spp)]
+
+    def equip(self, weights, plan, connectable_per_path: float):
+        if self.connect_one:
+            # a connection technique is sampled about once per L stored light vertices (L: their mean
+            # per light subpath, from the passes so far); opaque, as it changes from pass to pass
+            count = min(1.0, 1.0 / max(connectable_per_path, 1.0))
+            weights.connect_weight = dr.opaque(mi.Float, weights._m(count))
+        if self.merging:
+            # merging in iteration k: density pi r_k^2 N_k, N_k = the iteration's light subpaths
+            sizes = self.iteration_light_subpaths(plan)
+            etas = [weights._m(math.pi * r * r * n) for r, n in zip(self.radii(plan), sizes)]
+            iterations = mi.UInt32(plan.spp)
+            dr.make_opaque(iterations)
+            weights.lane_tables = (table(etas), table([1.0 / e for e in etas]), iterations)
+        return weights
+
+    def merge_area(self, plan) -> float:
+        return math.pi * self.plugin.first_radius ** 2 * plan.light_subpaths / plan.spp if self.merging else 0.0
+
+    def grid(self, vertices, stored: int, plan, stats):
+        if not self.merging:
+            return None
+        radii = self.radii(plan)
+        start = time.perf_counter()
+        grid = VertexGrid(vertices, stored, radii, self.iteration_light_subpaths(plan), self.plugin.values["kernel"])
+        grid.first_only = self.ppm
+        dr.eval(grid.buckets, grid.order, grid.points, grid.records)
+        dr.sync_thread()
+        stats.grid_s += time.perf_counter() - start
+        stats.merging_vertices += grid.count
+        if plan.index == 0:
+            stats.radius_first = radii[0]
+        stats.radius_last = radii[-1]
+        return grid
 
 
 class LabVCMIntegrator(LabBDPTIntegrator):
@@ -209,15 +305,10 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     def __init__(self, props: mi.Properties):
         super().__init__(props)
         self.merging = "merge" in self.kinds
-        self.connect_share = self.CONNECT_SHARE if self.merging else 0.0
-        self.connect_one = self.values["connections"] == "one" and "connect" in self.kinds
-        if self.values["mode"] == "ppm":
-            if "merge_first" in props and not self.values["merge_first"]:
-                raise ValueError("lab_vcm: mode 'ppm' merges only at the first smooth camera vertex: "
-                                 "merge_first = false does not apply to it")
-            self.weights_class = PpmWeights
-        # (no first merge: merging from the camera's second vertex on; ``BdptWeights.merge_from``)
-        self.merge_from = 1 if merges_first(self.values) or not self.merging else 2
+        ppm = self.values["mode"] == "ppm"
+        if ppm and "merge_first" in props and not self.values["merge_first"]:
+            raise ValueError("lab_vcm: mode 'ppm' merges only at the first smooth camera vertex: "
+                             "merge_first = false does not apply to it")
         #: r_1, the first iteration's merging radius (set by ``render``: ``radius``, or automatic)
         self.first_radius = 0.0
         self._pilot_defaults(props)
@@ -232,14 +323,21 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         if self.values["pilot"] and self.values["mode"] not in ("vcm", "bpt"):
             raise ValueError(f"lab_vcm: pilot chooses between every technique and path tracing alone, which only "
                              f"modes 'vcm' and 'bpt' have, not mode '{self.values['mode']}'")
-        self.caustic_merges = self.values["merge_vertices"] == "caustic"
-        if self.caustic_merges and self.values["mode"] != "vcm":
+        caustic_merges = self.values["merge_vertices"] == "caustic"
+        if caustic_merges and self.values["mode"] != "vcm":
             raise ValueError(f"lab_vcm: merge_vertices = 'caustic' leaves the light of paths without a delta lobe "
                              f"before the merge to the other techniques, which only mode 'vcm' has all of, not "
                              f"mode '{self.values['mode']}'")
         if self.values["connections"] == "one" and "connect" not in self.kinds:
             raise ValueError(f"lab_vcm: connections = 'one' picks the light vertex a camera vertex connects to; "
                              f"mode '{self.values['mode']}' makes no connections")
+        # (no first merge: merging from the camera's second vertex on; ``BdptWeights.merge_from``)
+        self.passes = VcmPasses(self, self.merging,
+                                merge_from=1 if merges_first(self.values) or not self.merging else 2,
+                                connect_share=self.CONNECT_SHARE if self.merging else 0.0,
+                                connect_one=self.values["connections"] == "one" and "connect" in self.kinds,
+                                caustic_merges=caustic_merges, ppm=ppm)
+        self.stats = VcmStats()
 
     def _pilot_defaults(self, props):
         """Unless given: the pilot in mode vcm only (mode bpt is lab_bdpt's estimator, the other modes
@@ -267,71 +365,6 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         """A render with every technique of this one's mode, without the pilot (what the pilot
         renders when it chooses them at this one's light_paths)."""
         return super().render(scene, sensor, seed, spp, develop, evaluate)
-
-    def _radii(self, plan) -> list[float]:
-        """The merging radius of each iteration of a pass (iterations done + 1 .. done + spp)."""
-        return [vcm_radius(self.first_radius, plan.done + k + 1, self.values["alpha"]) for k in range(plan.spp)]
-
-    def pass_spp_limit(self, film_pixels: int) -> int:
-        if not self.merging:
-            return super().pass_spp_limit(film_pixels)
-        # stored vertices per subpath from this render's own passes (the same seed, the same passes)
-        traced = self.stats.light_subpaths
-        per_path = self.stats.light_vertices_stored / traced if traced else None
-        subpaths = FIRST_PASS_LIGHT_SUBPATHS if per_path is None else min(
-            MAX_PASS_LIGHT_SUBPATHS, max(MIN_PASS_LIGHT_SUBPATHS, int(PASS_LIGHT_VERTICES / max(per_path, 1e-3))))
-        iterations = int(subpaths / (film_pixels * self.values["light_paths"]))
-        return max(1, min(iterations, MAX_PASS_CAMERA_LANES // film_pixels))
-
-    def pass_light_subpaths(self, count: int, spp_pass: int, camera_lanes: int) -> int:
-        """Below one light subpath per camera subpath (``light_paths`` < 1), camera lane i uses
-        light subpath i mod N; with N a multiple of the pass's iterations K, both lie in the same
-        iteration, i mod K (``BdptWeights.lane_iteration``), so a lane connects only to light
-        vertices of its own iteration, whose radius and N_k its weights carry."""
-        if not self.merging or spp_pass == 1 or count >= camera_lanes:
-            return count
-        return spp_pass * max(1, count // spp_pass)
-
-    @staticmethod
-    def _light_subpaths(plan) -> list[int]:
-        """N_k, the light subpaths of each iteration of a pass (at least 1: an iteration without
-        any has no camera lanes either, as camera lane i pairs with light subpath i)."""
-        return [max(n, 1) for n in iteration_sizes(plan.light_subpaths, plan.spp)]
-
-    def pass_weights(self, plan):
-        weights = super().pass_weights(plan)
-        if self.connect_one:
-            # a connection technique is sampled about once per L stored light vertices (L: their mean
-            # per light subpath, from the passes so far); opaque, as it changes from pass to pass
-            count = min(1.0, 1.0 / max(self.connectable_per_path, 1.0))
-            weights.connect_weight = dr.opaque(mi.Float, weights._m(count))
-        if self.merging:
-            # merging in iteration k: density pi r_k^2 N_k, N_k = the iteration's light subpaths
-            sizes = self._light_subpaths(plan)
-            etas = [weights._m(math.pi * r * r * n) for r, n in zip(self._radii(plan), sizes)]
-            iterations = mi.UInt32(plan.spp)
-            dr.make_opaque(iterations)
-            weights.lane_tables = (table(etas), table([1.0 / e for e in etas]), iterations)
-        return weights
-
-    def merge_area(self, plan) -> float:
-        return math.pi * self.first_radius ** 2 * plan.light_subpaths / plan.spp if self.merging else 0.0
-
-    def pass_grid(self, vertices, stored: int, plan, stats):
-        if not self.merging:
-            return None
-        radii = self._radii(plan)
-        start = time.perf_counter()
-        grid = VertexGrid(vertices, stored, radii, self._light_subpaths(plan), self.values["kernel"])
-        grid.first_only = self.values["mode"] == "ppm"
-        dr.eval(grid.buckets, grid.order, grid.points, grid.records)
-        dr.sync_thread()
-        stats.grid_s += time.perf_counter() - start
-        stats.merging_vertices += grid.count
-        if plan.index == 0:
-            stats.radius_first = radii[0]
-        stats.radius_last = radii[-1]
-        return grid
 
     def to_string(self):
         fields = ", ".join(f"{k}={v}" for k, v in self.settings().items())

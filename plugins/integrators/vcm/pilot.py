@@ -16,7 +16,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_lab.plugins.integrators.bdpt.integrator import BdptStats, pass_seed
+from mitsuba_lab.plugins.integrators.bdpt.passes import pass_seed
 from mitsuba_lab.plugins.integrators.common.support import render_arguments
 
 from .selection import PATH_TRACING_SIZE, PILOT_RENDERS, PilotCosts, choose, light_path_ratios, pilot_iterations, pilot_variances
@@ -95,10 +95,10 @@ class Pilot:
                 else:
                     camera_times.append(seconds)
         if len(ratios) > 1:       # render 0's camera seed, a light seed of its own
-            every.light_seed = pass_seed(base ^ LIGHT_SALT, 1)
+            every.passes.light_seed = pass_seed(base ^ LIGHT_SALT, 1)
             image, _ = timed(every, scene, sensor, pass_seed(base, 1), iterations)
             images["shared"].append(np.array(image)[..., :channels])
-            every.light_seed = None
+            every.passes.light_seed = None
         if not counted:
             # marginal costs of an iteration: every technique's from one iteration more than none,
             # path tracing's (cheaper, its times noisier) from PATH_TRACING_SIZE x the iterations;
@@ -139,7 +139,7 @@ class Pilot:
         chosen = None
         if choice is None:
             image, seconds = timed(camera, scene, sensor, seed, spp, develop, evaluate)
-            self.plugin.stats = BdptStats(passes=1, camera_s=seconds)
+            self.plugin.stats = self.plugin.passes.stats_class(passes=1, camera_s=seconds)
             # the pilot's path tracing is this render's estimator: its iterations count too
             out = np.array(image)
             channels = pilot_image.shape[-1]
