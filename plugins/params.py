@@ -183,28 +183,13 @@ LAB_PHOTON = (
     PATH_TRACER[2],                                   # hide_emitters, Mitsuba's meaning
 ) + AIM
 
-#: lab_bdpt's strategy kinds (``bdpt/weights.py``) and the named subsets of them.
-BDPT_KINDS = ("hit", "nee", "light", "connect")
-BDPT_PRESETS = {"all": BDPT_KINDS, "camera": ("hit", "nee"), "light": ("light",)}
+def _techniques():
+    """``integrators.bdpt.techniques``, which parses lab_bdpt's ``strategies`` and
+    ``only_strategy`` (imported when first needed: this module imports nothing of the package
+    when it loads, so tools can read it on its own)."""
+    from mitsuba_lab.plugins.integrators.bdpt import techniques
 
-
-def bdpt_strategy_kinds(value: str) -> tuple[str, ...] | None:
-    """The kinds a ``strategies`` value names (a preset, or kinds joined by '+'), or None."""
-    if value in BDPT_PRESETS:
-        return BDPT_PRESETS[value]
-    kinds = tuple(k.strip() for k in value.split("+"))
-    return kinds if kinds and all(k in BDPT_KINDS for k in kinds) and len(set(kinds)) == len(kinds) else None
-
-
-def bdpt_only_strategy(value: str) -> tuple[int, int] | None:
-    """(s, t) of an ``only_strategy`` value "s,t" (s >= 0, t >= 1, s + t >= 2), () for "", else None."""
-    if value == "":
-        return ()
-    parts = value.split(",")
-    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
-        return None
-    s, t = (int(p) for p in parts)
-    return (s, t) if t >= 1 and s + t >= 2 else None
+    return techniques
 
 
 #: lab_bdpt (bidirectional path tracing).
@@ -219,7 +204,7 @@ LAB_BDPT = (
           check=lambda v: v > 0 and math.isfinite(v), expected="a finite number > 0"),
     Param("strategies", str, "all", "strategies used: all, camera (s <= 1), light (t = 1), or kinds "
           "joined by '+' from hit, nee, light, connect",
-          check=lambda v: bdpt_strategy_kinds(v) is not None,
+          check=lambda v: _techniques().parse_techniques(v) is not None,
           expected="all, camera, light or kinds from hit, nee, light, connect joined by '+'"),
     Param("light_paths", float, 1.0, "light subpaths traced per camera subpath (light tracing's "
           "share: above 1 the extra ones only splat t = 1 connections; below 1 camera subpaths share them)",
@@ -228,22 +213,15 @@ LAB_BDPT = (
           "into passes to fit)", **_int_at_least(1024)),
     Param("only_strategy", str, "", "render only strategy (s, t), written 's,t', with its MIS weight "
           "(Veach's per-strategy images); empty = every strategy",
-          check=lambda v: bdpt_only_strategy(v) is not None,
+          check=lambda v: v == "" or _techniques().Strategy.parse(v) is not None,
           expected="empty or 's,t' with s >= 0, t >= 1 and s + t >= 2"),
 ) + AIM + (
     Param("count_rays", bool, True, "count camera, extension, shadow (NEE), connection, light-subpath and sensor "
           "(light tracing's) rays (ray_counts())"),
 )
 
-#: lab_vcm's modes: the strategy kinds each enables (SmallVCM's estimators behind one MIS).
-VCM_MODES = {
-    "vcm": BDPT_KINDS + ("merge",),          # vertex connection and merging: every technique
-    "bpt": BDPT_KINDS,                       # connections only: lab_bdpt
-    "bpm": ("hit", "merge"),                 # bidirectional photon mapping: merges at every vertex
-    "ppm": ("hit", "merge"),                 # progressive photon mapping: the first smooth vertex only
-    "lt": ("light",),                        # light tracing
-    "pt": ("hit", "nee"),                    # camera side only: lab_mis's estimator
-}
+#: lab_vcm's modes (the techniques each enables: ``vcm.estimator.MODES``).
+VCM_MODES = ("vcm", "bpt", "bpm", "ppm", "lt", "pt")
 
 #: Density-estimation kernels (``integrators/common/kernels.py``), lab_vcm's ``kernel``.
 KERNELS = ("epanechnikov", "constant")
@@ -283,7 +261,7 @@ VCM_LIGHT_PATHS_MAX = 16.0
 LAB_VCM = (
     Param("mode", str, "vcm", "which techniques: vcm (all), bpt (connections: lab_bdpt), bpm (merging), "
           "ppm (merging at the first smooth camera vertex), lt (light tracing), pt (path tracing: lab_mis)",
-          choices=tuple(VCM_MODES)),
+          choices=VCM_MODES),
     Param("radius", float, 0.0, "first iteration's merging radius r_1 in scene units; 0 = automatic "
           "(one pixel's width at the first surfaces the camera sees)",
           check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),

@@ -16,6 +16,7 @@ that still counts that merge is caught.
 import numpy as np
 import pytest
 
+from mitsuba_lab.plugins.integrators.bdpt.techniques import Technique
 from mitsuba_lab.plugins.integrators.bdpt.weights import (BdptWeights, KINDS, brute_force_weights,
                                                          feasible)
 
@@ -257,7 +258,7 @@ def test_a_wrong_restriction_is_caught(monkeypatch, subset):
     that a subpath's first ratio is a nee or light-tracing one) misweights these subsets."""
     g = random_paths(4, seed=12)
     mis = BdptWeights("power", 2.0, strategies=subset, light_paths=g["light_paths"])
-    monkeypatch.setattr(mis, "_flag", lambda state, start_kind: mis.e["connect"])
+    monkeypatch.setattr(mis, "_flag", lambda state, start_kind: mis.e[Technique.CONNECT])
     with np.errstate(all="ignore"):
         err = _max_rel(recursive_weights(g, mis), _reference(g, 2.0, subset))
     print(f"flag, {'+'.join(subset)}: max relative error {err:.2e}")
@@ -453,7 +454,7 @@ def test_a_caustic_merge_rule_applied_wrongly_is_caught(monkeypatch, mistake):
         caustic = mistake != "every merge"
         if mistake == "camera merges at once":
             monkeypatch.setattr(mis, "scatter_camera", lambda state, fwd, rev, cos, delta=False, depth=None:
-                                mis._scatter(state, fwd, rev, cos, delta, "light", mis._merges(depth)))
+                                mis._scatter(state, fwd, rev, cos, delta, Technique.LIGHT, mis._merges(depth)))
         if mistake == "joined merges":
             mis.eta_joined = 1.0
         p_light, p_camera = area_densities(g)

@@ -9,6 +9,9 @@
   splatted on the way (``splats``: the film block and its edge correction), and the storage of
   connectable vertices (``vertices``); ``render_light_tracing`` renders light tracing alone.
 * ``camera_subpath``: camera subpaths and the s = 0, s = 1 and s, t >= 2 strategies.
-* ``integrator``: passes sized to ``max_vertices``, the two images, the plugin; ``estimator``:
-  what lab_bdpt can render, without a variant.
+* ``integrator``: passes sized to ``max_vertices``, the two images, the plugin; ``passes``: what
+  a plugin built on it (lab_vcm) sets for each pass; ``estimator``: what lab_bdpt can render,
+  without a variant;
+* ``techniques``: the techniques as flags and a strategy as (s, t), parsed once from what users
+  write, without a variant.
 """

@@ -34,6 +34,7 @@ from mitsuba_lab.plugins.integrators.common.roulette import kept, russian_roulet
 from .endpoints import EmitterTable, direction_is_delta, nee_density
 from .light_subpath import carried, float_or_zero, reverse_pdf, strategy_mask
 from .vertices import NONE, LightVertices
+from .techniques import Strategy, Technique
 from .weights import BdptWeights, SubpathMis
 
 
@@ -54,7 +55,7 @@ class CameraPass:
     hide_emitters: bool
     offset_floor: float
     emitter_hits: bool
-    only: tuple = ()
+    only: Strategy | None = None
     light_count: int = 0                 # light subpaths of the pass (camera lane i uses i mod it)
     grid: object = None                  # lab_vcm: the light vertices' grid (``merge``), else None
     connect_share: float = 0.0           # lab_vcm: connections' Russian roulette (``connection_roulette``)
@@ -198,7 +199,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
     ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
     max_depth = dr.opaque(mi.UInt32, cp.max_depth)
     rr_depth = dr.opaque(mi.UInt32, cp.rr_depth)
-    emitter_hits, hide = cp.emitter_hits and "hit" in w.enabled, cp.hide_emitters
+    emitter_hits, hide = cp.emitter_hits and Technique.HIT in w.techniques, cp.hide_emitters
 
     if dr.hint(cp.light_count < lanes, mode="scalar"):
         lane = lane % dr.opaque(mi.UInt32, cp.light_count)   # fewer light subpaths: shared
@@ -224,7 +225,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
     if dr.hint(hide and emitter_hits, mode="scalar"):
         ray, pi = spawn.pass_through_emitters(scene, ray, pi, active, floor)
 
-    if dr.hint(not w.enabled & {"hit", "nee", "connect", "merge"}, mode="scalar"):
+    if dr.hint(not w.techniques & (Technique.HIT | Technique.NEE | Technique.CONNECT | Technique.MERGE), mode="scalar"):
         # light tracing alone: the camera ray only tells which pixels see something (alpha)
         return mi.Spectrum(0), valid_ray | (active & pi.is_valid())
 
@@ -261,7 +262,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
 
         # ---------------- s = 1: next-event estimation (+ the BSDF sample, one call) ----------------
         active_next = active & (depth < max_depth)
-        nee_on = smooth & active_next & strategy_mask(cp.only, 1, depth + 1) & ("nee" in w.enabled)
+        nee_on = smooth & active_next & strategy_mask(cp.only, 1, depth + 1) & (Technique.NEE in w.techniques)
         ds, em_weight = spawn.sample_visible_emitter(scene, si, sampler.next_2d(), floor, nee_on)
         tally(cp.counters, "shadow", nee_on)
         nee_on &= ds.pdf > 0
@@ -279,7 +280,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         L += dr.select(nee_on, spectrum_or_zero(beta * f * em_weight * float_or_zero(w_nee)), 0.0)
 
         # ---------------- s >= 2: connections to the light subpath ----------------
-        if dr.hint("connect" in w.enabled, mode="scalar"):
+        if dr.hint(Technique.CONNECT in w.techniques, mode="scalar"):
             u_connect = sampler.next_1d() if cp.connect_share > 0 else None
             if dr.hint(cp.connect_one, mode="scalar"):
                 L += connect_to_one_light_vertex(scene, cp, si, bsdf, beta, mis, depth, head,

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from mitsuba_lab.plugins import params as declarations
 from mitsuba_lab.plugins.integrators.estimator import Estimator
-from mitsuba_lab.plugins.params import bdpt_strategy_kinds
+from mitsuba_lab.plugins.integrators.bdpt.techniques import NONE, Technique, parse_techniques
 
 #: Delta emitters whose densities ``endpoints.py`` knows (plugin names, as users write them).
 SUPPORTED_DELTA_EMITTERS = ("point", "spot", "projector", "directional")
@@ -17,13 +17,12 @@ SUPPORTED_SENSORS = ("PerspectiveCamera", "ThinLensCamera", "OrthographicCamera"
 UNREACHABLE_SENSORS = ("OrthographicCamera",)
 
 
-def reachable_kinds(traits, kinds) -> set:
-    """The strategy kinds that can contribute on the scene's sensor: all of ``kinds`` but light
-    tracing (``light``) where the sensor's direction is a delta (orthographic)."""
-    kinds = set(kinds)
+def reachable(traits, techniques: Technique) -> Technique:
+    """The techniques that can contribute on the scene's sensor: all of ``techniques`` but light
+    tracing where the sensor's direction is a delta (orthographic)."""
     if traits.sensor_kinds and traits.sensor_kinds[0] in UNREACHABLE_SENSORS:
-        kinds.discard("light")
-    return kinds
+        return techniques & ~Technique.LIGHT
+    return techniques
 
 
 class Bidirectional(Estimator):
@@ -32,9 +31,9 @@ class Bidirectional(Estimator):
     PARAMETERS = declarations.LAB_BDPT
     OWN_PARAMETERS = ("heuristic", "beta", "strategies", "max_vertices", "only_strategy")
 
-    def kinds(self) -> tuple[str, ...]:
-        """The strategy kinds this estimator's parameters enable."""
-        return bdpt_strategy_kinds(self.strategies)
+    def techniques(self) -> Technique:
+        """The techniques this estimator's parameters enable."""
+        return parse_techniques(self.strategies)
 
     @classmethod
     def applicability(cls, traits, params: dict) -> tuple[bool, str]:
@@ -57,7 +56,7 @@ class Bidirectional(Estimator):
         problem = cls.media_problem(traits) or cls.unsupported(traits)
         if problem:
             return False, problem
-        missing = cls._subset_problem(traits, bdpt_strategy_kinds(params.get("strategies", "all")) or ())
+        missing = cls._subset_problem(traits, parse_techniques(params.get("strategies", "all")) or NONE)
         if missing:
             return False, f"lab_bdpt with strategies={params['strategies']} {missing}"
         return True, ""
@@ -79,23 +78,24 @@ class Bidirectional(Estimator):
         return ""
 
     @staticmethod
-    def _subset_problem(traits, kinds) -> str:
-        """What light of the scene the enabled strategy kinds cannot reach ('' if none)."""
-        kinds = reachable_kinds(traits, kinds)
+    def _subset_problem(traits, techniques: Technique) -> str:
+        """What light of the scene the enabled techniques cannot reach ('' if none)."""
+        T = Technique
+        kinds = reachable(traits, techniques)
         if not traits.emits_light:
             return ""
         if not kinds:                                  # (light tracing alone, on an orthographic sensor)
             return ("cannot render through an orthographic sensor (light tracing cannot reach a sensor "
                     "whose direction is a delta; that needs 'hit', 'nee' or 'connect')")
-        if traits.environment_emitters and "hit" not in kinds:
+        if traits.environment_emitters and T.HIT not in kinds:
             return "cannot render the environment seen directly (that needs 'hit')"
-        if traits.area_emitters and not kinds & {"hit", "light"}:
+        if traits.area_emitters and not kinds & (T.HIT | T.LIGHT):
             return "cannot render emitters seen directly (that needs 'hit' or 'light')"
-        if traits.delta_emitters and not kinds & {"nee", "light", "merge"}:
+        if traits.delta_emitters and not kinds & (T.NEE | T.LIGHT | T.MERGE):
             return "cannot render direct light from delta emitters (that needs 'nee' or 'light')"
-        if not traits.smooth_bsdf and "hit" not in kinds:
+        if not traits.smooth_bsdf and T.HIT not in kinds:
             return "cannot render a scene whose BSDFs are all delta (that needs 'hit')"
-        if traits.delta_bsdf and not kinds & {"hit", "nee", "connect", "merge"}:
+        if traits.delta_bsdf and not kinds & (T.HIT | T.NEE | T.CONNECT | T.MERGE):
             return ("cannot render what the camera sees in mirrors or through glass (light "
                     "tracing cannot reach the sensor through a delta lobe; that needs 'hit', 'nee' "
                     "or 'connect')")

@@ -12,7 +12,7 @@ from mitsuba_lab.plugins.integrators.common import spawn, spectral
 from mitsuba_lab.plugins.integrators.common.aim import AimedEmission
 from mitsuba_lab.plugins.integrators.common.counters import RayCounters
 from mitsuba_lab.plugins.integrators.common.support import base_render, render_arguments, warn_if_unsupported
-from mitsuba_lab.plugins.params import UNBOUNDED, bdpt_only_strategy
+from mitsuba_lab.plugins.params import UNBOUNDED
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
 from mitsuba_lab.plugins.scene_traits import SceneTraits
@@ -23,6 +23,7 @@ from .endpoints import direction_is_delta
 from .estimator import Bidirectional
 from .light_subpath import LightTracer, check_variant
 from .passes import PassPlan, Passes, pass_seed
+from .techniques import Strategy, Technique
 from .vertices import NONE, LightVertices, vertex_bytes
 from .weights import BdptWeights
 
@@ -138,8 +139,9 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         super().__init__(props)
         self.values = values
         self.estimator = self.ESTIMATOR(values)
-        self.kinds = self.estimator.kinds()             # the enabled strategy kinds
-        self.only = bdpt_only_strategy(values.get("only_strategy", ""))
+        self.techniques = self.estimator.techniques()   # the enabled techniques (flags)
+        only = values.get("only_strategy", "")
+        self.only = Strategy.parse(only) if only else None   # the one strategy rendered, or None
         self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
         #: what the driver does beyond lab_bdpt's parameters (``passes.Passes``: lab_bdpt's own)
         self.passes = Passes()
@@ -252,7 +254,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         """The MIS weights of a pass."""
         v, passes = self.values, self.passes
         ratio = plan.light_subpaths / plan.camera_lanes
-        weights = (passes.weights_class or BdptWeights)(v["heuristic"], v["beta"], self.kinds, light_paths=ratio,
+        weights = (passes.weights_class or BdptWeights)(v["heuristic"], v["beta"], self.techniques, light_paths=ratio,
                                                         merge_area=passes.merge_area(plan),
                                                         merge_from=passes.merge_from,
                                                         caustic_merges=passes.caustic_merges)
@@ -266,7 +268,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         None when they needed more than ``max_vertices`` (``vertices_per_path`` is updated; the
         caller retries with fewer). Without merging only the first ``camera_lanes`` subpaths, the
         ones camera subpaths connect to, store vertices."""
-        if not tracer.weights.enabled & {"light", "connect", "merge"}:   # (s <= 1 only: no light subpath)
+        if not tracer.weights.techniques & (Technique.LIGHT | Technique.CONNECT | Technique.MERGE):   # (s <= 1 only)
             return splats.new_block(film), LightVertices(1), dr.full(mi.UInt32, NONE, count), 0
         max_vertices = self.values["max_vertices"]
         capacity = int(min(max_vertices, math.ceil(1.25 * self.vertices_per_path * count) + 1024))

@@ -43,6 +43,7 @@ from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
 from . import splats
 from .endpoints import EmitterTable, camera_direction_pdf, direction_is_delta, nee_density
 from .vertices import NONE, LightVertices
+from .techniques import Strategy, Technique
 from .weights import BdptWeights, SubpathMis
 
 
@@ -75,12 +76,12 @@ def reverse_pdf(bsdf, ctx, si: mi.SurfaceInteraction3f, wo, active):
     return bsdf.pdf(ctx, si_rev, si.wi, active)
 
 
-def strategy_mask(only: tuple, s, t):
-    """True where strategy (s, t) is kept: every strategy when ``only`` is (), else only ``only``
+def strategy_mask(only: Strategy | None, s, t):
+    """True where strategy (s, t) is kept: every strategy when ``only`` is None, else only ``only``
     (``s``, ``t``: Python ints or Dr.Jit UInt32 arrays)."""
-    if not only:
+    if only is None:
         return True
-    keep = (s == only[0]) & (t == only[1])
+    keep = (s == only.s) & (t == only.t)
     return bool(keep) if isinstance(keep, bool) else keep
 
 
@@ -103,7 +104,7 @@ class LightTracer:
     counters = None
 
     def __init__(self, scene: mi.Scene, sensor: mi.Sensor, max_depth: int = -1, rr_depth: int = 5,
-                 weights: BdptWeights | None = None, offset_floor: float = 1.0, only: tuple = (),
+                 weights: BdptWeights | None = None, offset_floor: float = 1.0, only: Strategy | None = None,
                  hide_emitters: bool = False, aim=None, plugin: str = "lab_bdpt"):
         if not isinstance(max_depth, int) or max_depth < -1 or max_depth == 0:
             raise ValueError(f"{plugin}: max_depth must be -1 (unbounded) or >= 1, got {max_depth!r}")
@@ -117,7 +118,7 @@ class LightTracer:
         self.weights = weights if weights is not None else BdptWeights(strategies="light")
         self.floor = offset_floor
         self.table = EmitterTable(scene, aim)     # (aim: aim.AimedEmission, or None)
-        self.only = only                     # () or the one strategy (s, t) to splat
+        self.only = only                     # None or the one strategy (s, t) to splat
         self.hide_emitters = hide_emitters   # camera rays pass through area emitters
         self.reaches_sensor = not direction_is_delta(sensor)   # (orthographic: t = 1 is impossible)
         self.spectra = spectral.EmitterSpectra(scene, plugin) if mi.is_spectral else None
@@ -200,7 +201,7 @@ class LightTracer:
         # ---------------- s = 1, t = 1: the emitter point seen directly ----------------
         # (light tracing disabled, e.g. lab_vcm's bpm, or a sensor it cannot reach, orthographic:
         # nothing splatted, the same random numbers)
-        tracing = "light" in w.enabled and self.reaches_sensor
+        tracing = Technique.LIGHT in w.techniques and self.reaches_sensor
         u0 = mi.Point2f(rng.next_float32(), rng.next_float32())
         if dr.hint(tracing, mode="scalar"):
             si0 = mi.SurfaceInteraction3f(ps, ray.wavelengths)
@@ -221,7 +222,7 @@ class LightTracer:
         max_depth = dr.opaque(mi.UInt32, self.max_depth if self.max_depth > 0 else 0xFFFFFFFF)
         rr_depth = dr.opaque(mi.UInt32, self.rr_depth)
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
-        storing = vertices is not None and bool(w.enabled & {"connect", "merge"})
+        storing = vertices is not None and bool(w.techniques & (Technique.CONNECT | Technique.MERGE))
         # a merge needs one camera segment after the light vertex, a connection two
         camera_segments = 1 if w.merging else 2
         stores = dr.zeros(mi.UInt32, 1)

@@ -34,8 +34,8 @@ stripped (e.g. a point light's position density is its selection probability), t
 every call. Infinite emitters: the vertex at infinity is a direction; pass ``cos_light`` = 1 and
 ``dist2`` = 1 for the segment that touches it (densities there are in solid angle).
 
-``strategies`` restricts the sums to a subset of kinds (e.g. ``{"light"}``, light tracing alone,
-or ``{"hit", "nee"}``, which is unidirectional path tracing with MIS). Disabled kinds get weight
+``strategies`` restricts the sums to a subset of kinds (``techniques.Technique`` flags, e.g.
+``LIGHT``, light tracing alone, or ``HIT | NEE``, which is unidirectional path tracing with MIS). Disabled kinds get weight
 0 and leave the sums, so the enabled ones still sum to 1 over any path they can build: the
 subset is unbiased for the light it can reach. The flags are folded into the running sums as the
 kinds become known: a ratio's kind depends only on whether it is its subpath's first one
@@ -67,10 +67,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from mitsuba_lab.plugins.params import BDPT_KINDS as KINDS, BDPT_PRESETS as PRESETS, bdpt_strategy_kinds
+from .techniques import (CONNECTIONS, NAMES, ORDER, PRESETS, Strategy, Technique, parse_techniques,
+                         techniques_of)
 
-#: Every kind, merging (vertex merging, lab_vcm) included.
-ALL_KINDS = KINDS + ("merge",)
+#: The names of lab_bdpt's techniques, as users write them.
+KINDS = tuple(NAMES[kind] for kind in ORDER if kind in CONNECTIONS)
 
 
 def iteration_sizes(lanes: int, iterations: int) -> list[int]:
@@ -117,19 +118,16 @@ def _gate(flag, x):
 
 
 def strategy_kind(s: int, t: int) -> str:
-    """The kind of strategy (s, t) (see the module docstring)."""
-    if s == 0:
-        return "hit"
-    if t == 1:
-        return "light"
-    return "nee" if s == 1 else "connect"
+    """The name of strategy (s, t)'s kind (see the module docstring)."""
+    return NAMES[Strategy(s, t).technique]
 
 
 class BdptWeights:
     """The recursive MIS weights for one heuristic, one exponent and one set of strategies.
 
-    ``heuristic``: ``balance`` or ``power`` (exponent ``beta``); ``strategies``: a preset name
-    (``all``, ``camera`` = hit + nee, ``light``) or an iterable of kinds; ``light_paths``: the
+    ``heuristic``: ``balance`` or ``power`` (exponent ``beta``); ``strategies``: ``Technique``
+    flags, or what users write (a preset name, ``all``, ``camera`` = hit + nee, ``light``, or
+    kinds joined by '+'; or an iterable of kind names), parsed once here; ``light_paths``: the
     number of light subpaths each camera subpath competes with in the t = 1 strategy (SmallVCM's
     light-subpath count: light tracing splats one light subpath into many pixels);
     ``connect_count``: each connection technique's sample count per camera vertex, in (0, 1]
@@ -152,11 +150,14 @@ class BdptWeights:
             raise ValueError(f"lab_bdpt: light_paths must be > 0, got {light_paths}")
         if not 0 < connect_count <= 1:
             raise ValueError(f"lab_vcm: connect_count must be in (0, 1], got {connect_count}")
-        kinds = bdpt_strategy_kinds(strategies) if isinstance(strategies, str) else tuple(strategies)
-        if kinds is None or not kinds or any(k not in ALL_KINDS for k in kinds):
+        if isinstance(strategies, Technique):
+            kinds = strategies
+        else:
+            kinds = parse_techniques(strategies) if isinstance(strategies, str) else techniques_of(strategies)
+        if not kinds:
             raise ValueError(f"lab_bdpt: strategies must be one of {', '.join(PRESETS)} or a non-empty "
-                             f"subset of {', '.join(ALL_KINDS)}, got {strategies!r}")
-        if "merge" in kinds and not merge_area > 0:
+                             f"subset of {', '.join(NAMES.values())}, got {strategies!r}")
+        if Technique.MERGE in kinds and not merge_area > 0:
             raise ValueError(f"lab_vcm: merging needs merge_area = pi r^2 N_light > 0, got {merge_area}")
         # (a light subpath's sums hold merges at its vertices before it knows how far from the
         # sensor they will lie; only the camera's first vertex is always known to be one)
@@ -164,12 +165,14 @@ class BdptWeights:
             raise ValueError(f"lab_vcm: merge_from must be 1 (every camera vertex merges) or 2 (all but the "
                              f"first), got {merge_from!r}")
         self.beta = 1.0 if heuristic == "balance" else float(beta)
-        self.enabled = frozenset(kinds)
+        #: the enabled techniques
+        self.techniques = kinds
         self.light_paths = float(light_paths)
-        self.e = {k: 1.0 if k in self.enabled else 0.0 for k in ALL_KINDS}
+        #: each technique's enable factor, 1.0 or 0.0
+        self.e = {kind: 1.0 if kind in kinds else 0.0 for kind in ORDER}
         # eta = pi r^2 N_light: merging at a vertex over connecting there (Georgiev 2012's eta_VCM);
         # the merge terms are left out entirely without merging (as if eta = 0)
-        self.merging = "merge" in self.enabled
+        self.merging = Technique.MERGE in kinds
         self.eta = self._m(float(merge_area)) if self.merging else 0.0
         self.inv_eta = self._m(1.0 / float(merge_area)) if self.merging else 0.0
         self.merge_from = merge_from
@@ -178,7 +181,12 @@ class BdptWeights:
         # vertex joined to it (NEE, connections): never a technique under caustic_merges
         self.eta_joined = 0.0 if self.caustic else 1.0
         # a connection technique's sample count, to the power beta (its kind's enable factor)
-        self.connect_weight = self.e["connect"] * self._m(float(connect_count))
+        self.connect_weight = self.e[Technique.CONNECT] * self._m(float(connect_count))
+
+    @property
+    def enabled(self) -> frozenset[str]:
+        """The names of the enabled techniques (as users write them)."""
+        return frozenset(NAMES[kind] for kind in ORDER if kind in self.techniques)
 
     #: lab_vcm: (eta table, 1 / eta table, iterations), one entry per iteration of a pass, each
     #: to the power beta (Dr.Jit arrays; see ``at_lanes``); None: ``eta`` holds for every lane.
@@ -224,11 +232,11 @@ class BdptWeights:
 
         return np.power(x, self.beta)
 
-    def _flag(self, state: SubpathMis, start_kind: str):
+    def _flag(self, state: SubpathMis, start_kind: Technique):
         """Enable factor of the innermost ratio ``state.dvcm`` stands for."""
         return state.first * self.e[start_kind] + (1.0 - state.first) * self.connect_weight
 
-    def _gated(self, state: SubpathMis, start_kind: str):
+    def _gated(self, state: SubpathMis, start_kind: Technique):
         """``state.dvcm`` times its enable factor (0 for a disabled kind, whatever dvcm is)."""
         return _gate(self._flag(state, start_kind), state.dvcm)
 
@@ -255,7 +263,7 @@ class BdptWeights:
         camera subpath can hit it.
         """
         dvcm = self._m(pdf_nee / pdf_emit)
-        dvc = _select(delta, 0.0 * dvcm, _gate(self.e["hit"], self._m(cos_light / pdf_emit)))
+        dvc = _select(delta, 0.0 * dvcm, _gate(self.e[Technique.HIT], self._m(cos_light / pdf_emit)))
         return SubpathMis(dvcm, dvc, 1.0, dvc * self.inv_eta, self.start_merges())
 
     def start_camera(self, pdf_cam, delta=False) -> SubpathMis:
@@ -304,7 +312,7 @@ class BdptWeights:
         sampling the reverse (towards the previous vertex, coming from the new direction),
         ``cos_out`` |cos| of the new direction at this vertex, ``delta`` a delta lobe sampled.
         With ``caustic_merges`` the new state's ``merges`` (for the next vertex) is ``delta``."""
-        out = self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, "nee", state.merges)
+        out = self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, Technique.NEE, state.merges)
         if self.caustic:
             out = out._replace(merges=_select(delta, 1.0, 0.0))
         return out
@@ -316,7 +324,7 @@ class BdptWeights:
 
     def scatter_camera(self, state, pdf_fwd, pdf_rev, cos_out, delta=False, depth=None) -> SubpathMis:
         """``scatter_light`` for a camera-subpath vertex ``depth`` segments from the sensor."""
-        return self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, "light", self._merges(depth), self.caustic)
+        return self._scatter(state, pdf_fwd, pdf_rev, cos_out, delta, Technique.LIGHT, self._merges(depth), self.caustic)
 
     # -- the weights of the four kinds -----------------------------------------------------
 
@@ -326,10 +334,10 @@ class BdptWeights:
         along the segment; ``pdf_pos``: the emission position density of the point (used when
         the emitter is the first camera vertex, where the competitor is light tracing)."""
         first = camera.first
-        inner = _gate(first * self.e["light"], self._m(pdf_pos)) + _gate((1.0 - first) * self.e["nee"],
+        inner = _gate(first * self.e[Technique.LIGHT], self._m(pdf_pos)) + _gate((1.0 - first) * self.e[Technique.NEE],
                                                                          self._m(pdf_nee))
         w_camera = _gate(inner, camera.dvcm) + self._m(pdf_emit) * camera.dvc
-        return self.e["hit"] / (1.0 + w_camera)
+        return self.e[Technique.HIT] / (1.0 + w_camera)
 
     def nee(self, camera: SubpathMis, pdf_nee, pdf_emit, cos_light, cos_cam, dist2,
             pdf_cam_fwd, pdf_cam_rev, delta=False, depth=None):
@@ -340,11 +348,11 @@ class BdptWeights:
         subpath given the emitter's; ``delta``: delta emitter (it cannot be hit); ``depth``: the
         camera vertex's, in segments from the sensor."""
         p_cam0 = pdf_cam_fwd * cos_light / dist2
-        w_light = _select(delta, 0.0 * p_cam0, _gate(self.e["hit"], self._m(p_cam0 / pdf_nee)))
-        inner = (self.eta * (self._merges(depth) * self.eta_joined) + self._gated(camera, "light")
+        w_light = _select(delta, 0.0 * p_cam0, _gate(self.e[Technique.HIT], self._m(p_cam0 / pdf_nee)))
+        inner = (self.eta * (self._merges(depth) * self.eta_joined) + self._gated(camera, Technique.LIGHT)
                  + camera.dvc * self._m(pdf_cam_rev))
         w_camera = self._m(pdf_emit * cos_cam / (dist2 * pdf_nee)) * inner
-        return self.e["nee"] / (w_light + 1.0 + w_camera)
+        return self.e[Technique.NEE] / (w_light + 1.0 + w_camera)
 
     def connect(self, light: SubpathMis, camera: SubpathMis, pdf_light_fwd, pdf_light_rev,
                 pdf_cam_fwd, pdf_cam_rev, cos_light, cos_cam, dist2, depth=None):
@@ -354,11 +362,11 @@ class BdptWeights:
         that one; ``pdf_cam_*`` likewise; ``cos_*``: |cos| at each end; ``dist2``; ``depth``:
         the camera vertex's, in segments from the sensor."""
         w_light = self._m(pdf_cam_fwd * cos_light / dist2) * (
-            self.eta * light.merges + self._gated(light, "nee") + light.dvc * self._m(pdf_light_rev))
+            self.eta * light.merges + self._gated(light, Technique.NEE) + light.dvc * self._m(pdf_light_rev))
         w_camera = self._m(pdf_light_fwd * cos_cam / dist2) * (
-            self.eta * (self._merges(depth) * self.eta_joined) + self._gated(camera, "light")
+            self.eta * (self._merges(depth) * self.eta_joined) + self._gated(camera, Technique.LIGHT)
             + camera.dvc * self._m(pdf_cam_rev))
-        if not self.e["connect"]:
+        if not self.e[Technique.CONNECT]:
             return 0.0 * w_light
         # (this technique's term is its count n_c^beta, as each term of the sums carries its own)
         return self.connect_weight / (w_light + self.connect_weight + w_camera)
@@ -370,37 +378,37 @@ class BdptWeights:
         the light subpath given the sensor's. (The light vertex is the camera's first: merging
         there counts unless ``merge_from`` > 1.)"""
         w_light = self._m(pdf_cam * cos_light / (dist2 * self.light_paths)) * (
-            self.eta * (self._merges(1) * light.merges) + self._gated(light, "nee")
+            self.eta * (self._merges(1) * light.merges) + self._gated(light, Technique.NEE)
             + light.dvc * self._m(pdf_light_rev))
-        return self.e["light"] / (1.0 + w_light)
+        return self.e[Technique.LIGHT] / (1.0 + w_light)
 
     def emitter_to_camera(self, pdf_cam, cos_light, dist2, pdf_pos, delta=False):
         """t = 1, s = 1: an emitted point joined to the sensor directly (``pdf_pos``: its emission
         position density; infinite emitter: its direction density, with cos_light = dist2 = 1)."""
         ratio = pdf_cam * cos_light / (dist2 * self.light_paths * pdf_pos)
-        w_light = _select(delta, 0.0 * ratio, _gate(self.e["hit"], self._m(ratio)))
-        return self.e["light"] / (1.0 + w_light)
+        w_light = _select(delta, 0.0 * ratio, _gate(self.e[Technique.HIT], self._m(ratio)))
+        return self.e[Technique.LIGHT] / (1.0 + w_light)
 
 
     @property
     def merge_bounded(self) -> bool:
         """Whether ``merge_bound`` can fall below 1: only light tracing and connections put
         terms into the camera side's sum (else merging's roulette has nothing to skip)."""
-        return bool(self.enabled & {"light", "connect"})
+        return bool(self.techniques & (Technique.LIGHT | Technique.CONNECT))
 
     def merge_bound(self, camera: SubpathMis):
         """An upper bound on ``merge`` at a camera vertex, whatever light vertex it merges with:
         its weight without the terms that depend on the light vertex (all of them >= 0)."""
-        return self.e["merge"] / (1.0 + self._gated(camera, "light") * self.inv_eta)
+        return self.e[Technique.MERGE] / (1.0 + self._gated(camera, Technique.LIGHT) * self.inv_eta)
 
     def merge(self, light: SubpathMis, camera: SubpathMis, pdf_cam_fwd, pdf_cam_rev):
         """Merging a light vertex with a camera vertex at (about) the same point x_i, neither a
         delta lobe (``light`` and ``camera``: their states after ``after_hit``). The camera
         vertex's BSDF stands for both: ``pdf_cam_fwd`` its density of the light vertex's
         incoming direction (towards x_{i-1}) given the camera's, ``pdf_cam_rev`` the reverse."""
-        w_light = self._gated(light, "nee") * self.inv_eta + light.dvm * self._m(pdf_cam_fwd)
-        w_camera = self._gated(camera, "light") * self.inv_eta + camera.dvm * self._m(pdf_cam_rev)
-        return self.e["merge"] / (w_light + 1.0 + w_camera)
+        w_light = self._gated(light, Technique.NEE) * self.inv_eta + light.dvm * self._m(pdf_cam_fwd)
+        w_camera = self._gated(camera, Technique.LIGHT) * self.inv_eta + camera.dvm * self._m(pdf_cam_rev)
+        return self.e[Technique.MERGE] / (w_light + 1.0 + w_camera)
 
 
 def feasible(delta):
@@ -444,23 +452,23 @@ def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies=
 
     p_light, p_camera = np.asarray(p_light, dtype=np.float64), np.asarray(p_camera, dtype=np.float64)
     k = p_light.shape[0] - 1
-    enabled = BdptWeights(strategies=strategies, merge_area=merge_area or 1.0).enabled
+    enabled = BdptWeights(strategies=strategies, merge_area=merge_area or 1.0).techniques
     log_l, log_c = np.log(p_light), np.log(p_camera)
     log_nee = log_l[0] if p_nee is None else np.log(np.asarray(p_nee, dtype=np.float64))
     ok = feasible(delta)
     logs = []
     for s in range(k + 1):
-        kind = strategy_kind(s, k + 1 - s)
+        kind = Strategy(s, k + 1 - s).technique
         log_p = log_l[:s].sum(axis=0) + log_c[s:].sum(axis=0)
-        if kind == "nee":
+        if kind == Technique.NEE:
             log_p = log_p - log_l[0] + log_nee
-        if kind == "light":
+        if kind == Technique.LIGHT:
             log_p = log_p + np.log(light_paths)
-        if kind == "connect":
+        if kind == Technique.CONNECT:
             log_p = log_p + np.log(connect_count)
         usable = ok[s] & (kind in enabled)
         logs.append(np.where(usable, beta * log_p, -np.inf))
-    if "merge" in enabled:
+    if Technique.MERGE in enabled:
         delta = np.asarray(delta, dtype=bool)
         for i in range(1, k):
             log_p = log_l[:i + 1].sum(axis=0) + log_c[i:].sum(axis=0) + np.log(merge_area)

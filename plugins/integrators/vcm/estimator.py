@@ -2,7 +2,19 @@
 from __future__ import annotations
 
 from mitsuba_lab.plugins import params as declarations
-from mitsuba_lab.plugins.integrators.bdpt.estimator import Bidirectional, reachable_kinds
+from mitsuba_lab.plugins.integrators.bdpt.estimator import Bidirectional, reachable
+from mitsuba_lab.plugins.integrators.bdpt.techniques import CONNECTIONS, Technique
+
+#: The techniques of each of lab_vcm's modes (``params.VCM_MODES``; SmallVCM's estimators behind
+#: one MIS).
+MODES = {
+    "vcm": CONNECTIONS | Technique.MERGE,                # vertex connection and merging: every technique
+    "bpt": CONNECTIONS,                                  # connections only: lab_bdpt
+    "bpm": Technique.HIT | Technique.MERGE,              # bidirectional photon mapping: merges at every vertex
+    "ppm": Technique.HIT | Technique.MERGE,              # progressive photon mapping: the first smooth vertex only
+    "lt": Technique.LIGHT,                               # light tracing
+    "pt": Technique.HIT | Technique.NEE,                 # camera side only: lab_mis's estimator
+}
 
 
 def merges_first(params: dict) -> bool:
@@ -12,19 +24,19 @@ def merges_first(params: dict) -> bool:
 
 
 class VertexMerging(Bidirectional):
-    """lab_vcm's estimator: the techniques of its ``mode`` (``params.VCM_MODES``) under one MIS."""
+    """lab_vcm's estimator: the techniques of its ``mode`` (``MODES``) under one MIS."""
     plugin_name = "lab_vcm"
     PARAMETERS = declarations.LAB_VCM
     OWN_PARAMETERS = ("mode", "radius", "alpha", "light_paths", "kernel", "merge_first", "merge_vertices", "connections", "pilot", "light_paths_max", "heuristic", "beta",
                       "max_vertices")
 
-    def kinds(self) -> tuple[str, ...]:
-        return declarations.VCM_MODES[self.mode]
+    def techniques(self) -> Technique:
+        return MODES[self.mode]
 
     @classmethod
     def separate_reason(cls, params: dict) -> str:
         mode = params.get("mode", "vcm")
-        if "merge" in declarations.VCM_MODES.get(mode, ("merge",)):
+        if Technique.MERGE in MODES.get(mode, Technique.MERGE):
             return (f"lab_vcm mode={mode} merges with a radius that shrinks from sample to sample within a "
                     f"render: averaged renders would each restart the schedule")
         return ""
@@ -38,12 +50,12 @@ class VertexMerging(Bidirectional):
         if problem:
             return False, problem
         mode = params.get("mode", "vcm")
-        kinds = declarations.VCM_MODES[mode]
-        missing = cls._subset_problem(traits, kinds)
+        techniques = MODES[mode]
+        missing = cls._subset_problem(traits, techniques)
         if missing:
             return False, f"lab_vcm with mode={mode} {missing}"
         if (not merges_first(params) and traits.emits_light and traits.delta_emitters
-                and not reachable_kinds(traits, kinds) & {"nee", "light"}):
+                and not reachable(traits, techniques) & (Technique.NEE | Technique.LIGHT)):
             return False, (f"lab_vcm with mode={mode} and merge_first=false cannot render direct light from "
                            f"delta emitters on what the camera sees (that needs merging at the first vertex, "
                            f"'nee' or 'light')")

@@ -10,6 +10,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins.integrators.bdpt.integrator import LabBDPTIntegrator
 from mitsuba_lab.plugins.integrators.bdpt.passes import BdptStats, Passes
+from mitsuba_lab.plugins.integrators.bdpt.techniques import Technique
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, iteration_sizes
 from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
 from mitsuba_lab.plugins.params import VCM_LIGHT_PATHS_MAX
@@ -47,10 +48,10 @@ class PpmWeights(BdptWeights):
     a camera prefix of delta lobes) or the merge at that vertex; each has weight 1."""
 
     def hit(self, camera, pdf_nee, pdf_emit, pdf_pos):
-        return self.e["hit"]
+        return self.e[Technique.HIT]
 
     def merge(self, light, camera, pdf_cam_fwd, pdf_cam_rev):
-        return self.e["merge"]
+        return self.e[Technique.MERGE]
 
 
 @dataclass
@@ -304,7 +305,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        self.merging = "merge" in self.kinds
+        self.merging = Technique.MERGE in self.techniques
         ppm = self.values["mode"] == "ppm"
         if ppm and "merge_first" in props and not self.values["merge_first"]:
             raise ValueError("lab_vcm: mode 'ppm' merges only at the first smooth camera vertex: "
@@ -328,14 +329,14 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             raise ValueError(f"lab_vcm: merge_vertices = 'caustic' leaves the light of paths without a delta lobe "
                              f"before the merge to the other techniques, which only mode 'vcm' has all of, not "
                              f"mode '{self.values['mode']}'")
-        if self.values["connections"] == "one" and "connect" not in self.kinds:
+        if self.values["connections"] == "one" and Technique.CONNECT not in self.techniques:
             raise ValueError(f"lab_vcm: connections = 'one' picks the light vertex a camera vertex connects to; "
                              f"mode '{self.values['mode']}' makes no connections")
         # (no first merge: merging from the camera's second vertex on; ``BdptWeights.merge_from``)
         self.passes = VcmPasses(self, self.merging,
                                 merge_from=1 if merges_first(self.values) or not self.merging else 2,
                                 connect_share=self.CONNECT_SHARE if self.merging else 0.0,
-                                connect_one=self.values["connections"] == "one" and "connect" in self.kinds,
+                                connect_one=self.values["connections"] == "one" and Technique.CONNECT in self.techniques,
                                 caustic_merges=caustic_merges, ppm=ppm)
         self.stats = VcmStats()
 
