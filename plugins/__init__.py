@@ -25,7 +25,7 @@ _ORDER = (
     # needing no variant
     "integrators.bdpt.techniques", "params", "variant", "interrupts", "integrators.estimator", "integrators.common.kernels",
     "integrators.common.mis_weight", "integrators.naive", "integrators.nee", "integrators.mis",
-    "integrators.photon.estimator", "integrators.bdpt.weights", "integrators.bdpt.estimator",
+    "integrators.photon.estimator", "integrators.bdpt.recursion", "integrators.bdpt.weights", "integrators.bdpt.estimator",
     "integrators.vcm.estimator", "integrators.vcm.selection",
     # variant-bound: what the plugins share
     "scene_traits", "samplers.layout", "integrators.common.spectral",

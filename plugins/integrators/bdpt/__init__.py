@@ -1,8 +1,10 @@
 """``lab_bdpt``: bidirectional path tracing with every (s, t) strategy under one MIS.
 
-* ``weights``: the multiple-importance weights of every strategy of a path, computed in O(1)
-  per connection from two running quantities per subpath vertex (Georgiev 2012), plus a
-  brute-force reference; no Mitsuba variant needed, on numpy or Dr.Jit arrays.
+* ``recursion``: the multiple-importance weights of every strategy of a path, computed in O(1)
+  per connection from running quantities per subpath vertex (Georgiev 2012, as SmallVCM
+  writes it); ``weights``: the lab's extensions to it, each a layer (strategy subsets,
+  connection counts, merging from the second camera vertex, caustic-only merges, per-lane
+  radii), plus a brute-force reference; no Mitsuba variant needed, on numpy or Dr.Jit arrays.
 * ``endpoints``: the emitters' emission and emitter-sampling densities and the sensor's
   direction density, which the weights need and Mitsuba does not return.
 * ``light_subpath``: light subpaths in one symbolic loop, the t = 1 strategy (light tracing)
