@@ -144,8 +144,10 @@ LAB_MIS = PATH_TRACER + (
 
 #: Aimed emission (``integrators/common/aim.py``): lab_photon, lab_bdpt and lab_vcm. Aiming changes nothing in
 #: a scene without aim_at shapes (the light emits as Mitsuba samples it), so lab_bdpt and lab_photon aim
-#: by default. lab_vcm does not: its merges of aimed light vertices are biased in modes ppm and bpm
-#: (tests/plugins/test_vcm.py::test_merging_aimed_light_vertices_is_biased, a known fault).
+#: by default. lab_vcm does not: where merging carries the direct light too (modes ppm and bpm)
+#: only the 1 - aim of the light subpaths that leave unaimed bring it, each with 1 / (1 - aim) the
+#: weight, so away from the targets its image is noisier and heavier-tailed (not biased:
+#: tests/plugins/test_vcm.py::test_merging_aimed_light_vertices_agrees_with_mitsuba_path).
 AIM_DEFAULT, VCM_AIM_DEFAULT = 0.5, 0.0
 
 

@@ -6,8 +6,7 @@
   on a non-square film; it follows the film's resolution. Tolerance 4%: off-axis pixels of a
   20-degree view see the wall a little farther and at a little smaller angle.
 * lab_vcm in mode vcm runs its pilot (counted costs, up to 16 light subpaths) and merges from
-  the camera's second vertex, without aim (its merges of aimed light vertices are biased in modes
-  ppm and bpm: test_vcm.py); in other modes no pilot; lab_bdpt and lab_photon aim (0.5). A scene without specular shapes renders the same image with and
+  the camera's second vertex, without aim (``params.VCM_AIM_DEFAULT``); in other modes no pilot; lab_bdpt and lab_photon aim (0.5). A scene without specular shapes renders the same image with and
   without aim (aiming changes nothing there).
 """
 import math

@@ -271,8 +271,10 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                            (``params.PILOT_WORK_COSTS``)
     max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices, aim, aim_at: as
                            lab_bdpt (``aim``: the light subpaths that merge too;
-                           Default: 0: merging aimed light vertices is biased
-                           in modes ppm and bpm, a known fault).
+                           Default: 0: where merging carries the direct light,
+                           modes ppm and bpm, only the unaimed 1 - aim of the
+                           light subpaths bring it, a noisier image away from
+                           the aimed shapes).
     =============== ====== ========================================================
 
     A light vertex merges with a camera vertex when within r_i, facing the same way (normals
