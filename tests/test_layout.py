@@ -225,6 +225,19 @@ def test_the_experiment_and_check_layers_print_nothing():
     assert printing == {}
 
 
+def test_the_report_sections_are_listed_once_and_completely():
+    """Every module of experiment/report/sections/ is one entry of SECTIONS (the page's order) and
+    has ``applies`` and ``render``; nothing else is listed."""
+    from mitsuba_lab.experiment.report import sections
+
+    folder = os.path.dirname(sections.__file__)
+    modules = {name[:-3] for name in os.listdir(folder) if name.endswith(".py") and name != "__init__.py"}
+    listed = [section.__name__.rpartition(".")[2] for section in sections.SECTIONS]
+    assert sorted(listed) == sorted(modules) and len(set(listed)) == len(listed)
+    assert all(callable(getattr(s, "applies", None)) and callable(getattr(s, "render", None))
+               for s in sections.SECTIONS)
+
+
 def _long_modules() -> dict[str, int]:
     """Module name -> line count, for every module over MAX_LINES."""
     long = {}

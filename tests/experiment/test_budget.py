@@ -279,7 +279,8 @@ def test_the_image_strip_shows_every_strategy_at_one_budget(tmp_path):
     line = next(x for x in summary.splitlines() if x.startswith("![reference, each strategy"))
     print(line)
     assert line.startswith("![reference, each strategy at the 0.2 s budget (0.2 s measured), error maps]")
-    from mitsuba_lab.experiment.report.build import Report, strip_points
+    from mitsuba_lab.experiment.report.build import Report
+    from mitsuba_lab.experiment.report.strip import strip_points
 
     groups, label = group_points(Report(str(tmp_path)).stats["s"])
     picks, _ = strip_points(groups, label)
@@ -288,7 +289,8 @@ def test_the_image_strip_shows_every_strategy_at_one_budget(tmp_path):
 
 def test_the_image_strip_takes_the_largest_budget_all_strategies_have_and_marks_off_budget(tmp_path,
                                                                                             off_budget_sweep):
-    from mitsuba_lab.experiment.report.build import Report, strip_points
+    from mitsuba_lab.experiment.report.build import Report
+    from mitsuba_lab.experiment.report.strip import strip_points
 
     groups, label = group_points(off_budget_sweep.stats["s"])
     picks, title = strip_points(groups, label)
@@ -304,7 +306,8 @@ def test_the_image_strip_takes_the_largest_budget_all_strategies_have_and_marks_
 
 
 def test_without_budgets_the_image_strip_title_names_each_images_time(tmp_path):
-    from mitsuba_lab.experiment.report.build import Report, strip_points
+    from mitsuba_lab.experiment.report.build import Report
+    from mitsuba_lab.experiment.report.strip import strip_points
 
     synth.write_sweep(tmp_path, budgets=())
     groups, label = group_points(Report(str(tmp_path)).stats["s"])

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import synthetic_sweep as synth
 
-from mitsuba_lab.experiment.report.build import (ERROR_RANGE, SIGNED_CMAP, STRIP_COLUMNS, build_report, curves_figure,
-                                           strip_figure)
+from mitsuba_lab.experiment.report.build import build_report, curves_figure
+from mitsuba_lab.experiment.report.strip import ERROR_RANGE, SIGNED_CMAP, STRIP_COLUMNS, strip_figure
 from mitsuba_lab.experiment.report.spectrum import SLOPE_SE_LIMIT, fit_slope, slope_cell, slope_table
 from mitsuba_lab.reporting.figures import legend_outside, pyplot, series_styles
 
