@@ -212,12 +212,12 @@ def test_the_scan_finds_a_print():
     assert _prints(ast.parse("def f():\n    print('x')\nif __name__ == '__main__':\n    print('y')\n")) == [2]
 
 
-def test_the_experiment_and_check_layers_print_nothing():
-    """The sweep runner and check report through return values and callbacks (progress, ``say``);
+def test_the_library_prints_nothing():
+    """The sweep runner, check and invert report through return values and callbacks (progress, ``say``);
     the commands print. (A module's own ``__main__`` block, run as a script, may print.)"""
     printing = {}
     for name, path in module_files().items():
-        if name.startswith(("mitsuba_lab.experiment", "mitsuba_lab.check")):
+        if _in_library(name):
             with open(path, encoding="utf-8") as handle:
                 lines = _prints(ast.parse(handle.read(), path))
             if lines:

@@ -46,7 +46,7 @@ class _PassParameters(Mapping):
 
 PASS_PARAMETER = _PassParameters()
 #: ``[experiment] progressive`` when a config leaves it out: strategies that can accumulate render
-#: one progressive run per seed (plan.ladder_passes, experiment/progressive.py), not one render
+#: one progressive run per seed (plan.ladder_passes, experiment/execution/progressive.py), not one render
 #: per spp (measured on the quick and veach_mis sweeps: the same MSE at each spp, fewer render
 #: seconds, more curve points; experiments/README.md).
 DEFAULT_PROGRESSIVE = True

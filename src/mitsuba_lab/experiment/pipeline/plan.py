@@ -9,7 +9,7 @@ report find the same points again.
 
 With ``experiment.progressive`` each strategy and sampler of a scene gets one *progressive* point
 for the whole spp ladder (``scene/strategy/sampler/spp4-64``: one render per seed whose passes
-accumulate, ``ladder_passes``; experiment/progressive.py) and one per time budget, provided
+accumulate, ``ladder_passes``; experiment/execution/progressive.py) and one per time budget, provided
 every strategy and sampler planned on the scene can accumulate; otherwise the scene keeps one
 point per spp and budget, and the reason is recorded (``separate_reason``, ``Plan.separate``).
 """
@@ -33,7 +33,7 @@ class Point:
     budget_s: float | None
     seeds: tuple[int, ...]
     warmup_seed: int
-    progressive: bool = False       # one accumulating render per seed (experiment/progressive.py)
+    progressive: bool = False       # one accumulating render per seed (experiment/execution/progressive.py)
     passes: tuple[int, ...] = ()    # progressive over the ladder: spp of each pass (ladder_passes);
                                     # () for a budget: fitted by the point's first run
     ladder: tuple[int, ...] = ()    # progressive: the configured spp (they get the optional metrics)

@@ -6,7 +6,7 @@ row exactly once and redoes only what is missing. Images are written next to
 it under temporary names and renamed (images.atomic_path), and a run's row is
 appended only after its image exists, so a row never points at a missing file.
 
-A progressive run (experiment/progressive.py) is one row too, with its checkpoints inside it
+A progressive run (experiment/execution/progressive.py) is one row too, with its checkpoints inside it
 (``checkpoints``: spp, elapsed time, metrics and image after each pass), appended only after
 every checkpoint image exists: a run killed halfway leaves no row and is rendered again, whole.
 Readers (the report, results.csv) see each checkpoint as a run row of its own point

@@ -1,7 +1,7 @@
 """The bias tables of a scene's section in the sweep report: bias and variance per point, each
 strategy's image mean over the reference's, and a region's variance / bias^2 at each budget.
 
-``BiasTables`` is mixed into ``report_sections.SectionTables`` (the state it reads is described
+``BiasTables`` is mixed into ``tables.SectionTables`` (the state it reads is described
 there); the cells' verdicts are ``verdicts.bias_verdict``'s.
 """
 from __future__ import annotations

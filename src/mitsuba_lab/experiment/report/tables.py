@@ -1,6 +1,7 @@
-"""The tables of a scene's section in the sweep report, as Markdown lines.
+"""The tables of a scene's section in the sweep report, as Markdown lines (the modules of
+``sections`` call them, in the page's order).
 
-``SectionTables`` is mixed into ``report.Report``, whose loaded state the tables read:
+``SectionTables`` is mixed into ``build.Report``, whose loaded state the tables read:
 ``folder`` (the sweep's output folder), ``out`` (its report folder, for plots),
 ``store`` (the ``ResultStore``), ``references`` ({scene: Reference}) and ``plot_passes``.
 Every table takes the scene's groups {(strategy, sampler): [PointStats]} and ``label``,
@@ -140,7 +141,7 @@ class SectionTables(VeachSection, BiasTables):
                 *self.progressive_note(groups, label)]
 
     def progressive_note(self, groups, label) -> list[str]:
-        """Whether the scene's curves come from progressive runs (experiment/progressive.py) and
+        """Whether the scene's curves come from progressive runs (experiment/execution/progressive.py) and
         how their times are measured, or why a progressive sweep rendered the scene separately."""
         points = [p for group in groups.values() for p in group]
         if not points:

@@ -10,7 +10,7 @@ from .analysis import PointStats, region_stack_stats, veach_bound
 
 
 class VeachSection:
-    """A mixin of the report (``report_sections.SectionTables``): it reads the report's
+    """A mixin of the report (``tables.SectionTables``): it reads the report's
     ``folder``, ``references``, ``shown``, ``_run_row``, ``_integrator`` and ``_regions``."""
 
     def _mis_setting(self, stats: PointStats) -> tuple[str, int, tuple]:

@@ -1,14 +1,10 @@
-"""``mitsuba-lab invert CONFIG``: the command's arguments and its run (``add_arguments``,
-``run``), wired into the command line by ``mitsuba_lab.cli``."""
+"""``mitsuba-lab invert CONFIG``: prb inverse-rendering demos and gradient variance against time
+(``mitsuba_lab.inverse``); here its options and what it prints."""
 from __future__ import annotations
 
 import os
 
 from ..errors import LabError
-from .config import load_config
-from .gradients import gradient_sweep
-from .optimise import optimise
-from .report import format_gradient_table, write_gradients, write_optimisation, write_report
 
 EPILOG = """config tables: [scene] path | builtin ("cornell_texture"), resolution, texture_size, defaults;
 [render] max_depth (required), spp, target_spp, seed; [optimise] iterations, learning_rate,
@@ -34,6 +30,8 @@ def run(args, out) -> int:
     """``mitsuba-lab invert``: returns the exit status; errors are LabError (one line, exit 2)."""
     import dataclasses
 
+    from ..inverse.config import load_config
+    from ..inverse.report import write_report
     from ..progress import ProgressBar
 
     cfg = load_config(args.config)
@@ -62,6 +60,10 @@ def run(args, out) -> int:
 def run_parts(cfg, folder: str, run_opt: bool, run_grad: bool, bar, out) -> list[str]:
     """The optimisation and the gradient sweep, as asked, their results written; their
     report sections (Markdown)."""
+    from ..inverse.gradients import gradient_sweep
+    from ..inverse.optimise import optimise
+    from ..inverse.report import format_gradient_table, write_gradients, write_optimisation
+
     sections = []
     if run_opt:
         bar.begin(cfg.iterations, f"optimising {', '.join(cfg.keys)} ({cfg.iterations} iterations)")
