@@ -10,13 +10,13 @@ import os
 
 from ..errors import LabError
 from ..progress import duration
+from .execution.strategy_grid import check_grid, estimated_grid_seconds, render_strategy_grid
 from .pipeline.budget import tolerance_text
 from .pipeline.config import Config, PluginSpec, load_config, with_depth
 from .pipeline.plan import Plan, build_plan, estimated_seconds, nothing_to_run
 from .pipeline.reference import get_reference, load_cached, reference_key
 from .pipeline.reference_choice import choose_references
 from .pipeline.store import ResultStore
-from .execution.strategy_grid import check_grid, estimated_grid_seconds, render_strategy_grid
 from .pipeline.validate import validate
 
 
