@@ -33,6 +33,7 @@ BIDIRECTIONAL_STRATEGIES = {
 }
 STRATEGIES = {**PATH_STRATEGIES, **BIDIRECTIONAL_STRATEGIES}
 
+
 def _z_against(row: dict, mean: float, variance: float) -> float:
     means = row["split_means"]
     return metrics.z_score(row["mean"], np.var(means, ddof=1), len(means), mean, variance, 1)

@@ -112,6 +112,7 @@ def run(args, out) -> int:
     start = time.perf_counter()
     for path in scenes:
         print(f"{os.path.basename(path)} ...", file=out, flush=True)
+        # (check.STRATEGIES read as the command runs: a caller may narrow it, as the tests do)
         scene_rows, scene_warnings = check.check_scene(path, args, defines, check.STRATEGIES,
                                                        lambda line: print(line, file=out, flush=True))
         rows.extend(scene_rows)
