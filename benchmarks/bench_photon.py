@@ -39,8 +39,8 @@ import mitsuba as mi
 import numpy as np
 
 import mitsuba_lab  # noqa: F401
-from mitsuba_lab.experiment.config import DEFAULT_CACHE, PluginSpec
-from mitsuba_lab.experiment.reference import get_reference
+from mitsuba_lab.experiment.pipeline.config import DEFAULT_CACHE, PluginSpec
+from mitsuba_lab.experiment.pipeline.reference import get_reference
 from mitsuba_lab.metrics import fraction_rect_to_pixels, region
 from mitsuba_lab.render import render
 from mitsuba_lab.runtime import versions

@@ -42,9 +42,9 @@ import numpy as np
 import mitsuba_lab  # noqa: F401
 import drjit as dr
 import mitsuba as mi
-from mitsuba_lab.experiment.config import DEFAULT_CACHE, PluginSpec
-from mitsuba_lab.experiment.reference import get_reference
-from mitsuba_lab.experiment.spectrum import bright_mask, low_frequency_fraction, rows_below_bright
+from mitsuba_lab.experiment.pipeline.config import DEFAULT_CACHE, PluginSpec
+from mitsuba_lab.experiment.pipeline.reference import get_reference
+from mitsuba_lab.experiment.report.spectrum import bright_mask, low_frequency_fraction, rows_below_bright
 from pixel_integrals import exact_owen_pair, first_pair, integrand_families, pixel_integral_mse
 from mitsuba_lab.plugins.samplers.common import log2_ceil
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout

@@ -11,7 +11,7 @@ import os
 import numpy as np
 
 from mitsuba_lab import images
-from mitsuba_lab.experiment.store import ResultStore
+from mitsuba_lab.experiment.pipeline.store import ResultStore
 
 WIDTH, HEIGHT = 24, 16
 SEEDS = (1, 2, 3)

@@ -1,4 +1,4 @@
-"""`mitsuba-lab check` (src/mitsuba_lab/check.py), driven through add_arguments / run."""
+"""`mitsuba-lab check` (src/mitsuba_lab/check/, commands/check.py), driven through add_arguments / run."""
 import argparse
 import csv
 import io
@@ -9,8 +9,10 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mitsuba_lab import check, check_verdicts
-from mitsuba_lab.check_verdicts import SKEW_MIN, BiasRung, Empty, Rung, Twin, Verdict, judge, judge_consistent
+from mitsuba_lab import check
+from mitsuba_lab.check import verdicts as check_verdicts
+from mitsuba_lab.commands import check as check_command
+from mitsuba_lab.check.verdicts import SKEW_MIN, BiasRung, Empty, Rung, Twin, Verdict, judge, judge_consistent
 from mitsuba_lab.errors import LabError
 from mitsuba_lab.scene import make_integrator
 from mitsuba_lab.scene_xml import scene_defaults
@@ -36,9 +38,9 @@ def _path_tracers_unless_asked(request, monkeypatch):
 
 def run_check(argv):
     parser = argparse.ArgumentParser(prog="mitsuba-lab check")
-    check.add_arguments(parser)
+    check_command.add_arguments(parser)
     out = io.StringIO()
-    status = check.run(parser.parse_args(argv), out)
+    status = check_command.run(parser.parse_args(argv), out)
     return status, out.getvalue()
 
 

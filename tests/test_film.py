@@ -11,7 +11,7 @@ from lab_cli import run
 
 from mitsuba_lab import check
 from mitsuba_lab import inverse as inv
-from mitsuba_lab.experiment.config import ConfigError
+from mitsuba_lab.experiment.pipeline.config import ConfigError
 from mitsuba_lab.film import as_resolution, film_key, film_shape, parse_resolution_text
 from mitsuba_lab.scene import film_size
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from mitsuba_lab import inverse as inv
+from mitsuba_lab.commands import invert as invert_command
 from mitsuba_lab.errors import LabError
 from mitsuba_lab.scene import load_scene
 
@@ -204,9 +205,9 @@ reference_spp = 8
 reference_seeds = 1
 ''')
     parser = argparse.ArgumentParser()
-    inv.add_arguments(parser)
+    invert_command.add_arguments(parser)
     out = io.StringIO()
-    assert inv.run(parser.parse_args([str(config), "-o", str(tmp_path / "o")]), out) == 0
+    assert invert_command.run(parser.parse_args([str(config), "-o", str(tmp_path / "o")]), out) == 0
     for name in ("optimisation.csv", "gradients.csv", "initial.png", "target.exr", "final.exr",
                  "report/index.html", "report/summary.md", "report/gradients.png"):
         assert (tmp_path / "o" / name).is_file(), name
@@ -215,7 +216,7 @@ reference_seeds = 1
     bad.write_text(config.read_text().replace(f'[parameters."{RED}"]', '[parameters."red.albedo"]')
                    .replace("[gradients]", "[gradients]\nkey = \"red.albedo\""))
     with pytest.raises(LabError, match="unknown scene parameter key.*red.albedo.*the scene has: .*" + RED):
-        inv.run(parser.parse_args([str(bad), "-o", str(tmp_path / "b")]), io.StringIO())
+        invert_command.run(parser.parse_args([str(bad), "-o", str(tmp_path / "b")]), io.StringIO())
 
 
 def test_no_most_efficient_sampler_with_one_sampler():

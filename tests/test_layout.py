@@ -129,7 +129,6 @@ def test_no_import_cycle():
     graph = import_graph(module_files())
     commands = {f"mitsuba_lab.{module}" for module, _ in cli.COMMANDS.values()}
     assert graph["mitsuba_lab.cli"] == {"mitsuba_lab.commands.args"} | commands
-    assert graph["mitsuba_lab.check"] >= {"mitsuba_lab.commands.args", "mitsuba_lab.errors"}
     assert set(graph) >= set().union(*graph.values())          # every edge names a module
     assert cycles(graph) == []
 
@@ -145,8 +144,7 @@ def test_the_plugins_import_nothing_of_the_orchestration_layer():
 
 
 def test_no_import_cycle_counting_imports_inside_functions():
-    """Deferred imports too: the library never reaches back into cli (check.py takes its
-    argument helpers from commands.args)."""
+    """Deferred imports too: the library never reaches back into cli."""
     graph = import_graph(module_files(), deferred=True)
     assert not [m for m, edges in graph.items() if "mitsuba_lab.cli" in edges and m != "mitsuba_lab.__main__"]
     assert cycles(graph) == []
@@ -176,6 +174,68 @@ def test_the_command_line_layer_imports_no_mitsuba():
                               timeout=120, cwd=ROOT)
         assert proc.returncode == 0, f"{name}: {proc.stderr[-2000:]}"
         assert proc.stdout.strip() == "[]", f"{name} imports {proc.stdout.strip()}"
+
+
+#: The library: it parses no arguments and prints nothing (commands/ owns the terminal).
+LIBRARY = ("mitsuba_lab.experiment", "mitsuba_lab.check", "mitsuba_lab.inverse")
+
+
+def _in_library(name: str) -> bool:
+    return any(name == top or name.startswith(top + ".") for top in LIBRARY)
+
+
+def test_the_library_imports_nothing_of_the_command_line():
+    """experiment/, check/ and inverse/ import neither cli nor commands/, not even inside a
+    function: what a command prints and parses lives in its module of commands/."""
+    graph = import_graph(module_files(), deferred=True)
+    reaching = {name: sorted(t for t in targets if t == "mitsuba_lab.cli" or t.startswith("mitsuba_lab.commands"))
+                for name, targets in graph.items() if _in_library(name)}
+    assert {name: targets for name, targets in reaching.items() if targets} == {}
+
+
+def _prints(tree: ast.Module) -> list[int]:
+    """Lines of print() calls, those of an ``if __name__ == "__main__":`` block (a module run
+    as a script) left out."""
+    def is_main(node):
+        return isinstance(node, ast.If) and isinstance(node.test, ast.Compare) and \
+            isinstance(node.test.left, ast.Name) and node.test.left.id == "__name__"
+    stack, found = [n for n in tree.body if not is_main(n)], []
+    while stack:
+        node = stack.pop()
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "print":
+            found.append(node.lineno)
+        stack.extend(ast.iter_child_nodes(node))
+    return sorted(found)
+
+
+def test_the_scan_finds_a_print():
+    assert _prints(ast.parse("def f():\n    print('x')\nif __name__ == '__main__':\n    print('y')\n")) == [2]
+
+
+def test_the_library_prints_nothing():
+    """The sweep runner, check and invert report through return values and callbacks (progress, ``say``);
+    the commands print. (A module's own ``__main__`` block, run as a script, may print.)"""
+    printing = {}
+    for name, path in module_files().items():
+        if _in_library(name):
+            with open(path, encoding="utf-8") as handle:
+                lines = _prints(ast.parse(handle.read(), path))
+            if lines:
+                printing[name] = lines
+    assert printing == {}
+
+
+def test_the_report_sections_are_listed_once_and_completely():
+    """Every module of experiment/report/sections/ is one entry of SECTIONS (the page's order) and
+    has ``applies`` and ``render``; nothing else is listed."""
+    from mitsuba_lab.experiment.report import sections
+
+    folder = os.path.dirname(sections.__file__)
+    modules = {name[:-3] for name in os.listdir(folder) if name.endswith(".py") and name != "__init__.py"}
+    listed = [section.__name__.rpartition(".")[2] for section in sections.SECTIONS]
+    assert sorted(listed) == sorted(modules) and len(set(listed)) == len(listed)
+    assert all(callable(getattr(s, "applies", None)) and callable(getattr(s, "render", None))
+               for s in sections.SECTIONS)
 
 
 def _long_modules() -> dict[str, int]:

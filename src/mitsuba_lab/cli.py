@@ -25,15 +25,15 @@ EXIT_INTERRUPTED = 130        # 128 + SIGINT, as shells report Ctrl-C
 EXIT_PIPE = 141               # 128 + SIGPIPE, as for any command whose reader closed the pipe
 
 #: verb -> (module under mitsuba_lab, help line), in --help order. Each module has
-#: ``add_arguments(parser)`` and ``run(args, out)``; check and invert live with their library.
+#: ``add_arguments(parser)`` and ``run(args, out)``.
 COMMANDS = {
     "render": ("commands.render", "render one scene with one integrator"),
     "demo": ("commands.demo", "render the Cornell box with every lab integrator"),
     "sweep": ("commands.sweep", "run a strategy sweep and write its report"),
     "reference": ("commands.reference", "build (or find) one cached high-spp reference"),
     "report": ("commands.report", "rebuild a sweep's report from its stored results"),
-    "check": ("check", "render the stiff scenes with every applicable lab strategy against path"),
-    "invert": ("inverse", "prb inverse-rendering demos and gradient variance against time"),
+    "check": ("commands.check", "render the stiff scenes with every applicable lab strategy against path"),
+    "invert": ("commands.invert", "prb inverse-rendering demos and gradient variance against time"),
     "theory": ("commands.theory", "reproduce five worked Monte Carlo problems (P1-P5)"),
     "plugins": ("commands.plugins", "list the lab's plugins, or one plugin's declared parameters"),
 }

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from mitsuba_lab.cli import main
-from mitsuba_lab.experiment.report import Report, build_report
-from mitsuba_lab.experiment.store import ResultStore
+from mitsuba_lab.experiment.report.build import Report, build_report
+from mitsuba_lab.experiment.pipeline.store import ResultStore
 from mitsuba_lab import images
 
 SIZE = 8
@@ -169,7 +169,7 @@ def test_veach_section_is_absent_with_one_lab_mis_weighting(synthetic):
 
 
 def test_veach_bound_without_a_standard_error_is_not_resolved():
-    from mitsuba_lab.experiment.analysis import veach_bound
+    from mitsuba_lab.experiment.report.analysis import veach_bound
 
     nan = float("nan")
     balance = {"variance": 2.0, "variance_se": nan, "ref_mean_square": 0.0}

@@ -7,9 +7,9 @@ import pytest
 import synthetic_sweep as synth
 
 from mitsuba_lab.cli import main
-from mitsuba_lab.experiment.comparisons import comparison_sets, group_points
-from mitsuba_lab.experiment.figure import build_figure, pick_set
-from mitsuba_lab.experiment.report import Report
+from mitsuba_lab.experiment.report.comparisons import comparison_sets, group_points
+from mitsuba_lab.experiment.report.figure import build_figure, pick_set
+from mitsuba_lab.experiment.report.build import Report
 
 
 @pytest.fixture(scope="module")

@@ -13,15 +13,15 @@ import numpy as np
 import pytest
 import synthetic_sweep as synth
 
-from mitsuba_lab.experiment import budget
-from mitsuba_lab.experiment.analysis import region_at_budgets
-from mitsuba_lab.experiment.comparisons import group_points
-from mitsuba_lab.experiment.config import PluginSpec, SceneSpec
-from mitsuba_lab.experiment.plan import Point
-from mitsuba_lab.experiment.run import SweepRunner
-from mitsuba_lab.experiment.store import ResultStore
+from mitsuba_lab.experiment.pipeline import budget
+from mitsuba_lab.experiment.report.analysis import region_at_budgets
+from mitsuba_lab.experiment.report.comparisons import group_points
+from mitsuba_lab.experiment.pipeline.config import PluginSpec, SceneSpec
+from mitsuba_lab.experiment.pipeline.plan import Point
+from mitsuba_lab.experiment.pipeline.run import SweepRunner
+from mitsuba_lab.experiment.pipeline.store import ResultStore
 from mitsuba_lab.experiment.sweep import budget_message
-from mitsuba_lab.experiment.worker import PointResult, PointTask, execute_counted, execute_progressive
+from mitsuba_lab.experiment.execution.worker import PointResult, PointTask, execute_counted, execute_progressive
 
 WARMUP = 99
 REFERENCE = np.full((4, 6, 3), 0.5, np.float32)
@@ -179,7 +179,7 @@ def off_budget_sweep(tmp_path_factory):
         if row["point"] == "s/noisy/independent/t0.2s":
             row["wall_s"] = 0.13 + 0.001 * row["seed"]
     synth.edit_runs(folder, slow_down)
-    from mitsuba_lab.experiment.report import Report
+    from mitsuba_lab.experiment.report.build import Report
 
     return Report(str(folder))
 
@@ -198,7 +198,7 @@ def test_the_equal_time_table_labels_budgets_by_measured_time_and_marks_the_poin
 def test_the_figure_does_not_call_an_off_budget_set_equal_time(off_budget_sweep):
     import matplotlib.pyplot as plt
 
-    from mitsuba_lab.experiment.figure import build_figure
+    from mitsuba_lab.experiment.report.figure import build_figure
 
     fig = build_figure(off_budget_sweep, "s", budget=0.2)
     title = fig._suptitle.get_text()
@@ -218,7 +218,7 @@ def test_a_point_off_budget_is_left_out_of_the_ranking_at_its_budget(off_budget_
     noisy, good = table[0.2]["noisy"], table[0.2]["good"]
     assert noisy["off_budget"] and math.isnan(noisy["x_best"]) and good["x_best"] == 1.0
     assert not table[0.1]["noisy"]["off_budget"] and table[0.1]["noisy"]["x_best"] > 1.0
-    from mitsuba_lab.experiment.report_sections import budget_cell
+    from mitsuba_lab.experiment.report.tables import budget_cell
     assert "**off the 0.2 s budget**: not compared" in budget_cell(noisy)
     # the efficiency table ranks by measured time and says which point is off its budget
     groups, label = group_points(stats)
@@ -248,7 +248,7 @@ def test_the_bias_tables_mark_the_point_off_budget(off_budget_sweep):
 
 
 def test_the_viewer_labels_the_point_off_budget(off_budget_sweep):
-    from mitsuba_lab.experiment.viewer import scene_data
+    from mitsuba_lab.experiment.report.viewer import scene_data
 
     report = off_budget_sweep
     ref = report.references["s"]
@@ -271,7 +271,7 @@ def test_the_image_strip_shows_every_strategy_at_one_budget(tmp_path):
     beside another at 0.99 s. With budgets it shows every strategy at the largest budget all have,
     and says so; the synthetic sweep has budgets 0.1 and 0.2 s and spp points (4, 16 spp) whose
     times differ per strategy (the old rule picked good at 16 spp, 0.064 s, and noisy at 0.032 s)."""
-    from mitsuba_lab.experiment.report import build_report
+    from mitsuba_lab.experiment.report.build import build_report
 
     synth.write_sweep(tmp_path)
     paths = build_report(str(tmp_path))
@@ -279,7 +279,8 @@ def test_the_image_strip_shows_every_strategy_at_one_budget(tmp_path):
     line = next(x for x in summary.splitlines() if x.startswith("![reference, each strategy"))
     print(line)
     assert line.startswith("![reference, each strategy at the 0.2 s budget (0.2 s measured), error maps]")
-    from mitsuba_lab.experiment.report import Report, strip_points
+    from mitsuba_lab.experiment.report.build import Report
+    from mitsuba_lab.experiment.report.strip import strip_points
 
     groups, label = group_points(Report(str(tmp_path)).stats["s"])
     picks, _ = strip_points(groups, label)
@@ -288,7 +289,8 @@ def test_the_image_strip_shows_every_strategy_at_one_budget(tmp_path):
 
 def test_the_image_strip_takes_the_largest_budget_all_strategies_have_and_marks_off_budget(tmp_path,
                                                                                             off_budget_sweep):
-    from mitsuba_lab.experiment.report import Report, strip_points
+    from mitsuba_lab.experiment.report.build import Report
+    from mitsuba_lab.experiment.report.strip import strip_points
 
     groups, label = group_points(off_budget_sweep.stats["s"])
     picks, title = strip_points(groups, label)
@@ -304,7 +306,8 @@ def test_the_image_strip_takes_the_largest_budget_all_strategies_have_and_marks_
 
 
 def test_without_budgets_the_image_strip_title_names_each_images_time(tmp_path):
-    from mitsuba_lab.experiment.report import Report, strip_points
+    from mitsuba_lab.experiment.report.build import Report
+    from mitsuba_lab.experiment.report.strip import strip_points
 
     synth.write_sweep(tmp_path, budgets=())
     groups, label = group_points(Report(str(tmp_path)).stats["s"])

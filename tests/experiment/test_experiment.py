@@ -9,11 +9,11 @@ import time
 import numpy as np
 import pytest
 
-from mitsuba_lab.experiment import browser
-from mitsuba_lab.experiment.config import ConfigError, PluginSpec, load_config, parse_config
-from mitsuba_lab.experiment.plan import build_plan
-from mitsuba_lab.experiment.reference import get_reference, reference_key
-from mitsuba_lab.experiment.store import ResultStore
+from mitsuba_lab.experiment.report import browser
+from mitsuba_lab.experiment.pipeline.config import ConfigError, PluginSpec, load_config, parse_config
+from mitsuba_lab.experiment.pipeline.plan import build_plan
+from mitsuba_lab.experiment.pipeline.reference import get_reference, reference_key
+from mitsuba_lab.experiment.pipeline.store import ResultStore
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -265,7 +265,7 @@ def test_bad_config_exits_2_with_one_line(tmp_path):
 
 
 def test_veach_bound_verdicts():
-    from mitsuba_lab.experiment.analysis import veach_bound
+    from mitsuba_lab.experiment.report.analysis import veach_bound
 
     balance = {"variance": 1.0, "variance_se": 0.1, "ref_mean_square": 4.0}
     # slack for n_L = 1 at 1 spp: (1/1 - 1/2) * 4 = 2
@@ -282,8 +282,8 @@ def test_veach_bound_verdicts():
 def test_sweep_on_a_dask_cluster_survives_a_killed_worker(tmp_path):
     """Two worker processes; one is killed with SIGKILL after the first point comes back."""
     distributed = pytest.importorskip("distributed")
-    from mitsuba_lab.experiment.executors import DaskExecutor
-    from mitsuba_lab.experiment.run import SweepRunner
+    from mitsuba_lab.experiment.execution.executors import DaskExecutor
+    from mitsuba_lab.experiment.pipeline.run import SweepRunner
 
     path = tmp_path / "c.toml"
     path.write_text(TINY.format(cache=tmp_path / "cache", root=ROOT).replace("spp = [2, 8]", "spp = [2, 4, 8, 16]"))

@@ -9,7 +9,7 @@ from film_scenes import wide_cornell
 from lab_cli import run
 
 from mitsuba_lab import images
-from mitsuba_lab.experiment.config import ConfigError, load_config_dict
+from mitsuba_lab.experiment.pipeline.config import ConfigError, load_config_dict
 from mitsuba_lab.experiment.sweep import prepare_sweep
 from mitsuba_lab.scene import film_size
 from mitsuba_lab.scene_xml import load_scene_variant

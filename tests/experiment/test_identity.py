@@ -7,9 +7,9 @@ import shutil
 import pytest
 
 from mitsuba_lab import cli
-from mitsuba_lab.experiment import identity
-from mitsuba_lab.experiment.identity import describe_changes
-from mitsuba_lab.experiment.store import ResultStore
+from mitsuba_lab.experiment.pipeline import identity
+from mitsuba_lab.experiment.pipeline.identity import describe_changes
+from mitsuba_lab.experiment.pipeline.store import ResultStore
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 

@@ -7,10 +7,10 @@ import os
 
 import pytest
 
-from mitsuba_lab.experiment.analysis import PointStats, bias_by_passes, region_at_budgets
-from mitsuba_lab.experiment.config import ConfigError, PluginSpec, parse_config, sample_count_plugin
-from mitsuba_lab.experiment.plan import Point
-from mitsuba_lab.experiment.worker import calibrate, settle
+from mitsuba_lab.experiment.report.analysis import PointStats, bias_by_passes, region_at_budgets
+from mitsuba_lab.experiment.pipeline.config import ConfigError, PluginSpec, parse_config, sample_count_plugin
+from mitsuba_lab.experiment.pipeline.plan import Point
+from mitsuba_lab.experiment.execution.worker import calibrate, settle
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CORNELL = os.path.join(ROOT, "scenes", "cornell_box.xml")
@@ -18,7 +18,7 @@ CORNELL = os.path.join(ROOT, "scenes", "cornell_box.xml")
 
 @pytest.mark.parametrize("name", ["caustics.toml", "photon_bias.toml"])
 def test_shipped_photon_experiments_plan_in_a_dry_run(name):
-    from mitsuba_lab.experiment.sweep import sweep_command
+    from mitsuba_lab.commands.sweep import sweep_command
 
     out = io.StringIO()
     assert sweep_command(os.path.join(ROOT, "experiments", name), None, True, out) == 0
@@ -183,7 +183,7 @@ def test_region_at_budgets_charges_each_seed_its_own_time():
     cells = region_at_budgets(points, lambda p: p.strategy, "caustic", rel_floor=0.001)[2.0]
     assert cells["auto"]["cost"] == pytest.approx(0.04) and cells["fixed"]["cost"] == pytest.approx(0.04)
     assert cells["auto"]["x_best"] == pytest.approx(1.0) and cells["auto"]["time_spread"] == pytest.approx(4.0)
-    from mitsuba_lab.experiment.report_sections import budget_cell
+    from mitsuba_lab.experiment.report.tables import budget_cell
     assert "times 4x apart" in budget_cell(cells["auto"]) and "apart" not in budget_cell(cells["fixed"])
 
 
@@ -208,8 +208,8 @@ def test_region_bias_variance_sees_a_blurred_region_and_not_the_rest(tmp_path):
     import numpy as np
 
     from mitsuba_lab import images
-    from mitsuba_lab.experiment.analysis import region_bias_variance
-    from mitsuba_lab.experiment.reference import Reference
+    from mitsuba_lab.experiment.report.analysis import region_bias_variance
+    from mitsuba_lab.experiment.pipeline.reference import Reference
 
     rng = np.random.default_rng(5)
     image = np.full((16, 16, 3), 2.0)
@@ -258,11 +258,11 @@ mis = {{ type = "lab_mis" }}
 
 @pytest.mark.slow
 def test_tiny_photon_sweep_runs_passes_and_reports_bias_against_passes(tmp_path):
-    from mitsuba_lab.experiment.config import load_config
-    from mitsuba_lab.experiment.plan import build_plan
-    from mitsuba_lab.experiment.report import build_report
-    from mitsuba_lab.experiment.run import SweepRunner
-    from mitsuba_lab.experiment.store import ResultStore
+    from mitsuba_lab.experiment.pipeline.config import load_config
+    from mitsuba_lab.experiment.pipeline.plan import build_plan
+    from mitsuba_lab.experiment.report.build import build_report
+    from mitsuba_lab.experiment.pipeline.run import SweepRunner
+    from mitsuba_lab.experiment.pipeline.store import ResultStore
 
     path = tmp_path / "tiny.toml"
     path.write_text(TINY.format(cache=tmp_path / "cache", scene=CORNELL))
@@ -291,8 +291,8 @@ def test_relative_bias_is_zero_for_unbiased_renders_and_sees_a_scaled_one():
     the bright pixel count like the dim ones."""
     import numpy as np
 
-    from mitsuba_lab.experiment.analysis import relative_bias_variance
-    from mitsuba_lab.experiment.reference import Reference
+    from mitsuba_lab.experiment.report.analysis import relative_bias_variance
+    from mitsuba_lab.experiment.pipeline.reference import Reference
 
     rng = np.random.default_rng(3)
     image = np.full((16, 16, 3), 0.5)

@@ -7,8 +7,8 @@ import os
 
 import pytest
 
-from mitsuba_lab.experiment.analysis import PointStats, pilot_choice
-from mitsuba_lab.experiment.report_sections import SectionTables
+from mitsuba_lab.experiment.report.analysis import PointStats, pilot_choice
+from mitsuba_lab.experiment.report.tables import SectionTables
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CORNELL = os.path.join(ROOT, "scenes", "cornell_box.xml")

@@ -5,11 +5,11 @@ import os
 import numpy as np
 import pytest
 
-from mitsuba_lab.experiment.config import ConfigError, PluginSpec, parse_config
-from mitsuba_lab.experiment.plan import build_plan, ladder_passes, separate_reason
-from mitsuba_lab.experiment.progressive import fit_pass_time, next_budget_pass, run_passes
-from mitsuba_lab.experiment.run import SweepRunner
-from mitsuba_lab.experiment.store import ResultStore
+from mitsuba_lab.experiment.pipeline.config import ConfigError, PluginSpec, parse_config
+from mitsuba_lab.experiment.pipeline.plan import build_plan, ladder_passes, separate_reason
+from mitsuba_lab.experiment.execution.progressive import fit_pass_time, next_budget_pass, run_passes
+from mitsuba_lab.experiment.pipeline.run import SweepRunner
+from mitsuba_lab.experiment.pipeline.store import ResultStore
 from mitsuba_lab.render import RenderStats
 
 from agreement import Z_BOUND
@@ -184,7 +184,7 @@ def sweep(folder, cache, strategies=None, **experiment):
 
 @pytest.mark.slow
 def test_progressive_sweep_rows_resume_and_switch_off(tmp_path):
-    from mitsuba_lab.experiment.report import build_report
+    from mitsuba_lab.experiment.report.build import build_report
 
     out, cache = tmp_path / "out", tmp_path / "cache"
     store, _ = sweep(out, cache)

@@ -12,7 +12,7 @@ import os
 import pytest
 from lab_cli import run
 
-from mitsuba_lab.experiment.config import ConfigError
+from mitsuba_lab.experiment.pipeline.config import ConfigError
 from mitsuba_lab.experiment.sweep import prepare_sweep
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

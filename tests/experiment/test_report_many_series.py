@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import synthetic_sweep as synth
 
-from mitsuba_lab.experiment.report import (ERROR_RANGE, SIGNED_CMAP, STRIP_COLUMNS, build_report, curves_figure,
-                                           strip_figure)
-from mitsuba_lab.experiment.spectrum import SLOPE_SE_LIMIT, fit_slope, slope_cell, slope_table
+from mitsuba_lab.experiment.report.build import build_report, curves_figure
+from mitsuba_lab.experiment.report.strip import ERROR_RANGE, SIGNED_CMAP, STRIP_COLUMNS, strip_figure
+from mitsuba_lab.experiment.report.spectrum import SLOPE_SE_LIMIT, fit_slope, slope_cell, slope_table
 from mitsuba_lab.reporting.figures import legend_outside, pyplot, series_styles
 
 STRATEGIES = ("good", "noisy", "nee", "path", "rising")
@@ -133,7 +133,7 @@ def test_a_slope_over_too_short_a_time_range_says_so():
     """Issue 42 follow-up, item 7: under load a slope was fitted over an off-budget 1 s point at
     1.4 s and the 2 s point at 1.7 s, 1.2x apart: -7.15 +- 0.57, starred only as "2 points: too
     few to check the line". The real reason comes first: too short a time range."""
-    from mitsuba_lab.experiment.spectrum import slope_note
+    from mitsuba_lab.experiment.report.spectrum import slope_note
 
     short = fit_slope([1.4, 1.7], [0.0263, 0.00821], [0.001, 0.0003], axis="time")
     note = "\n".join(slope_note([("mis", short)], "slope column"))
@@ -234,7 +234,7 @@ def test_the_report_marks_the_rising_slope_and_not_the_clean_ones(report):
 def test_a_point_at_the_reference_floor_is_not_ranked():
     """A strategy whose MSE minus the reference's floor is not above zero has no efficiency:
     it is listed as not ranked and named, not given a rank below the others."""
-    from mitsuba_lab.experiment.report_sections import SectionTables
+    from mitsuba_lab.experiment.report.tables import SectionTables
 
     def point(mse_corrected):
         efficiency = 1.0 / (mse_corrected * 0.2) if mse_corrected > 0 else math.nan

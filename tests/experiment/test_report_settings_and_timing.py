@@ -6,8 +6,8 @@ import re
 import pytest
 import synthetic_sweep as synth
 
-from mitsuba_lab.experiment.analysis import MIN_TRUSTED_TIME_S
-from mitsuba_lab.experiment.report import build_report
+from mitsuba_lab.experiment.report.analysis import MIN_TRUSTED_TIME_S
+from mitsuba_lab.experiment.report.build import build_report
 from mitsuba_lab.reporting import md_to_html
 
 #: Wall times of the "noisy" strategy are scaled by this: all its renders then take under

@@ -1,4 +1,4 @@
-"""Tests of mitsuba_lab.experiment.spectrum: error spectra and MSE-vs-spp slopes.
+"""Tests of mitsuba_lab.experiment.report.spectrum: error spectra and MSE-vs-spp slopes.
 
 Synthetic images with known spectra, fixed seeds; tolerances stated per test.
 """
@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mitsuba_lab.experiment.spectrum import (
+from mitsuba_lab.experiment.report.spectrum import (
     bright_mask, low_frequency_fraction, mse_slope, plot_error_spectra, radial_power_spectrum,
     rows_below_bright, slope_table, spectrum_rows)
 

@@ -4,10 +4,10 @@ import os
 import numpy as np
 import pytest
 
-from mitsuba_lab.experiment.config import ConfigError, load_config
-from mitsuba_lab.experiment.plan import build_plan
-from mitsuba_lab.experiment.store import ResultStore
-from mitsuba_lab.experiment.strategy_grid import (check_grid, grid_cells, grid_section, render_strategy_grid,
+from mitsuba_lab.experiment.pipeline.config import ConfigError, load_config
+from mitsuba_lab.experiment.pipeline.plan import build_plan
+from mitsuba_lab.experiment.pipeline.store import ResultStore
+from mitsuba_lab.experiment.execution.strategy_grid import (check_grid, grid_cells, grid_section, render_strategy_grid,
                                                   require_complete)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

@@ -12,7 +12,7 @@ import mitsuba_lab
 from mitsuba_lab import cli
 from mitsuba_lab.errors import LabError
 from mitsuba_lab.experiment.api import ResultRows
-from mitsuba_lab.experiment.config import ConfigError, load_config_dict
+from mitsuba_lab.experiment.pipeline.config import ConfigError, load_config_dict
 from mitsuba_lab.progress import ProgressBar
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -224,7 +224,7 @@ def test_the_sweep_renders_in_a_process_of_its_own(tmp_path):
     Asserted by the process each row names, not by timing (the suite must pass under load)."""
     import os
 
-    from mitsuba_lab.experiment.store import ResultStore
+    from mitsuba_lab.experiment.pipeline.store import ResultStore
 
     for in_process in (False, True):
         output = tmp_path / f"out_{in_process}"
@@ -262,7 +262,7 @@ def test_the_render_process_sends_each_failure_back_as_one_line():
     from types import SimpleNamespace
 
     from mitsuba_lab.errors import LabError
-    from mitsuba_lab.experiment.render_process import RenderProcessError, portable
+    from mitsuba_lab.experiment.execution.render_process import RenderProcessError, portable
 
     task = SimpleNamespace(point=SimpleNamespace(id="s/x/independent/spp4"))
     bad_input = portable(LabError("lab_mis: parameter 'rr_depth' must be an integer >= 1, got 0"), task)
@@ -278,7 +278,7 @@ def test_the_render_process_sends_each_failure_back_as_one_line():
 def test_an_error_in_the_render_process_arrives_as_its_one_line(tmp_path):
     """A parameter the plugin can only check against the scene (aim_at naming a shape the scene
     lacks) fails in the render process; the sweep's process raises that error's one line."""
-    from mitsuba_lab.experiment.render_process import RenderProcessError
+    from mitsuba_lab.experiment.execution.render_process import RenderProcessError
 
     config = isolation_config(tmp_path, "lab_bdpt")
     config["strategies"]["mis"].update(aim=0.5, aim_at="no_such_shape")

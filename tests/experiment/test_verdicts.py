@@ -12,11 +12,11 @@ import pytest
 import synthetic_sweep as synth
 
 from mitsuba_lab import images
-from mitsuba_lab.experiment.analysis import bias_by_passes, point_stats
-from mitsuba_lab.experiment.verdicts import UNRELIABLE, best_of, bias_verdict, seeds_needed, separation_factor
-from mitsuba_lab.experiment.reference import Reference
-from mitsuba_lab.experiment.report import build_report
-from mitsuba_lab.experiment.report_sections import SectionTables
+from mitsuba_lab.experiment.report.analysis import bias_by_passes, point_stats
+from mitsuba_lab.experiment.report.verdicts import UNRELIABLE, best_of, bias_verdict, seeds_needed, separation_factor
+from mitsuba_lab.experiment.pipeline.reference import Reference
+from mitsuba_lab.experiment.report.build import build_report
+from mitsuba_lab.experiment.report.tables import SectionTables
 from mitsuba_lab.reporting import fmt, fmt_column, fmt_pm, fmt_pm_column
 
 
@@ -247,7 +247,7 @@ def test_a_biased_or_marked_strategy_is_left_out_of_the_efficiency_verdicts(tmp_
         assert rows and all(row.rstrip(" |").endswith("good left out: biased here") for row in rows), rows
 
     synth.write_sweep(tmp_path / "marked")
-    from mitsuba_lab.experiment.store import ResultStore
+    from mitsuba_lab.experiment.pipeline.store import ResultStore
 
     ResultStore(str(tmp_path / "marked")).append(
         {"kind": "meta", "config": "synthetic.toml", "name": "synthetic", "machine": {},

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 import synthetic_sweep as synth
 
-from mitsuba_lab.experiment import browser
-from mitsuba_lab.experiment.comparisons import comparison_sets, group_points
-from mitsuba_lab.experiment.report import Report, build_report
-from mitsuba_lab.experiment.viewer import HALF_MAX, encode_half
+from mitsuba_lab.experiment.report import browser
+from mitsuba_lab.experiment.report.comparisons import comparison_sets, group_points
+from mitsuba_lab.experiment.report.build import Report, build_report
+from mitsuba_lab.experiment.report.viewer import HALF_MAX, encode_half
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +126,7 @@ def open_page(path):
         if os.environ.get("CI"):
             pytest.fail(f"{reason}: CI must run the browser tests (.ci/bootstrap installs both)")
         pytest.skip(reason)
-    from mitsuba_lab.experiment.viewer_shots import ViewerPage
+    from mitsuba_lab.experiment.report.viewer_shots import ViewerPage
 
     return ViewerPage(str(path))
 
@@ -253,7 +253,7 @@ def single(tmp_path_factory):
 
 @pytest.mark.slow
 def test_signed_difference_has_a_symmetric_range_and_costs_no_data(biased, sweep):
-    from mitsuba_lab.experiment.viewer import signed_difference
+    from mitsuba_lab.experiment.report.viewer import signed_difference
 
     (data,) = page_data((biased / "report" / "index.html").read_text())
     lo, hi = data["diff_range"]
@@ -269,7 +269,7 @@ def test_signed_difference_has_a_symmetric_range_and_costs_no_data(biased, sweep
 
 def expected_diff_colour(data, entry, x, y):
     """The colour the signed view gives image pixel (x, y) of ``entry``, from the page's data."""
-    from mitsuba_lab.experiment.viewer import signed_difference
+    from mitsuba_lab.experiment.report.viewer import signed_difference
 
     shape = (synth.HEIGHT, synth.WIDTH, 3)
     image = decode(data["images"][entry["rgb"]]).reshape(shape)

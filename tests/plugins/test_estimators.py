@@ -11,8 +11,8 @@ import pytest
 
 import mitsuba_lab
 from backend import variant
-from mitsuba_lab.experiment.config import PASS_PARAMETER, PluginSpec, parse_config, sample_count_plugin
-from mitsuba_lab.experiment.plan import build_plan
+from mitsuba_lab.experiment.pipeline.config import PASS_PARAMETER, PluginSpec, parse_config, sample_count_plugin
+from mitsuba_lab.experiment.pipeline.plan import build_plan
 from mitsuba_lab.plugins.integrators.estimator import lookup
 from mitsuba_lab.scene import ALL_LAB_INTEGRATORS, SceneTraits, strategy_applicability
 
@@ -119,7 +119,7 @@ def test_estimators_need_no_variant():
     knowledge (here the sample-count parameter) is there without importing Mitsuba."""
     code = ("import os, sys\n"
             "os.environ['MITSUBA_LAB_ACTIVATE'] = '0'\n"   # as the mitsuba-lab command imports it
-            "from mitsuba_lab.experiment.config import PASS_PARAMETER\n"
+            "from mitsuba_lab.experiment.pipeline.config import PASS_PARAMETER\n"
             "from mitsuba_lab.plugins.integrators.estimator import lookup\n"
             "print(dict(PASS_PARAMETER), lookup('lab_naive').SIMPLICITY, 'mitsuba' in sys.modules)\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)

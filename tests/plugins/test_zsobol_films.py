@@ -20,7 +20,7 @@ import drjit as dr
 import mitsuba as mi
 
 from agreement import Z_BOUND, renders, z_scores
-from mitsuba_lab.experiment.spectrum import low_frequency_fraction
+from mitsuba_lab.experiment.report.spectrum import low_frequency_fraction
 from mitsuba_lab.metrics import z_score
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout, film_block_size
 from mitsuba_lab.render import render

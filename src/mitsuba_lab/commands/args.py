@@ -1,23 +1,12 @@
-"""Argument types and helpers shared by the commands (and by ``check``): no Mitsuba, no numpy."""
+"""Argument types and helpers shared by the commands: no Mitsuba, no numpy."""
 from __future__ import annotations
 
 import argparse
 import os
 
+from ..values import parse_value  # noqa: F401 (KEY=VALUE values; re-exported as cli.parse_value)
+
 EXIT_USAGE = 2
-
-
-def parse_value(text: str):
-    """'8' -> 8, '0.5' -> 0.5, 'true' -> True, anything else stays a string."""
-    lowered = text.lower()
-    if lowered in ("true", "false"):
-        return lowered == "true"
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
 
 
 def parse_assignments(items: list[str] | None, option: str) -> dict:

@@ -34,5 +34,16 @@ def run(args, out) -> int:
     params = parse_assignments(args.param, "--param")
     if args.max_depth is not None:
         params["max_depth"] = args.max_depth
-    return sweep.reference_command(args.scene, args.integrator, params, args.spp, args.chunks, args.res,
-                                   parse_assignments(args.define, "--define"), args.cache, args.output, out)
+    from ..progress import ProgressBar
+
+    ref, cached, cache, integrator = sweep.build_reference(
+        args.scene, args.integrator, params, args.spp, args.chunks, args.res, parse_assignments(args.define, "--define"),
+        args.cache, args.output, ProgressBar())
+    origin = "found in the cache" if cached else f"rendered in {ref.meta.get('seconds', 0):.1f} s"
+    height, width = ref.image.shape[:2]
+    print(f"reference {ref.key} ({integrator}, {width}x{height}) {origin}: {cache}/{ref.key}.exr; noise floor "
+          f"MSE {ref.mse_floor:.4g}, relMSE {ref.rel_mse_floor():.4g}", file=out)
+    if args.output:
+        sweep.write_reference_image(args.output, ref)
+        print(f"wrote {args.output}", file=out)
+    return 0

@@ -128,7 +128,7 @@ def render_plan(args, defines: dict):
 def run(args, out) -> int:
     from .. import images, scene as scenes
     from ..errors import LabError
-    from ..experiment.config import PluginSpec, sample_count_plugin
+    from ..experiment.pipeline.config import PluginSpec, sample_count_plugin
     from ..plugins.params import resolve
     from ..render import render
     from ..runtime import versions

@@ -32,14 +32,14 @@ def add_arguments(parser) -> None:
 def run(args, out) -> int:
     import os
 
-    from ..experiment.report import Report, check_sweep_folder
+    from ..experiment.report.build import Report, check_sweep_folder
 
     check_sweep_folder(args.folder)
     report = Report(args.folder)
     paths = report.write()
     print(f"wrote {paths['html']}, {paths['md']} and {paths['csv']}", file=out)
     if args.figure or args.figure_dir or args.budget is not None:
-        from ..experiment.figure import write_figures
+        from ..experiment.report.figure import write_figures
 
         figures = write_figures(report, args.figure_dir or os.path.join(report.out, "figures"), args.budget)
         print("wrote " + ", ".join(figures), file=out)

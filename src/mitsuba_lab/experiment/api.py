@@ -35,7 +35,7 @@ def _have_pandas() -> bool:
 
 def _cell(text: str):
     """A CSV cell back as the value the store held: None (empty), bool, int, float or str."""
-    from ..commands.args import parse_value
+    from ..values import parse_value
 
     return None if text == "" else parse_value(text)
 

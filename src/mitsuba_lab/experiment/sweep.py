@@ -1,23 +1,23 @@
-"""The `sweep` and `reference` commands: wiring config, plan, runner, report and terminal.
+"""A sweep wired end to end: config, plan, references, points, strategy grid, report.
 
 ``prepare_sweep`` and ``run_sweep`` are the pipeline itself, shared by ``mitsuba-lab sweep``
-and ``mitsuba_lab.sweep`` (experiment.api)."""
+(``commands.sweep``, which prints) and ``mitsuba_lab.sweep`` (``experiment.api``); progress goes
+to the ProgressBar they are given. ``estimate_cost`` is ``--dry-run``'s estimate,
+``build_reference`` the reference of ``mitsuba-lab reference``."""
 from __future__ import annotations
 
-import itertools
 import os
-import time
 
 from ..errors import LabError
-from ..progress import ProgressBar, duration
-from .budget import tolerance_text
-from .config import PASS_PARAMETER, Config, PluginSpec, load_config, with_depth
-from .plan import Plan, build_plan, estimated_seconds, nothing_to_run
-from .reference import get_reference, load_cached, reference_key
-from .reference_choice import choose_references
-from .store import ResultStore
-from .strategy_grid import check_grid, estimated_grid_seconds, grid_renders, render_strategy_grid
-from .validate import validate
+from ..progress import duration
+from .execution.strategy_grid import check_grid, estimated_grid_seconds, render_strategy_grid
+from .pipeline.budget import tolerance_text
+from .pipeline.config import Config, PluginSpec, load_config, with_depth
+from .pipeline.plan import Plan, build_plan, estimated_seconds, nothing_to_run
+from .pipeline.reference import get_reference, load_cached, reference_key
+from .pipeline.reference_choice import choose_references
+from .pipeline.store import ResultStore
+from .pipeline.validate import validate
 
 
 def scene_traits(scene_spec):
@@ -76,37 +76,6 @@ def pilot_rates(config) -> tuple[dict, dict]:
     return rates, pixels
 
 
-def print_plan(config, plan, out) -> None:
-    print(f"sweep '{config.name}' from {config.source}: {len(config.scenes)} scene(s), "
-          f"{len(config.strategies)} strateg(ies), {len(config.samplers)} sampler(s), "
-          f"levels {list(config.spp)} spp + {list(config.time_budgets)} s, {config.repetitions} seeds",
-          file=out)
-    strategies = {s.name: s for s in config.strategies}
-    for scene in config.scenes:
-        points = plan.for_scene(scene.name)
-        print(f"  {scene.name}: {len(points)} points x ({config.repetitions} timed + 1 warm-up) renders; "
-              f"reference {config.reference_for(scene).integrator.type}", file=out)
-        for point in points:
-            unit = PASS_PARAMETER.get(strategies[point.strategy].type)
-            count = f"{point.spp} {unit} of 1 spp" if unit else f"{point.spp} spp"
-            level = count if point.spp else f"{point.budget_s:g} s budget ({unit or 'spp'} from a pilot)"
-            if point.progressive:
-                level = (f"progressive: passes {list(point.passes)} spp, curve at "
-                         f"{list(itertools.accumulate(point.passes))} spp" if point.passes
-                         else f"{point.budget_s:g} s budget, progressive (passes fitted by the first seed)")
-            print(f"    {point.id:60s} {level}", file=out)
-    for item in plan.separate:
-        print(f"  separate renders on {item['scene']}: {item['strategy']} / {item['sampler']}: {item['reason']}",
-              file=out)
-    for item in plan.left_out:
-        print(f"  left out: {item['scene']} / {item['strategy']}: {item['reason']}", file=out)
-    for item in plan.unsupported:
-        print(f"  runs, marked \"{item['mark']}\" (experiment.allow_unsupported): {item['scene']} / "
-              f"{item['strategy']}: {item['reason']}", file=out)
-    for item in plan.aliases:
-        print(f"  alias: {item['scene']} / {item['strategy']} = {item['same_as']}: {item['reason']}", file=out)
-
-
 def prepare_sweep(source) -> tuple[Config, Plan]:
     """(config, plan) from a TOML path or a dict (``load_config``): every problem with the config,
     its plugins and its scenes is raised here, as a LabError, before anything renders."""
@@ -128,10 +97,10 @@ def require_points(config, plan) -> None:
         raise LabError(reason)
 
 
-def print_dry_run(config, plan, out) -> None:
-    """The plan and its estimated cost, from a short pilot render per scene (``--dry-run``); a
-    plan with nothing to run is printed, then refused (``require_points``) before any pilot."""
-    print_plan(config, plan, out)
+def estimate_cost(config, plan) -> dict:
+    """``--dry-run``'s estimate, from a short pilot render per scene (a plan with nothing to run is
+    refused first, ``require_points``): {"seconds": {scene: s}, "grid_seconds": s or None,
+    "rates": {scene: samples per second of the pilot}, "cached": scenes whose reference is cached}."""
     require_points(config, plan)
     rates, pixels = pilot_rates(config)
     cached = set()
@@ -141,19 +110,9 @@ def print_dry_run(config, plan, out) -> None:
                             ref.spp, ref.chunks)
         if load_cached(ref.cache, key):
             cached.add(scene.name)
-    seconds = estimated_seconds(plan, config, rates, pixels, cached)
-    for name, s in seconds.items():
-        ref = "cached" if name in cached else "to render"
-        print(f"  estimated {duration(s)} for {name} (reference {ref}; pilot "
-              f"{rates[name] / 1e6:.2f} M samples/s with the reference integrator)", file=out)
     grid = config.strategy_grid
-    if grid:
-        seconds["strategy grid"] = estimated_grid_seconds(config, rates[grid.scene], pixels[grid.scene])
-        print(f"  strategy grid: {grid_renders(config)} renders of {grid.strategy} on {grid.scene}, "
-              f"{grid.spp} spp, path lengths 1..{grid.max_length}: estimated "
-              f"{duration(seconds['strategy grid'])}", file=out)
-    print(f"estimated total: {duration(sum(seconds.values()))} (lab integrators run at 0.7-1.1x the "
-          f"speed of path; compile time not included)", file=out)
+    return {"seconds": estimated_seconds(plan, config, rates, pixels, cached), "rates": rates, "cached": cached,
+            "grid_seconds": estimated_grid_seconds(config, rates[grid.scene], pixels[grid.scene]) if grid else None}
 
 
 def progress_printer(bar):
@@ -203,20 +162,20 @@ def run_sweep(config, plan, folder: str, bar, cluster: str | None = None, in_pro
     require_points(config, plan)
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise LabError(f"output path is not a folder: {folder}")
-    from .report import build_report
-    from .run import SweepRunner
+    from .report.build import build_report
+    from .pipeline.run import SweepRunner
 
     store = ResultStore(folder)
     progress = progress_printer(bar)
     executor = None
     address = cluster or config.cluster
     if address:
-        from .executors import DaskExecutor
+        from .execution.executors import DaskExecutor
 
         executor = DaskExecutor(address)
         bar.message(f"running points on the Dask cluster at {address}")
     elif not in_process:
-        from .executors import ProcessExecutor
+        from .execution.executors import ProcessExecutor
 
         executor = ProcessExecutor()
     try:
@@ -232,26 +191,17 @@ def done_line(config, seconds: float, paths: dict[str, str]) -> str:
             f"report: {paths['html']} (and {paths['md']})")
 
 
-def sweep_command(config_path: str, output: str | None, dry_run: bool, out, cluster: str | None = None) -> int:
-    config, plan = prepare_sweep(config_path)
-    if dry_run:
-        print_dry_run(config, plan, out)
-        return 0
-    start = time.perf_counter()
-    paths = run_sweep(config, plan, output or config.output, ProgressBar(), cluster)
-    print(done_line(config, time.perf_counter() - start, paths), file=out)
-    return 0
-
-
-def reference_command(scene_path, integrator, params, spp, chunks, resolution, defaults, cache, output, out):
-    """``mitsuba-lab reference``. ``integrator`` None: the default for the scene's features
-    (``features.default_reference``); a named one that ignores a feature of the scene is refused."""
+def build_reference(scene_path, integrator, params, spp, chunks, resolution, defaults, cache, output, bar):
+    """``mitsuba-lab reference``'s reference: (Reference, was cached, the cache folder, the
+    integrator). ``integrator`` None: the default for the scene's features
+    (``features.default_reference``); a named one that ignores a feature of the scene is refused.
+    ``bar`` (a ProgressBar) shows the chunks."""
     from .. import images
     from ..features import default_reference
     from ..scene import SceneTraits
     from ..scene_xml import load_scene_variant
-    from .config import DEFAULT_CACHE
-    from .reference_choice import reference_problem
+    from .pipeline.config import DEFAULT_CACHE
+    from .pipeline.reference_choice import reference_problem
 
     if spp % chunks or chunks < 2:
         raise LabError(f"--chunks must be >= 2 and divide --spp ({spp}), got {chunks}")
@@ -266,7 +216,6 @@ def reference_command(scene_path, integrator, params, spp, chunks, resolution, d
     if reason:
         raise LabError(f"scene {scene_path}: the reference must render every feature of the scene, but {reason}")
     cache = os.path.abspath(os.path.expanduser(cache or os.environ.get("MITSUBA_LAB_CACHE") or DEFAULT_CACHE))
-    bar = ProgressBar()
     bar.begin(chunks, unit="chunk")
     try:
         ref, cached = get_reference(os.path.abspath(scene_path), resolution, defaults,
@@ -274,12 +223,12 @@ def reference_command(scene_path, integrator, params, spp, chunks, resolution, d
                                     progress=lambda k, n: bar.step())
     finally:
         bar.close()                                        # (Ctrl-C: no live bar left mid-line)
-    origin = "found in the cache" if cached else f"rendered in {ref.meta.get('seconds', 0):.1f} s"
-    height, width = ref.image.shape[:2]
-    print(f"reference {ref.key} ({integrator}, {width}x{height}) {origin}: {cache}/{ref.key}.exr; noise floor "
-          f"MSE {ref.mse_floor:.4g}, relMSE {ref.rel_mse_floor():.4g}", file=out)
-    if output:
-        images.write_exr(output, ref.image, {"mitsuba_lab.reference": ref.key})
-        images.write_png(os.path.splitext(output)[0] + ".png", ref.image)
-        print(f"wrote {output}", file=out)
-    return 0
+    return ref, cached, cache, integrator
+
+
+def write_reference_image(output: str, ref) -> None:
+    """The reference's image as ``output`` (EXR, tagged with its key) and a PNG beside it."""
+    from .. import images
+
+    images.write_exr(output, ref.image, {"mitsuba_lab.reference": ref.key})
+    images.write_png(os.path.splitext(output)[0] + ".png", ref.image)

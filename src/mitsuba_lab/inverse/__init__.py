@@ -15,12 +15,11 @@ Both end in a report in the sweep runner's format (``report``): ``OUTDIR/report/
 Modules, by role: ``config`` (the TOML schema), ``scenes`` (scene building, the builtin
 ``cornell_texture``, parameters as numpy), ``prb`` (rendering and losses), ``optimise``
 (the Adam loop and its timing), ``gradients`` (gradient variance against time, finite
-differences), ``report`` (CSVs, plots, Markdown and HTML), ``command`` (``add_arguments``
-and ``run`` of ``mitsuba-lab invert``).
+differences), ``report`` (CSVs, plots, Markdown and HTML). The command's options and what it
+prints: ``commands.invert``.
 """
 from __future__ import annotations
 
-from .command import add_arguments, run
 from .config import load_config, parse_config
 from .gradients import best_sampler, finite_difference, gradient, gradient_sweep
 from .optimise import optimise
@@ -28,7 +27,7 @@ from .prb import loss_function, make_prb, render_image
 from .report import format_gradient_table, write_gradients, write_optimisation, write_report
 from .scenes import load_inverse_scene, select_params, set_values, start_and_truth, to_numpy, truth_texture
 
-__all__ = ["add_arguments", "run", "load_config", "parse_config", "optimise", "gradient", "gradient_sweep",
+__all__ = ["load_config", "parse_config", "optimise", "gradient", "gradient_sweep",
            "finite_difference", "best_sampler", "loss_function", "make_prb", "render_image", "load_inverse_scene",
            "select_params", "set_values", "start_and_truth", "to_numpy", "truth_texture", "write_optimisation",
            "write_gradients", "write_report", "format_gradient_table"]

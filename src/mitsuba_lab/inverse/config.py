@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-from ..experiment.config import TableReader, read_resolution, read_toml
+from ..experiment.pipeline.config import TableReader, read_resolution, read_toml
 
 LOSSES = ("l2", "relative_l2")
 BUILTIN_SCENES = ("cornell_texture",)
