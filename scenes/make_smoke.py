@@ -47,12 +47,12 @@ def smoke_density(seed: int = SEED, shape=SHAPE) -> np.ndarray:
     # the source (y < 0.06) and a soft top so the plume ends inside the grid.
     height = np.clip((y - 0.04) / 0.06, 0, 1) * np.clip((0.95 - y) / 0.25, 0, 1)
     core = np.exp(-2.5 * d2) * (0.07 / radius) ** 1.2 * height
-    # Puffs: a product of a few random low-frequency waves, between about 0.3 and 1.7.
+    # Puffs: a product of four random low-frequency waves, each between 0.75 and 1.25.
     puffs = np.ones_like(core)
     for _ in range(4):
         k = rng.normal(0.0, 6.0, 3)
         phase = rng.uniform(0, 2 * np.pi)
-        puffs *= 1.0 + 0.35 * np.sin(k[0] * x + k[1] * y * 1.5 + k[2] * z + phase)
+        puffs *= 1.0 + 0.25 * np.sin(k[0] * x + k[1] * y * 1.5 + k[2] * z + phase)
     density = core * puffs
     density /= density.max()
     density[density < THRESHOLD] = 0.0
