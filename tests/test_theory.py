@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 import pytest
 
-from mitsuba_lab import theory
+from mitsuba_lab import theory, theory_media
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +32,7 @@ def test_quick_run_matches_every_prediction(quick_rows):
 @pytest.mark.slow
 def test_rows_are_well_formed(quick_rows):
     keys = {"problem", "quantity", "predicted", "measured", "tolerance", "note"}
-    assert {row["problem"] for row in quick_rows} == {"P1", "P2", "P3", "P4", "P5"}
+    assert {row["problem"] for row in quick_rows} == {"P1", "P2", "P3", "P4", "P5", "P6", "P7"}
     for row in quick_rows:
         assert set(row) == keys
         assert math.isfinite(row["measured"]) and row["tolerance"] > 0
@@ -108,6 +108,70 @@ def test_problem4_predicted_rmse_ordering():
 def test_problem5_numbers():
     assert round(theory.rr_added_variance(5.0, 0.6), 2) == 16.67
     assert theory.rr_expected_extra_bounces(0.6) == pytest.approx(1.5)
+
+
+def test_problem6_numbers():
+    pred = theory_media.p6_predicted()
+    assert round(pred["transmittance"], 6) == 0.182684                # exp(-1.7)
+    assert round(pred["var_delta"], 6) == 0.149310
+    assert round(pred["var_ratio"], 6) == 0.083841
+    assert round(pred["lookups_delta"], 3) == 1.179 and pred["lookups_ratio"] == pytest.approx(2.4)
+    # The closed forms against brute quadrature of sigma_t on a fine grid.
+    x = np.linspace(0.0, theory_media.P6_LENGTH, 400_001)
+    sigma = theory_media.p6_sigma_t(x)
+    tau = np.trapezoid(sigma, x)
+    assert pred["transmittance"] == pytest.approx(math.exp(-tau), rel=1e-9)
+    second = math.exp(-np.trapezoid(2 * sigma - sigma**2 / theory_media.P6_MAJORANT, x))
+    assert pred["var_ratio"] == pytest.approx(second - math.exp(-2 * tau), rel=1e-8)
+
+
+def test_poisson_product_identity():
+    """E[prod f(x_i)] = exp(-int s (1 - f)) for a Poisson process of rate s, the identity P6's
+    predictions rest on, summed directly over the number of points (Poisson weights, exact)."""
+    s, length = 1.2, 2.0
+    x = np.linspace(0.0, length, 200_001)
+    f = (1 - theory_media.p6_sigma_t(x) / s) ** 2                             # ratio tracking's square
+    mean_f = np.trapezoid(f, x) / length
+    n = np.arange(60)
+    poisson = np.exp(-s * length + n * math.log(s * length) - np.array([math.lgamma(k + 1) for k in n]))
+    assert np.sum(poisson * mean_f**n) == pytest.approx(math.exp(-np.trapezoid(s * (1 - f), x)), rel=1e-12)
+
+
+def test_problem7_numbers():
+    pred = theory_media.p7_predicted()
+    assert round(pred["truth"], 5) == 0.12751
+    assert round(pred["var_distance"] / pred["var_equiangular"]) == 465   # equi-angular wins clearly
+    assert pred["var_equiangular"] < pred["var_mis"] < pred["var_distance"]
+    t = np.linspace(0.0, theory_media.P7_TMAX, 2_000_001)                    # the densities, on a plain grid
+    assert np.trapezoid(theory_media.p7_equiangular_pdf(t), t) == pytest.approx(1.0, abs=1e-9)
+    escape = math.exp(-theory_media.P7_SIGMA_T * theory_media.P7_TMAX)
+    assert np.trapezoid(theory_media.p7_distance_pdf(t), t) == pytest.approx(1 - escape, abs=1e-9)
+    assert np.trapezoid(theory_media.p7_integrand(t), t) == pytest.approx(pred["truth"], rel=1e-6)
+
+
+def test_equiangular_samples_follow_their_density():
+    t = theory_media.sample_equiangular(np.random.default_rng(3), 400_000)
+    assert t.min() >= 0 and t.max() <= theory_media.P7_TMAX
+    edges = np.array([0.0, 1.0, 1.4, 1.5, 1.6, 2.0, theory_media.P7_TMAX])
+    grid = np.linspace(0.0, theory_media.P7_TMAX, 400_001)
+    cdf = np.concatenate([[0], np.cumsum(np.diff(grid) * 0.5 * (theory_media.p7_equiangular_pdf(grid)[1:] +
+                                                                 theory_media.p7_equiangular_pdf(grid)[:-1]))])
+    expected = np.diff(np.interp(edges, grid, cdf))
+    counts = np.histogram(t, edges)[0] / t.size
+    assert np.all(np.abs(counts - expected) <= 4 * np.sqrt(expected * (1 - expected) / t.size))   # 4 SE
+
+
+def test_media_problems_match_their_predictions():
+    """P6 and P7 alone (fast; the whole run is the slow test above)."""
+    counts = theory._QUICK
+    children = np.random.SeedSequence(0).spawn(7)
+    rows = (theory_media.problem6(np.random.default_rng(children[5]), counts) +
+            theory_media.problem7(np.random.default_rng(children[6]), counts))
+    assert theory.check(rows) == [], theory.format_table(theory.check(rows))
+    measured = _measured(rows)
+    assert measured["var_ratio"] < measured["var_delta"]                # ratio tracking's gain
+    assert measured["lookups_delta"] < measured["lookups_ratio"]       # at more look-ups
+    assert measured["var_equiangular"] * 100 < measured["var_distance"]
 
 
 @pytest.mark.parametrize("sampler", [theory.sample_uniform_hemisphere,

@@ -34,7 +34,7 @@ COMMANDS = {
     "report": ("commands.report", "rebuild a sweep's report from its stored results"),
     "check": ("commands.check", "render the stiff scenes with every applicable lab strategy against path"),
     "invert": ("commands.invert", "prb inverse-rendering demos and gradient variance against time"),
-    "theory": ("commands.theory", "reproduce five worked Monte Carlo problems (P1-P5)"),
+    "theory": ("commands.theory", "reproduce seven worked Monte Carlo problems (P1-P7)"),
     "plugins": ("commands.plugins", "list the lab's plugins, or one plugin's declared parameters"),
 }
 #: Commands that never render, so never select a Mitsuba variant (``activate``).

@@ -1,9 +1,13 @@
-"""Five worked Monte Carlo problems (toy estimators), with their analytic predictions.
+"""Seven worked Monte Carlo problems (toy estimators), with their analytic predictions.
 
 Each problem predicts a number before measuring it: (1) an RMSE from a single-sample
 variance and its N^-1/2 law, (2) the variance reduction of importance sampling,
 (3) a zero-variance cosine estimator, (4) MIS weights and the MIS gain (Veach 1997,
-ch. 9), (5) the cost of Russian roulette. This module derives the
+ch. 9), (5) the cost of Russian roulette, (6) transmittance through a heterogeneous
+medium by delta tracking and by ratio tracking (means, variances, density look-ups),
+(7) single scattering from a point light along a ray in a thin medium by distance
+sampling, equi-angular sampling (Kulla and Fajardo 2012) and their MIS (both in
+:mod:`mitsuba_lab.theory_media`; rows in :mod:`mitsuba_lab.theory_rows`). This module derives the
 predictions, runs the estimators with numpy (fixed seeds), measures them
 through :mod:`mitsuba_lab.metrics` so the same metric code the renderer
 experiments use is exercised, and reports both side by side::
@@ -25,6 +29,13 @@ from collections.abc import Callable
 import numpy as np
 
 from . import metrics
+from .theory_media import problem6, problem7
+from .theory_rows import FP_TOL, TOL_SE
+from .theory_rows import mean_row as _mean_row
+from .theory_rows import ratio_row as _ratio_row
+from .theory_rows import rmse_row as _rmse_row
+from .theory_rows import row as _row
+from .theory_rows import variance_row as _variance_row
 from .plugins.integrators.common.mis_weight import mis_weight
 
 __all__ = [
@@ -44,18 +55,14 @@ __all__ = [
     "format_table",
 ]
 
-# A Monte Carlo row passes when |measured - predicted| <= TOL_SE standard
-# errors: ~6e-5 two-sided false-alarm chance per row for normal errors.
-TOL_SE = 4.0
-# Exact identities differ from their prediction by rounding only (a few ulps).
-FP_TOL = 1e-12
 # Largest temporary array, in float64 elements (2**21 = 16 MB), so even the
 # 4000 x 65536 trial matrix of Problem 1 never needs more than ~100 MB.
 CHUNK_ELEMENTS = 1 << 21
 
 # Trials per problem by default, and ~10x fewer when quick.
-_DEFAULT = dict(p1=4000, p2=4000, p3=100_000, p4=3000, p5=2_000_000, var=1_000_000)
-_QUICK = dict(p1=400, p2=400, p3=100_000, p4=1000, p5=200_000, var=100_000)
+_DEFAULT = dict(p1=4000, p2=4000, p3=100_000, p4=3000, p5=2_000_000, p6=1_000_000, p7=1_000_000,
+                var=1_000_000)
+_QUICK = dict(p1=400, p2=400, p3=100_000, p4=1000, p5=200_000, p6=100_000, p7=100_000, var=100_000)
 
 
 # --------------------------------------------------------------------------
@@ -291,34 +298,6 @@ def _surviving_bounces(rng, n, q):
 # --------------------------------------------------------------------------
 # Rows: prediction vs measurement
 # --------------------------------------------------------------------------
-def _row(problem, quantity, predicted, measured, tolerance, note=""):
-    return {"problem": problem, "quantity": quantity, "predicted": float(predicted),
-            "measured": float(measured), "tolerance": float(tolerance), "note": note}
-
-
-def _rmse_row(problem, quantity, predicted, estimates, truth, note):
-    rmse = metrics.rmse_from_trials(estimates, truth)
-    se = metrics.rmse_standard_error(estimates, truth)
-    return _row(problem, quantity, predicted, rmse, TOL_SE * se, note), rmse, se
-
-
-def _ratio_row(problem, quantity, predicted, num, num_se, den, den_se, note):
-    """Ratio of two independent estimates; relative errors add in quadrature."""
-    ratio = num / den
-    rel_se = math.hypot(num_se / num, den_se / den)
-    return _row(problem, quantity, predicted, ratio, TOL_SE * ratio * rel_se, note)
-
-
-def _variance_row(problem, quantity, predicted, samples, note):
-    return _row(problem, quantity, predicted, metrics.mc_variance(samples),
-                TOL_SE * metrics.variance_standard_error(samples), note)
-
-
-def _mean_row(problem, quantity, predicted, samples, note):
-    return _row(problem, quantity, predicted, np.mean(samples),
-                TOL_SE * metrics.standard_error(samples), note)
-
-
 def _problem1(rng, n):
     sigma2 = p1_sigma2()
     truth = math.e - 1
@@ -439,17 +418,17 @@ def _problem5(rng, n, value=5.0, q=0.6):
 
 
 def run_all(seed: int = 0, quick: bool = False) -> list[dict]:
-    """Run Problems 1-5 and return one row per predicted quantity.
+    """Run Problems 1-7 and return one row per predicted quantity.
 
     Each row is ``{"problem", "quantity", "predicted", "measured",
     "tolerance", "note"}``. Each problem draws from its own child of
     ``SeedSequence(seed)``, so rows are reproducible and independent of
     problem order. ``quick=True`` uses ~10x fewer trials (for
     CI); the default uses the full trial counts (4000, 4000, 1e5,
-    3000, 2e6), processed in chunks to bound memory.
+    3000, 2e6, 1e6, 1e6), processed in chunks to bound memory.
     """
     counts = _QUICK if quick else _DEFAULT
-    problems = (_problem1, _problem2, _problem3, _problem4, _problem5)
+    problems = (_problem1, _problem2, _problem3, _problem4, _problem5, problem6, problem7)
     children = np.random.SeedSequence(seed).spawn(len(problems))
     rows = []
     for problem, child in zip(problems, children, strict=True):

@@ -1,10 +1,11 @@
-"""``mitsuba-lab theory``: five worked Monte Carlo problems (P1-P5), predicted against measured (no variant)."""
+"""``mitsuba-lab theory``: seven worked Monte Carlo problems (P1-P7), predicted against measured (no variant)."""
 from __future__ import annotations
 
 
 def add_arguments(parser) -> None:
-    parser.description = ("Run five toy estimators (uniform MC, importance sampling, cosine "
-                          "sampling, MIS weights and MIS, Russian roulette) and print predicted "
+    parser.description = ("Run seven toy estimators (uniform MC, importance sampling, cosine "
+                          "sampling, MIS weights and MIS, Russian roulette, delta and ratio "
+                          "tracking, equi-angular and distance sampling) and print predicted "
                           "against measured values. Exit status 1 when a measurement misses its "
                           "stated tolerance.")
     parser.add_argument("--json", action="store_true",
