@@ -11,8 +11,8 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mitsuba_lab.experiment.config import load_config_dict
-from mitsuba_lab.experiment.run import pixel_regions
+from mitsuba_lab.experiment.pipeline.config import load_config_dict
+from mitsuba_lab.experiment.pipeline.run import pixel_regions
 from mitsuba_lab.scene import SceneTraits, load_scene
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
