@@ -170,7 +170,9 @@ def test_store_current_runs_skip_superseded_rows(tmp_path):
 
 
 def run_cli(*args, **kwargs):
-    return subprocess.run([sys.executable, "-m", "mitsuba_lab", *args], capture_output=True, text=True,
+    # (python -m mitsuba_lab_command is the mitsuba-lab script: it chooses a variant only after
+    # reading --variant; importing the package, as python -m mitsuba_lab does, activates first)
+    return subprocess.run([sys.executable, "-m", "mitsuba_lab_command", *args], capture_output=True, text=True,
                           timeout=600, cwd=ROOT, **kwargs)
 
 
@@ -227,7 +229,7 @@ def test_sweep_resumes_after_kill_9(tmp_path):
     config.write_text(TINY.format(cache=tmp_path / "cache", root=ROOT).replace("spp = [2, 8]", "spp = [2, 4, 8, 16]"))
     tiny_config = str(config)
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "mitsuba_lab", "sweep", tiny_config, "-o", str(out)],
+    proc = subprocess.Popen([sys.executable, "-m", "mitsuba_lab_command", "sweep", tiny_config, "-o", str(out)],
                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     results = out / "results.jsonl"
     deadline = time.time() + 300
