@@ -122,8 +122,15 @@ def scene_and_reference(name):
     return _cache[name]
 
 
-@pytest.mark.parametrize("estimator", list(ESTIMATORS))
-@pytest.mark.parametrize("name", list(SCENES))
+#: (scene, estimator): every estimator on every scene. The suite leaves out lab_vcm ``vcm`` under the
+#: constant projector, by far the dearest case (16 iterations of merging a render), whose code
+#: path the textured projector's case covers (a constant texture is a texture; the merges do not
+#: depend on the emitter); benchmarks/agreement_matrix.py runs them all.
+AGREEMENT_MATRIX = [(name, estimator) for name in SCENES for estimator in ESTIMATORS]
+AGREEMENT_CASES = [case for case in AGREEMENT_MATRIX if case != ("constant projector", "lab_vcm vcm")]
+
+
+@pytest.mark.parametrize("name, estimator", AGREEMENT_CASES)
 def test_agrees_with_mitsuba_path(name, estimator):
     scene, ref = scene_and_reference(name)
     plugin, params = ESTIMATORS[estimator]

@@ -236,7 +236,8 @@ def test_merging_has_lab_photons_variance_at_equal_light_vertices(monkeypatch):
     (region `direct`, 160 pixels, 24 seeds) the ratio of their mean per-pixel variances is 1
     within 0.2, 5 standard errors (0.038, a bootstrap over the seeds; measured 1.00). Power:
     iterations in blocks of 64 lanes, which gave a pixel's samples in a pass the same light
-    vertices, measure 2.35."""
+    vertices, measure 2.38 on 8 seeds (2.35 on 24): a mean of 480 variances of 7 degrees of freedom
+    each, a few per cent off at most, far from the bound 1.2."""
     from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights
 
     scene = load_scene(scene_path("sds.xml"), res=64)
@@ -245,15 +246,15 @@ def test_merging_has_lab_photons_variance_at_equal_light_vertices(monkeypatch):
                                                            "alpha": 0.999, "photons_per_pass": 65536, "passes": 16}),
                      1, range(24))[:, wall[0], wall[1], :3]
 
-    def variance_ratio():
-        lab = renders(scene, vcm(mode="ppm", radius=0.03, alpha=0.999, light_paths=16), 16, range(24))
+    def variance_ratio(seeds):
+        lab = renders(scene, vcm(mode="ppm", radius=0.03, alpha=0.999, light_paths=16), 16, seeds)
         lab = lab[:, wall[0], wall[1], :3]
         scale = (lab.mean(0) + photon.mean(0)) ** 2 / 4 + 0.01
         return (lab.var(0, ddof=1) / scale).mean() / (photon.var(0, ddof=1) / scale).mean()
 
-    ratio = variance_ratio()
+    ratio = variance_ratio(range(24))
     monkeypatch.setattr(BdptWeights, "lane_iteration", lambda self, lane: (lane // 64) % self.lane_tables[2])
-    blocked = variance_ratio()
+    blocked = variance_ratio(range(8))
     print(f"variance of lab_vcm ppm / lab_photon: {ratio:.2f}; with blocks of 64 lanes: {blocked:.2f}")
     assert abs(ratio - 1) < 0.2
     assert blocked > 1.2
@@ -371,8 +372,16 @@ def test_the_epanechnikov_kernel_blurs_less_than_the_constant_one():
 STIFF = sorted(f for f in os.listdir(os.path.join(ROOT, "scenes", "stiff")) if f.endswith(".xml"))
 
 
-@pytest.mark.parametrize("mode, light_paths, merge_vertices", [("vcm", 1, "all"), ("ppm", 1, "all"), ("vcm", 4, "all"),
-                                                              ("vcm", 1, "caustic")])
+#: lab_vcm's spectral cases, (mode, light_paths, merge_vertices). The suite runs two: vcm with 4 light
+#: subpaths per camera subpath emits, connects, merges and splats the extra subpaths at each pass's
+#: wavelengths (everything vcm with 1 does, and more), and ppm is merging alone. merge_vertices
+#: "caustic" only chooses which vertices merge, as in RGB (test_caustic_merges_...). The whole
+#: list runs in benchmarks/agreement_matrix.py.
+SPECTRAL_MATRIX = [("vcm", 1, "all"), ("ppm", 1, "all"), ("vcm", 4, "all"), ("vcm", 1, "caustic")]
+SPECTRAL_CASES = [("vcm", 4, "all"), ("ppm", 1, "all")]
+
+
+@pytest.mark.parametrize("mode, light_paths, merge_vertices", SPECTRAL_CASES)
 def test_spectral_variant_agrees_with_mitsuba_path(mode, light_paths, merge_vertices):
     """The spectral variant, as lab_photon: one set of wavelengths per pass (here one iteration), at
     which light subpaths are emitted, merged and connected (sRGB of a spectrum may be out of
