@@ -170,10 +170,6 @@ class PathEstimator(Estimator):
 
     # -- Knowledge ------------------------------------------------------------------------
 
-    @classmethod
-    def applicability(cls, traits, params: dict) -> tuple[bool, str]:
-        problem = cls.media_problem(traits)
-        return (False, problem) if problem else (True, "")
 
     @classmethod
     def equivalence(cls, traits, params: dict) -> tuple[tuple, str]:

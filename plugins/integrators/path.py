@@ -21,7 +21,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import params
-from mitsuba_lab.plugins.integrators.common import direct, spawn
+from mitsuba_lab.plugins.integrators.common import direct, media, spawn
 from mitsuba_lab.plugins.integrators.common.counters import RayCounters
 from mitsuba_lab.plugins.integrators.estimator import PathEstimator
 from mitsuba_lab.plugins.integrators.mis import MIS
@@ -50,9 +50,14 @@ class KernelPlan:
     * ``emitter_sampling`` off: the estimator does not sample emitters, or the scene has no
       emitter, or no BSDF has a smooth component (NEE is done only at smooth vertices): no
       *Emitter sampling* section, no shadow rays;
-    * ``hits_are_delta``: every BSDF is delta, so every emitter hit follows a camera ray or a
-      delta bounce, which only BSDF sampling can produce: its weight is 1 for every unbiased
-      estimator (``PathEstimator``), and no emitter pdf lookup or previous-vertex state is needed.
+    * ``hits_are_delta``: every BSDF is delta and there is no medium, so every emitter hit
+      follows a camera ray or a delta bounce, which only BSDF sampling can produce: its weight is
+      1 for every unbiased estimator (``PathEstimator``), and no emitter pdf lookup or
+      previous-vertex state is needed;
+    * ``media`` on: the scene has participating media: the *Medium interaction* section (free
+      flights, ``media.free_flight``), phase functions at medium vertices, shadow rays that
+      carry transmittance through media and null boundaries (``media.transmittance``), and
+      Mitsuba's ``volpath`` counting of depth (null boundaries are no vertices).
 
     ``offset_floor`` is the scene's coordinate scale for ray offsets (``spawn.offset_floor``).
     """
@@ -60,13 +65,16 @@ class KernelPlan:
     emitter_sampling: bool
     hits_are_delta: bool
     offset_floor: float = 1.0
+    media: bool = False
 
     @classmethod
     def of(cls, traits: SceneTraits, estimator: PathEstimator) -> "KernelPlan":
+        smooth = traits.smooth_bsdf or traits.media          # phase functions are smooth
         return cls(emitter_hits=traits.hittable_emitters,
-                   emitter_sampling=estimator.samples_emitters and traits.emitters > 0 and traits.smooth_bsdf,
-                   hits_are_delta=not traits.smooth_bsdf,
-                   offset_floor=spawn.offset_floor(traits))
+                   emitter_sampling=estimator.samples_emitters and traits.emitters > 0 and smooth,
+                   hits_are_delta=not smooth,
+                   offset_floor=spawn.offset_floor(traits),
+                   media=traits.media)
 
     @property
     def tracks_previous_vertex(self) -> bool:
@@ -153,6 +161,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         emitter_hits, emitter_sampling = plan.emitter_hits, plan.emitter_sampling
         hits_are_delta, track_prev = plan.hits_are_delta, plan.tracks_previous_vertex
         floor = plan.offset_floor
+        has_media = plan.media
         estimator = self.estimator
         n_L = estimator.emitter_samples
 
@@ -172,6 +181,12 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         n_ext = mi.UInt32(0)
         n_shadow = mi.UInt32(0)
         camera_lanes = active & dr.full(mi.Bool, True, dr.width(ray))  # `active` may arrive as a scalar
+        if dr.hint(has_media, mode="scalar"):
+            # the medium the ray travels in (the sensor's, at first), and the channel whose
+            # coefficients sample its free flights
+            medium = mi.MediumPtr(medium) if medium is not None else dr.zeros(mi.MediumPtr)
+            channel = media.sampling_channel(sampler, active)
+            phase_ctx = mi.PhaseFunctionContext(sampler)
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
         if dr.hint(self.hide_emitters and emitter_hits, mode="scalar"):
             # Mitsuba's meaning: camera rays pass through area emitters to what lies behind them
@@ -179,6 +194,16 @@ class LabPathIntegrator(mi.SamplingIntegrator):
 
         while dr.hint(active, max_iterations=-1, label=f"{estimator.plugin_name} path loop"):
             si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
+            on_surface = active                     # lanes whose ray reached the surface si
+
+            # --------------------- Medium interaction ----------------------
+            # a free flight through the ray's medium: it scatters at mei before si, or gets
+            # there with its throughput weighted (media.free_flight)
+            if dr.hint(has_media, mode="scalar"):
+                in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+                mei, scattered, w_flight = media.free_flight(medium, ray, si.t, sampler, channel, in_medium)
+                beta[in_medium] *= w_flight
+                on_surface = active & ~scattered
 
             # ----------------------- Direct emission -----------------------
             # L += beta w_B L_e, w_B from the densities of the BSDF sample that found the emitter
@@ -189,40 +214,80 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                 else:
                     w_hit = estimator.hit_weight(direct.hit_densities(
                         scene, prev_it, ds, prev_bsdf_pdf, prev_bsdf_delta, n_L))
-                emission_on = active & (w_hit > 0)   # (a new array: `&=` on an alias would change `active`)
+                emission_on = on_surface & (w_hit > 0)   # (a new array: `&=` on an alias would change `active`)
                 if dr.hint(self.hide_emitters, mode="scalar"):
                     emission_on = emission_on & (depth > 0)
                 L += beta * w_hit * ds.emitter.eval(si, emission_on)   # beta is finite (checked below)
 
-            active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
             bsdf = si.bsdf(ray)
+            if dr.hint(has_media, mode="scalar"):
+                # --------- Emitter sampling + scattering, at a surface or in a medium ---------
+                # the vertex is si (on_surface, a real one unless its BSDF sample is null) or mei
+                # (scattered), with the phase function in place of the BSDF
+                surface = on_surface & si.is_valid()
+                further = depth + 1 < self.max_depth
+                phase = mei.medium.phase_function()
+                phase[~scattered] = dr.zeros(mi.PhaseFunctionPtr)
+                it = dr.zeros(mi.Interaction3f)
+                it[surface] = si
+                it[scattered] = mei
+                if dr.hint(emitter_sampling, mode="scalar"):
+                    active_em = further & ((surface & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
+                                           | (scattered & mei.medium.use_emitter_sampling()))
+                    L = media.emitter_sampling(scene, sampler, bsdf_ctx, phase_ctx, it, si, bsdf, mei, phase,
+                                               scattered, medium, channel, beta, L, estimator.sample_weight,
+                                               n_L, active_em, floor)
+                    n_shadow += dr.select(active_em, n_L, 0)
+                # null boundaries are crossed whatever the depth; real vertices scatter below max_depth
+                bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), surface)
+                null = mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Null)
+                wo, phase_weight, phase_pdf = phase.sample(phase_ctx, mei, sampler.next_1d(), sampler.next_2d(),
+                                                           scattered & further)
+                real = (surface & ~null) | scattered
+                active_next = (surface & (null | further)) | (scattered & further & (phase_pdf > 0))
 
-            # ----------------- Emitter sampling + BSDF sampling -----------------
-            # L += beta w_L f L_e G / (n_L p_L) for n_L emitter samples; one BSDF sample continues
-            if dr.hint(emitter_sampling, mode="scalar"):
-                active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-                L, bsdf_sample, bsdf_weight = direct.emitter_sampling(
-                    scene, sampler, bsdf_ctx, si, bsdf, beta, L, estimator.sample_weight, n_L, active_em,
-                    active_next, floor)
-                n_shadow += dr.select(active_em, n_L, 0)
+                # ------------------- Update loop variables ---------------------
+                ray = dr.select(scattered, mei.spawn_ray(wo), spawn.spawn_ray(si, si.to_world(bsdf_sample.wo), floor))
+                beta *= dr.select(scattered, phase_weight, bsdf_weight)
+                eta[surface] *= bsdf_sample.eta
+                valid_ray |= real
+                if dr.hint(track_prev, mode="scalar"):
+                    prev_it[real] = it
+                    prev_bsdf_pdf[real] = dr.select(scattered, phase_pdf, bsdf_sample.pdf)
+                prev_bsdf_delta[real] = dr.select(scattered, ~mei.medium.use_emitter_sampling(),
+                                                  mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Delta))
+                medium[surface & si.is_medium_transition()] = si.target_medium(ray.d)
+                depth[real] += 1
             else:
-                bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(),
-                                                       active_next)
+                active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
 
-            # ------------------- Update loop variables ---------------------
-            ray = spawn.spawn_ray(si, si.to_world(bsdf_sample.wo), floor)
-            beta *= bsdf_weight
-            eta *= bsdf_sample.eta
-            valid_ray |= active & si.is_valid() & ~mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Null)
-            if dr.hint(track_prev, mode="scalar"):
-                prev_it = dr.zeros(mi.Interaction3f)
-                prev_it.p, prev_it.n, prev_it.t, prev_it.time = si.p, si.n, si.t, si.time
-                prev_it.wavelengths = si.wavelengths
-                prev_bsdf_pdf = bsdf_sample.pdf
-            prev_bsdf_delta = mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Delta)
+                # ----------------- Emitter sampling + BSDF sampling -----------------
+                # L += beta w_L f L_e G / (n_L p_L) for n_L emitter samples; one BSDF sample continues
+                if dr.hint(emitter_sampling, mode="scalar"):
+                    active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+                    L, bsdf_sample, bsdf_weight = direct.emitter_sampling(
+                        scene, sampler, bsdf_ctx, si, bsdf, beta, L, estimator.sample_weight, n_L, active_em,
+                        active_next, floor)
+                    n_shadow += dr.select(active_em, n_L, 0)
+                else:
+                    bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(),
+                                                           active_next)
+
+                # ------------------- Update loop variables ---------------------
+                ray = spawn.spawn_ray(si, si.to_world(bsdf_sample.wo), floor)
+                beta *= bsdf_weight
+                eta *= bsdf_sample.eta
+                valid_ray |= active & si.is_valid() & ~mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Null)
+                if dr.hint(track_prev, mode="scalar"):
+                    prev_it = dr.zeros(mi.Interaction3f)
+                    prev_it.p, prev_it.n, prev_it.t, prev_it.time = si.p, si.n, si.t, si.time
+                    prev_it.wavelengths = si.wavelengths
+                    prev_bsdf_pdf = bsdf_sample.pdf
+                prev_bsdf_delta = mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Delta)
+
+                depth[si.is_valid()] += 1
 
             # --------------------- Stopping criterion ----------------------
-            depth[si.is_valid()] += 1
             beta_max = dr.max(mi.unpolarized_spectrum(beta))
             active_next &= (beta_max != 0) & dr.isfinite(beta_max)
             beta, survives = russian_roulette(beta, sampler.next_1d(), depth >= self.rr_depth, eta=eta)

@@ -1,0 +1,178 @@
+"""Participating media for the path loop: where a ray scatters, and how much light gets through.
+
+The volume rendering equation adds to the surface integral an integral along each ray segment
+inside a medium: radiance at distance t is attenuated by the transmittance
+
+    T(0, t) = exp(-int_0^t sigma_t(s) ds)            (Beer-Lambert)
+
+and in-scattered with sigma_s(t) times the phase function. Two estimators carry it:
+
+* ``free_flight``: the distance to the next real collision, sampled in proportion to
+  sigma_t(t) T(0, t) by delta tracking (Woodcock et al. 1965): tentative collisions at the
+  rate of a majorant sigma_bar >= sigma_t, each real with probability sigma_t / sigma_bar,
+  otherwise null and passed. In a homogeneous medium (sigma_bar = sigma_t) the first tentative
+  collision is real: the analytic inversion t = -ln(1 - u) / sigma_t. Mitsuba's media draw the
+  tentative collisions (``Medium.sample_interaction``, against one majorant per medium).
+* ``transmittance``: T along a shadow ray, through media and the index-matched (``null``)
+  boundaries between them. Exact (Beer-Lambert) in homogeneous media; ratio tracking in
+  heterogeneous ones (Novak et al. 2014): at each tentative collision T is multiplied by
+  sigma_n / sigma_bar = 1 - sigma_t / sigma_bar instead of being stopped, an unbiased estimate
+  of lower variance than delta tracking's 0 or 1.
+
+With chromatic coefficients, distances are sampled with the coefficients of one channel (the
+path's ``sampling_channel``) and every channel is weighted by its own transmittance over that
+channel's density, as Mitsuba's ``volpath`` does; each real collision then carries the albedo
+sigma_s / sigma_t. The weights below are the ones in the comments of each function.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from mitsuba_lab.plugins.integrators.common import spawn
+
+
+def sampling_channel(sampler: mi.Sampler, active) -> mi.UInt32:
+    """The channel whose coefficients drive distance sampling along a path: one of the three
+    uniformly in RGB variants (one sample, so the path's expectation sums the three), the first
+    (hero) wavelength in spectral variants, the only one in mono."""
+    if mi.is_rgb:
+        n = dr.size_v(mi.Spectrum)
+        return mi.UInt32(dr.minimum(n * sampler.next_1d(active), n - 1))
+    return mi.UInt32(0)
+
+
+def channel_value(spectrum, channel):
+    """The value of ``spectrum`` in ``channel`` (its only value in mono variants)."""
+    if mi.is_rgb:
+        return dr.select(channel == 0, spectrum[0], dr.select(channel == 1, spectrum[1], spectrum[2]))
+    return spectrum[0]
+
+
+def _tracked_weight(medium, m, ray_maxt, channel, active):
+    """T / p_c for one step of tracking from the ray's origin: T the transmittance over the
+    step and p_c the density of the step's outcome in the sampling channel (sigma_bar_c T_c at
+    a tentative collision, T_c past ``ray_maxt``). Per channel, exact against the majorant."""
+    end = dr.zeros(mi.SurfaceInteraction3f)
+    end.t = ray_maxt
+    tr, pdf = medium.transmittance_eval_pdf(m, end, active)
+    pdf_c = channel_value(pdf, channel)
+    return dr.select(active & (pdf_c > 0), tr / pdf_c, 0.0)
+
+
+@dr.syntax
+def free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler, channel, active):
+    """Delta tracking along ``ray`` inside ``medium`` up to distance ``t_max`` (the next surface).
+
+    Returns (mei, scattered, weight): ``scattered`` where a real collision was found before
+    ``t_max``, ``mei`` that collision (its point, coefficients and medium), and ``weight`` the
+    factor of the path's throughput: per channel, T / p_c at every tentative collision and at
+    the escape, sigma_n / P_null at a null collision and sigma_s / P_real at the real one, with
+    P_real = mean(sigma_t / sigma_bar) = 1 - P_null. With equal channels this is 1 through the
+    medium and the albedo sigma_s / sigma_t at a scattering event.
+    """
+    ray = mi.Ray3f(ray)
+    ray.maxt = dr.select(active, t_max, 0.0)
+    weight = mi.Spectrum(1.0)
+    mei = dr.zeros(mi.MediumInteraction3f)
+    scattered = mi.Bool(False)
+    tracking = mi.Bool(active)
+    while tracking:
+        m = medium.sample_interaction(ray, sampler.next_1d(tracking), channel, tracking)
+        collided = tracking & m.is_valid()
+        weight[tracking] *= _tracked_weight(medium, m, ray.maxt, channel, tracking)
+        p_null = dr.mean(dr.select(m.combined_extinction > 0, m.sigma_n / m.combined_extinction, 0.0))
+        null = collided & (sampler.next_1d(collided) < p_null)
+        real = collided & ~null
+        weight[null] *= m.sigma_n / p_null
+        weight[real] *= m.sigma_s / (1.0 - p_null)
+        mei[real] = m
+        scattered |= real
+        # a null collision: go on from it, the surface as far away as before
+        ray.o[null] = m.p
+        ray.maxt[null] = ray.maxt - m.t
+        tracking = null & (dr.max(mi.unpolarized_spectrum(weight)) > 0)
+    return mei, scattered, weight
+
+
+@dr.syntax
+def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampler, channel, active):
+    """T over ``ray`` (from its origin to ``ray.maxt``) inside ``medium``: Beer-Lambert in a
+    homogeneous medium; ratio tracking in a heterogeneous one, per channel the product of T / p_c
+    over the steps and of sigma_n at each tentative collision (= 1 - sigma_t / sigma_bar with
+    equal channels)."""
+    ray = mi.Ray3f(ray)
+    T = mi.Spectrum(1.0)
+    exact = active & medium.is_homogeneous()
+    tracking = mi.Bool(active)
+    while tracking:
+        m = medium.sample_interaction(ray, sampler.next_1d(tracking), channel, tracking)
+        m.t[exact] = dr.inf                       # homogeneous: the whole segment at once
+        end = dr.zeros(mi.SurfaceInteraction3f)
+        end.t = ray.maxt
+        tr, _ = medium.transmittance_eval_pdf(m, end, exact)
+        T[exact] *= tr
+        ratio = tracking & ~exact
+        collided = ratio & m.is_valid()
+        T[ratio] *= _tracked_weight(medium, m, ray.maxt, channel, ratio)
+        T[collided] *= m.sigma_n
+        ray.o[collided] = m.p
+        ray.maxt[collided] = ray.maxt - m.t
+        tracking = collided & (dr.max(mi.unpolarized_spectrum(T)) > 0)
+    return T
+
+
+@dr.syntax
+def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, target: mi.Point3f,
+                  sampler: mi.Sampler, channel, floor: float, active):
+    """T from the vertex ``it`` (inside ``medium``, which a surface vertex has already switched
+    to the side facing ``target``) to the point ``target``: through media, and through the
+    surfaces between whose BSDFs let light pass unscattered (``null`` boundaries, a mask's clear
+    part: ``eval_null_transmission``); every other surface blocks it. Rays start and stop at
+    the lab's offsets (``spawn``)."""
+    ray = spawn.spawn_ray_to(it, target, floor)
+    medium = mi.MediumPtr(medium)
+    T = mi.Spectrum(1.0)
+    going = mi.Bool(active)
+    while going:
+        si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=going)
+        crossing = going & si.is_valid()
+        segment = mi.Ray3f(ray)
+        segment.maxt = dr.select(crossing, si.t, ray.maxt)
+        inside = going & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+        T[inside] *= segment_transmittance(medium, segment, sampler, channel, inside)
+        bsdf = si.bsdf(ray)
+        T[crossing] *= bsdf.eval_null_transmission(si, crossing)
+        medium[crossing & si.is_medium_transition()] = si.target_medium(ray.d)
+        # on past the surface, towards the same target
+        ray[crossing] = spawn.spawn_ray_to(si, target, floor)
+        going = crossing & (dr.max(mi.unpolarized_spectrum(T)) > 0)
+    return T
+
+
+def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, scattered, medium, channel,
+                     beta, L, sample_weight, n_L: int, active, floor: float):
+    """Next-event estimation at a vertex of a path in a scene with media: the surface ``si``
+    (its ``bsdf``) or, where ``scattered``, the medium point ``mei`` (its ``phase`` function);
+    ``it`` is the vertex as an ``Interaction3f``, ``medium`` the medium the path arrived in.
+
+    Adds to ``L`` n_L emitter samples, each beta w f L_e G T / (n_L p_L): an emitter point
+    sampled without a visibility test, T the transmittance to it (``transmittance``: media and
+    null boundaries pass light, other surfaces block it), f and p_B the BSDF's (with its cosine)
+    or the phase function's, and w = ``sample_weight(Densities)`` (direct.py's convention)."""
+    from mitsuba_lab.plugins.integrators.common.direct import emitter_sample_contribution
+    from mitsuba_lab.plugins.integrators.estimator import Densities
+
+    for _ in range(n_L):
+        ds, em_weight = scene.sample_emitter_direction(it, sampler.next_2d(), False, active)
+        sampled = active & (ds.pdf != 0)
+        # a surface at a medium boundary sends the shadow ray into the medium on its side
+        start = dr.select(~scattered & si.is_medium_transition(), si.target_medium(ds.d), medium)
+        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled)
+        f_bsdf, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), sampled & ~scattered)
+        f_phase, pdf_phase = phase.eval_pdf(phase_ctx, mei, ds.d, sampled & scattered)
+        f = dr.select(scattered, f_phase, f_bsdf)
+        w = sample_weight(Densities(bsdf=dr.select(scattered, pdf_phase, pdf_bsdf), emitter=n_L * ds.pdf,
+                                    delta=ds.delta))
+        L = L + emitter_sample_contribution(beta, ds, em_weight * T, f, w / n_L, sampled)
+    return L
