@@ -257,6 +257,6 @@ class SceneTraits:
         if not self.emits_light:
             notes.append("no emitter emits light: every image is black")
         if self.media and media:
-            notes.append("the scene has participating media, which the lab integrators cannot "
-                         "render and Mitsuba's path ignores: render it with Mitsuba's volpath")
+            notes.append("the scene has participating media, which lab_photon, lab_bdpt, lab_vcm and "
+                         "Mitsuba's path ignore: render it with lab_mis (lab_nee, lab_naive) or Mitsuba's volpath")
         return notes

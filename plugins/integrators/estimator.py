@@ -75,6 +75,8 @@ class Estimator:
     SIMPLICITY = OTHER_SIMPLICITY
     #: The estimator's own parameters (kept by an instance as attributes of the same name).
     OWN_PARAMETERS: tuple[str, ...] = ()
+    #: Whether it simulates participating media (else it renders a scene as if they were absent).
+    RENDERS_MEDIA = False
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -120,9 +122,9 @@ class Estimator:
     @classmethod
     def media_problem(cls, traits) -> str:
         """The reason a strategy that ignores participating media is left out, or ''."""
-        if traits.media:
+        if traits.media and not cls.RENDERS_MEDIA:
             return (f"{cls.plugin_name} does not support participating media (the scene has a medium): "
-                    f"use Mitsuba's volpath")
+                    f"use lab_mis or Mitsuba's volpath")
         return ""
 
 
@@ -154,6 +156,7 @@ class PathEstimator(Estimator):
     loop relies on that where every sample of a kind is delta (``path.KernelPlan``).
     """
     PARAMETERS = declarations.PATH_TRACER
+    RENDERS_MEDIA = True
     #: Whether the estimator samples emitters (next-event estimation) at all.
     samples_emitters = False
     #: Shadow rays per vertex, n_L.
@@ -178,11 +181,12 @@ class PathEstimator(Estimator):
         * max_depth 0, or no emitter emits: every pixel is exactly 0.
         * max_depth 1: only emitters seen directly; no vertex samples anything, every estimator
           returns the emission its camera ray hits, with weight 1.
-        * All BSDFs delta: NEE runs only at vertices with a smooth BSDF component, so lab_nee and
-          lab_mis never sample an emitter (any heuristic, any n_L), and every emitter hit follows
-          a camera ray or a delta bounce, where all three weight it 1. So lab_naive, lab_nee and
-          lab_mis are one estimator, *whatever the emitters*: delta lights contribute nothing to
-          any of them (nor to Mitsuba's path).
+        * All BSDFs delta and no medium: NEE runs only at vertices with a smooth BSDF component,
+          so lab_nee and lab_mis never sample an emitter (any heuristic, any n_L), and every
+          emitter hit follows a camera ray or a delta bounce, where all three weight it 1. So
+          lab_naive, lab_nee and lab_mis are one estimator, *whatever the emitters*: delta lights
+          contribute nothing to any of them (nor to Mitsuba's path). (A medium's phase function is
+          smooth: NEE runs at its vertices.)
         * Otherwise each estimator's own key (``technique_key``). Parameters that are not the
           estimator's (Mitsuba's own, e.g. ``timeout``) must match; count_rays is ignored.
         """
@@ -197,7 +201,7 @@ class PathEstimator(Estimator):
             return (("emitters seen directly", hide, extras),
                     "max_depth 1: every strategy returns the emission its camera ray hits")
         shared = (max_depth, rr_depth, hide, extras)
-        if not traits.smooth_bsdf:
+        if not traits.smooth_bsdf and not traits.media:
             return (("BSDF sampling only (all BSDFs delta)", shared),
                     "all BSDFs are delta: no vertex can sample an emitter, so every strategy is BSDF "
                     "sampling with weight 1")

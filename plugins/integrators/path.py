@@ -137,6 +137,11 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         # would split the render into several kernels.
         traits = SceneTraits.from_scene(scene)
         warn_if_unsupported(self, traits)         # never an image silently missing light
+        if traits.media and mi.is_polarized:
+            variant = mi.variant()
+            raise ValueError(f"{self.ESTIMATOR.plugin_name}: participating media in the polarized variant "
+                             f"'{variant}' are not supported yet: use {variant.replace('_polarized', '')} "
+                             f"or Mitsuba's volpath")
         bind_film_layout(scene, sensor)           # samplers that order pixels learn the film's shape
         self._plan = (scene, KernelPlan.of(traits, self.estimator))
         try:

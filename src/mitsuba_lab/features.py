@@ -73,7 +73,7 @@ def ignored_features(traits, integrator_type: str, params: dict | None = None) -
     if integrator_type in MITSUBA_IGNORES:
         ignores = MITSUBA_IGNORES[integrator_type]
     elif lookup(integrator_type) is not None:
-        ignores = frozenset({"media"})          # no lab integrator simulates media (Estimator.media_problem)
+        ignores = frozenset() if lookup(integrator_type).RENDERS_MEDIA else frozenset({"media"})
     else:
         return None
     return tuple(f for f in scene_features(traits) if f in ignores)

@@ -73,7 +73,7 @@ def free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler,
     """
     ray = mi.Ray3f(ray)
     ray.maxt = dr.select(active, t_max, 0.0)
-    weight = mi.Spectrum(1.0)
+    weight = mi.UnpolarizedSpectrum(1.0)
     mei = dr.zeros(mi.MediumInteraction3f)
     scattered = mi.Bool(False)
     tracking = mi.Bool(active)
@@ -102,7 +102,7 @@ def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampl
     over the steps and of sigma_n at each tentative collision (= 1 - sigma_t / sigma_bar with
     equal channels)."""
     ray = mi.Ray3f(ray)
-    T = mi.Spectrum(1.0)
+    T = mi.UnpolarizedSpectrum(1.0)
     exact = active & medium.is_homogeneous()
     tracking = mi.Bool(active)
     while tracking:
@@ -132,7 +132,7 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
     the lab's offsets (``spawn``)."""
     ray = spawn.spawn_ray_to(it, target, floor)
     medium = mi.MediumPtr(medium)
-    T = mi.Spectrum(1.0)
+    T = mi.UnpolarizedSpectrum(1.0)
     going = mi.Bool(active)
     while going:
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=going)

@@ -183,12 +183,15 @@ def render_warnings(scene, kind: str, params: dict) -> tuple[list[str], str]:
     own problems), and the reason a lab integrator cannot render the scene's light correctly
     ('' when it can; the planner's answer, ``strategy_applicability``). Mitsuba's own integrators
     are not refused here: what they ignore (media for `path`) is among the scene's warnings."""
+    from ..features import ignored_features
     from ..plugins.integrators.estimator import lookup
     from ..scene import SceneTraits, strategy_applicability
 
     traits = SceneTraits.from_scene(scene)
     ok, reason = strategy_applicability(traits, kind, params) if lookup(kind) is not None else (True, "")
-    notes = traits.warnings(media=ok)           # an unsupported lab integrator names the media itself
+    ignored = ignored_features(traits, kind, params)
+    # the note on media is for an integrator that ignores them (an unsupported lab one says so itself)
+    notes = traits.warnings(media=ok and (ignored is None or "media" in ignored))
     return notes, "" if ok else reason
 
 

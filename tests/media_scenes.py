@@ -1,0 +1,105 @@
+"""Scenes with participating media written as users write them, as dicts for ``mi.load_dict``
+(the current variant): a box of fog under an area light, a point light inside fog seen from a
+camera inside it, a chromatic medium inside glass, heterogeneous smoke under an environment and
+a spot light beside a masked card. 32x24 films (8x8 blocks: 4 x 3), box filter."""
+from __future__ import annotations
+
+import numpy as np
+
+import mitsuba as mi
+
+T = mi.ScalarTransform4f
+
+
+def rgb(*value) -> dict:
+    return {"type": "rgb", "value": list(value) if len(value) == 3 else [value[0]] * 3}
+
+
+def base(sensor_medium: dict | None = None, res=(32, 24)) -> dict:
+    """A camera looking at a diffuse floor (4 units across)."""
+    sensor = {"type": "perspective", "fov": 45,
+              "to_world": T().look_at(origin=[0, 1, 5], target=[0, 0.6, 0], up=[0, 1, 0]),
+              "film": {"type": "hdrfilm", "width": res[0], "height": res[1], "rfilter": {"type": "box"}},
+              "sampler": {"type": "independent"}}
+    if sensor_medium is not None:
+        sensor["medium"] = sensor_medium
+    return {"type": "scene", "sensor": sensor,
+            "floor": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90).scale(4),
+                      "bsdf": {"type": "diffuse", "reflectance": rgb(0.6, 0.5, 0.4)}}}
+
+
+def overhead_light(radiance: float = 4.0) -> dict:
+    return {"type": "rectangle", "to_world": T().translate([0, 3, 0]).rotate([1, 0, 0], 90),
+            "emitter": {"type": "area", "radiance": rgb(radiance)}}
+
+
+def smoke_grid(n: int = 8) -> mi.VolumeGrid:
+    """A sparse plume: density 0 in most cells, up to 3.6 in a ball at the centre."""
+    x = np.linspace(-1, 1, n)
+    X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
+    density = np.clip(1.2 - np.sqrt(X ** 2 + Y ** 2 + Z ** 2), 0, None) * 3.0
+    density[density < 0.5] = 0.0
+    return mi.VolumeGrid(density.astype(np.float32)[..., None])
+
+
+def fog_box(albedo: float = 0.8, sigma_t: float = 1.0) -> dict:
+    """A cube of homogeneous fog behind an index-matched (null) boundary, under an area light."""
+    scene = base()
+    scene["box"] = {"type": "cube", "to_world": T().translate([0, 0.6, 0]).scale(0.6), "bsdf": {"type": "null"},
+                    "interior": {"type": "homogeneous", "albedo": albedo, "sigma_t": sigma_t}}
+    scene["light"] = overhead_light()
+    return scene
+
+
+def point_in_fog() -> dict:
+    """The camera and a point light inside one forward-scattering fog (HG g = 0.5) that fills a
+    large null sphere; a card under the light casts a shadow through the fog."""
+    scene = base(sensor_medium={"type": "ref", "id": "fog"})
+    scene["fog"] = {"type": "homogeneous", "albedo": 0.9, "sigma_t": 0.15, "id": "fog",
+                    "phase": {"type": "hg", "g": 0.5}}
+    scene["room"] = {"type": "sphere", "radius": 8, "bsdf": {"type": "null"}, "interior": {"type": "ref", "id": "fog"}}
+    scene["light"] = {"type": "point", "position": [0.3, 1.5, 0.5], "intensity": rgb(6)}
+    scene["card"] = {"type": "rectangle", "to_world": T().translate([0.3, 1.2, 0.5]).rotate([1, 0, 0], 90).scale(0.3),
+                     "bsdf": {"type": "diffuse"}}
+    return scene
+
+
+def chromatic_in_glass() -> dict:
+    """A glass ball filled with a chromatic medium (sigma_t 0.5 / 2 / 5 per channel), under an
+    area light and a dim constant environment."""
+    scene = base()
+    scene["ball"] = {"type": "sphere", "center": [0, 0.7, 0], "radius": 0.7, "bsdf": {"type": "dielectric", "int_ior": 1.5},
+                     "interior": {"type": "homogeneous", "albedo": rgb(0.9, 0.8, 0.95), "sigma_t": rgb(0.1, 0.4, 1.0),
+                                  "scale": 5.0}}
+    scene["light"] = {"type": "rectangle", "to_world": T().translate([1, 3, 1]).rotate([1, 0, 0], 90),
+                      "emitter": {"type": "area", "radiance": rgb(5)}}
+    scene["environment"] = {"type": "constant", "radiance": rgb(0.2)}
+    return scene
+
+
+def smoke(albedo=0.9) -> dict:
+    """Heterogeneous smoke (``smoke_grid``) in a null box under a sky-blue environment, a spot
+    light, and a card of a ``mask``ed red diffuse (opacity 0.4) beside it."""
+    scene = base()
+    scene["box"] = {"type": "cube", "to_world": T().translate([0, 0.8, 0]).scale(0.8), "bsdf": {"type": "null"},
+                    "interior": {"type": "heterogeneous", "albedo": albedo, "scale": 2.0,
+                                 "sigma_t": {"type": "gridvolume", "grid": smoke_grid(),
+                                             "to_world": T().translate([-0.8, 0, -0.8]).scale(1.6)}}}
+    scene["environment"] = {"type": "constant", "radiance": rgb(0.8, 0.9, 1.0)}
+    scene["card"] = {"type": "rectangle", "to_world": T().translate([1.3, 0.6, 0]).rotate([0, 1, 0], -60).scale(0.5),
+                     "bsdf": {"type": "mask", "opacity": 0.4, "bsdf": {"type": "diffuse", "reflectance": rgb(0.8, 0.2, 0.2)}}}
+    scene["spot"] = {"type": "spot", "to_world": T().look_at(origin=[2, 3, 1], target=[0, 0.5, 0], up=[0, 1, 0]),
+                     "intensity": rgb(20), "cutoff_angle": 30}
+    return scene
+
+
+def chromatic_smoke() -> dict:
+    """``smoke`` with a chromatic albedo, lit by the area light only."""
+    scene = smoke(albedo=rgb(0.95, 0.7, 0.5))
+    del scene["environment"], scene["card"], scene["spot"]
+    scene["light"] = overhead_light(5.0)
+    return scene
+
+
+SCENES = {"fog_box": fog_box, "point_in_fog": point_in_fog, "chromatic_in_glass": chromatic_in_glass,
+          "smoke": smoke, "chromatic_smoke": chromatic_smoke}
