@@ -73,8 +73,9 @@ def test_media_are_reported():
         "light": {"type": "constant"}})
     t = SceneTraits.from_scene(scene)
     assert t.media and any("participating media" in w for w in t.warnings())
-    applies, reason = strategy_applicability(t, "lab_mis", {})
+    applies, reason = strategy_applicability(t, "lab_bdpt", {})
     assert not applies and "participating media" in reason and "volpath" in reason
+    assert strategy_applicability(t, "lab_mis", {}) == (True, "")      # the path family renders media
     assert strategy_applicability(t, "volpath", {}) == (True, "")
 
 
@@ -161,7 +162,7 @@ def test_no_shadow_rays_where_no_vertex_can_use_them():
     assert (t.hittable_emitters, t.emitters > 0, t.smooth_bsdf) == (True, True, False)
     plan = KernelPlan.of(t, make_integrator("lab_mis", {}).estimator)
     # emitter hits, no NEE, every hit delta; Mitsuba's ray offsets
-    assert dataclasses.astuple(plan) == (True, False, True, 1.0)
+    assert dataclasses.astuple(plan) == (True, False, True, 1.0, False)
     counts = {}
     for kind, params in (("lab_naive", {}), ("lab_nee", {}), ("lab_mis", {"emitter_samples": 3})):
         _, stats = image(scene, kind, params)

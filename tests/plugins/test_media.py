@@ -72,7 +72,7 @@ def test_mono_and_spectral_variants_agree_with_volpath(kind, name):
 @pytest.mark.parametrize("what", ["free_flight", "transmittance"])
 def test_a_three_percent_error_in_a_medium_estimator_is_caught(monkeypatch, what):
     """Power: the free flights' weight, or the shadow rays' transmittance, 3% too high."""
-    from mitsuba_lab.plugins.integrators import media
+    from mitsuba_lab.plugins.integrators.common import media
 
     original = getattr(media, what)
 
