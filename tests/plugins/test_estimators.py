@@ -71,7 +71,7 @@ def test_photon_is_left_out_with_media_and_without_emitters():
               "light": {"type": "constant"}}
     applies, reason = strategy_applicability(traits_of(medium), "lab_photon", {})
     assert not applies and reason == ("lab_photon does not support participating media (the scene has a "
-                                      "medium): use Mitsuba's volpath")
+                                      "medium): use lab_mis or Mitsuba's volpath")
     applies, reason = strategy_applicability(traits_of({"type": "scene", "ball": {"type": "sphere"}}),
                                              "lab_photon", {})
     assert not applies and "needs an emitter" in reason
