@@ -134,13 +134,35 @@ PATH_TRACER = (
     Param("count_rays", bool, True, "count camera, extension and shadow rays (ray_counts())"),
 )
 
+#: How the NEE path tracers sample where light scatters in a homogeneous medium and how their shadow
+#: rays estimate transmittance (``integrators/common/media.py``); no effect on a scene without media.
+MEDIUM_SAMPLINGS = ("distance", "equiangular", "mis")
+TRANSMITTANCES = ("ratio", "delta")
+
+
+def _media(sampling_default: str) -> tuple[Param, ...]:
+    return (
+        Param("medium_sampling", str, sampling_default,
+              "where in-scattered direct light is sampled along a ray in a homogeneous medium: distance "
+              "(free flights, NEE at the collision), equiangular (Kulla-Fajardo, towards a light point "
+              "sampled from the ray's origin) or mis (both, weighted by the estimator's MIS); heterogeneous "
+              "media always use distance", choices=MEDIUM_SAMPLINGS),
+        Param("transmittance", str, "ratio",
+              "shadow rays' transmittance in heterogeneous media: ratio (ratio tracking) or delta (delta "
+              "tracking, 0 or 1); exact (Beer-Lambert) in homogeneous media either way",
+              choices=TRANSMITTANCES),
+    )
+
+
+#: lab_nee: the path tracer's and the medium sampling (distance by default: plain NEE).
+LAB_NEE = PATH_TRACER + _media("distance")
 #: lab_mis: the path tracer's and its own.
 LAB_MIS = PATH_TRACER + (
     Param("heuristic", str, "power", "MIS heuristic", choices=HEURISTICS),
     Param("beta", float, 2.0, "power-heuristic exponent (1 = balance)",
           check=lambda v: v > 0 and math.isfinite(v), expected="a finite number > 0"),
     Param("emitter_samples", int, 1, "shadow rays per vertex, n_L", **_int_at_least(1)),
-)
+) + _media("mis")
 
 #: Aimed emission (``integrators/common/aim.py``): lab_photon, lab_bdpt and lab_vcm. Aiming changes nothing in
 #: a scene without aim_at shapes (the light emits as Mitsuba samples it), so lab_bdpt and lab_photon aim
@@ -328,7 +350,7 @@ LAB_ZSOBOL = SAMPLER + (
 
 _DECLARED: dict[str, tuple[Param, ...]] = {
     "lab_naive": PATH_TRACER,
-    "lab_nee": PATH_TRACER,
+    "lab_nee": LAB_NEE,
     "lab_mis": LAB_MIS,
     "lab_photon": LAB_PHOTON,
     "lab_bdpt": LAB_BDPT,

@@ -103,3 +103,10 @@ def chromatic_smoke() -> dict:
 
 SCENES = {"fog_box": fog_box, "point_in_fog": point_in_fog, "chromatic_in_glass": chromatic_in_glass,
           "smoke": smoke, "chromatic_smoke": chromatic_smoke}
+
+
+def fog_box_point() -> dict:
+    """``fog_box`` lit by a point light above it instead of the area light."""
+    scene = fog_box()
+    scene["light"] = {"type": "point", "position": [0.3, 2.0, 0.5], "intensity": rgb(10)}
+    return scene

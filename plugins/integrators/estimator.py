@@ -27,6 +27,8 @@ from mitsuba_lab.plugins import params as declarations
 
 #: Parameters that do not change an estimator (only what is counted).
 NO_EFFECT = ("count_rays",)
+#: Parameters that change an estimator only in a scene with participating media.
+MEDIUM_PARAMETERS = ("medium_sampling", "transmittance")
 #: Rank of a plugin that is not the lab's among identical estimators.
 OTHER_SIMPLICITY = 3
 
@@ -138,11 +140,15 @@ class Densities(NamedTuple):
     * ``bsdf``: p_B(x), the density of BSDF sampling;
     * ``emitter``: n_L p_L(x), n_L (shadow rays per vertex) times the density of emitter sampling;
     * ``delta``: x was drawn from a delta component (a delta BSDF lobe for an emitter hit, a
-      delta emitter for an emitter sample), which the other technique cannot produce.
+      delta emitter for an emitter sample), which the other technique cannot produce;
+    * ``equiangular``: at a medium vertex where equi-angular sampling runs, the density of that
+      third technique (``media.equiangular_density``), and then all three are densities per unit
+      distance along the ray and solid angle at the vertex; None elsewhere (two techniques).
     """
     bsdf: Any
     emitter: Any
     delta: Any
+    equiangular: Any = None
 
 
 class PathEstimator(Estimator):
@@ -171,6 +177,11 @@ class PathEstimator(Estimator):
         """w_L: the weight of one emitter sample (only called when ``samples_emitters``)."""
         raise NotImplementedError
 
+    def equiangular_weight(self, d: Densities):
+        """w_E: the weight of an equi-angular sample in a medium (``d.equiangular`` its density;
+        only called when ``samples_emitters``)."""
+        raise NotImplementedError
+
     # -- Knowledge ------------------------------------------------------------------------
 
 
@@ -191,6 +202,8 @@ class PathEstimator(Estimator):
           estimator's (Mitsuba's own, e.g. ``timeout``) must match; count_rays is ignored.
         """
         p = {k: v for k, v in params.items() if k not in NO_EFFECT}
+        if not traits.media:                                             # they act only in media
+            p = {k: v for k, v in p.items() if k not in MEDIUM_PARAMETERS}
         max_depth, rr_depth = p.pop("max_depth"), p.pop("rr_depth")
         hide = p.pop("hide_emitters") and traits.hittable_emitters         # nothing to hide otherwise
         own = {name: p.pop(name) for name in cls.OWN_PARAMETERS}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from mitsuba_lab.plugins import params as declarations
 from mitsuba_lab.plugins.integrators.estimator import Densities, PathEstimator
-from mitsuba_lab.plugins.integrators.common.mis_weight import hit_weight, sample_weight
+from mitsuba_lab.plugins.integrators.common.mis_weight import equiangular_weight, hit_weight, sample_weight
 
 
 class MIS(PathEstimator):
@@ -28,6 +28,10 @@ class MIS(PathEstimator):
     # ----------------------- Emitter sampling ----------------------
     def sample_weight(self, d: Densities):
         return sample_weight(d, self.heuristic, self.beta)
+
+    # ---------------- Equi-angular sampling in a medium ----------------
+    def equiangular_weight(self, d: Densities):
+        return equiangular_weight(d, self.heuristic, self.beta)
 
     # -- Knowledge ------------------------------------------------------------------------
     @staticmethod

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import drjit as dr
 
+from mitsuba_lab.plugins import params as declarations
+from mitsuba_lab.plugins.integrators.common.mis_weight import mis_weight
 from mitsuba_lab.plugins.integrators.estimator import Densities, PathEstimator
 
 
@@ -13,6 +15,8 @@ class NEE(PathEstimator):
     plugin_name = "lab_nee"
     SIMPLICITY = 1
     samples_emitters = True
+    #: The path tracer's and the medium sampling (``params.LAB_NEE``).
+    PARAMETERS = declarations.LAB_NEE
 
     # ----------------------- Direct emission -----------------------
     def hit_weight(self, d: Densities):
@@ -20,7 +24,12 @@ class NEE(PathEstimator):
 
     # ----------------------- Emitter sampling ----------------------
     def sample_weight(self, d: Densities):
-        return 1.0
+        if d.equiangular is None:
+            return 1.0
+        return mis_weight(d.emitter, d.equiangular, "balance")    # two ways to sample the light
+
+    def equiangular_weight(self, d: Densities):
+        return mis_weight(d.equiangular, d.emitter, "balance")
 
     # -- Knowledge ------------------------------------------------------------------------
     @classmethod

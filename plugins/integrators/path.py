@@ -116,6 +116,9 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         self.rr_depth = values["rr_depth"]
         self.hide_emitters = values["hide_emitters"]
         self.count_rays = values["count_rays"]
+        # (declared by the path tracers that sample emitters: lab_nee, lab_mis)
+        self.medium_sampling = values.get("medium_sampling", "distance")
+        self.tracking_kind = values.get("transmittance", "ratio")
         self.estimator = self.ESTIMATOR(values)
         self.counters = RayCounters()
         self._plan = None                      # (scene, KernelPlan) while render() runs
@@ -167,6 +170,11 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         hits_are_delta, track_prev = plan.hits_are_delta, plan.tracks_previous_vertex
         floor = plan.offset_floor
         has_media = plan.media
+        # equi-angular sampling of the light in homogeneous media (medium_sampling equiangular or
+        # mis), and whether NEE at free-flight collisions is a technique beside it (mis)
+        equiangular_on = has_media and emitter_sampling and self.medium_sampling != "distance"
+        nee_in_media = self.medium_sampling != "equiangular"
+        tracking = self.tracking_kind
         estimator = self.estimator
         n_L = estimator.emitter_samples
 
@@ -192,6 +200,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             medium = mi.MediumPtr(medium) if medium is not None else dr.zeros(mi.MediumPtr)
             channel = media.sampling_channel(sampler, active)
             phase_ctx = mi.PhaseFunctionContext(sampler)
+        # the previous vertex's equi-angular state, for emitter hits' weights
+        prev_ea = media.Equiangular() if equiangular_on else mi.Bool(False)
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
         if dr.hint(self.hide_emitters and emitter_hits, mode="scalar"):
             # Mitsuba's meaning: camera rays pass through area emitters to what lies behind them
@@ -206,6 +216,15 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             # there with its throughput weighted (media.free_flight)
             if dr.hint(has_media, mode="scalar"):
                 in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+                if dr.hint(equiangular_on, mode="scalar"):
+                    # the light scattered along the whole segment, sampled towards a light point
+                    segment = media.Segment(ray.o, ray.d, si.t)
+                    ea_lanes = (in_medium & medium.is_homogeneous() & medium.use_emitter_sampling()
+                                & (depth + 1 < self.max_depth))
+                    L += media.equiangular_scatter(scene, sampler, phase_ctx, medium, segment, ray.wavelengths,
+                                                   beta, channel, estimator.equiangular_weight, n_L,
+                                                   nee_in_media, ea_lanes, floor, tracking)
+                    n_shadow += dr.select(ea_lanes, 1, 0)
                 mei, scattered, w_flight = media.free_flight(medium, ray, si.t, sampler, channel, in_medium)
                 beta[in_medium] *= w_flight
                 on_surface = active & ~scattered
@@ -217,8 +236,10 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                 if dr.hint(hits_are_delta, mode="scalar"):
                     w_hit = mi.Float(1.0)
                 else:
-                    w_hit = estimator.hit_weight(direct.hit_densities(
-                        scene, prev_it, ds, prev_bsdf_pdf, prev_bsdf_delta, n_L))
+                    d_hit = direct.hit_densities(scene, prev_it, ds, prev_bsdf_pdf, prev_bsdf_delta, n_L)
+                    if dr.hint(equiangular_on, mode="scalar"):
+                        d_hit = prev_ea.densities(scene, d_hit, prev_it, ds, on_surface, nee_in_media)
+                    w_hit = estimator.hit_weight(d_hit)
                 emission_on = on_surface & (w_hit > 0)   # (a new array: `&=` on an alias would change `active`)
                 if dr.hint(self.hide_emitters, mode="scalar"):
                     emission_on = emission_on & (depth > 0)
@@ -236,12 +257,19 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                 it = dr.zeros(mi.Interaction3f)
                 it[surface] = si
                 it[scattered] = mei
+                ea_here = None
+                if dr.hint(equiangular_on, mode="scalar"):
+                    ea_here = media.Equiangular(segment, media.distance_pdf(medium, mei.t, mei.sigma_t, channel),
+                                                scattered & ea_lanes)
                 if dr.hint(emitter_sampling, mode="scalar"):
+                    in_medium_nee = scattered & mei.medium.use_emitter_sampling()
+                    if dr.hint(equiangular_on and not nee_in_media, mode="scalar"):
+                        in_medium_nee &= ~ea_here.lanes    # equi-angular sampling alone finds that light
                     active_em = further & ((surface & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
-                                           | (scattered & mei.medium.use_emitter_sampling()))
+                                           | in_medium_nee)
                     L = media.emitter_sampling(scene, sampler, bsdf_ctx, phase_ctx, it, si, bsdf, mei, phase,
                                                scattered, medium, channel, beta, L, estimator.sample_weight,
-                                               n_L, active_em, floor)
+                                               n_L, active_em, floor, tracking, ea_here, nee_in_media)
                     n_shadow += dr.select(active_em, n_L, 0)
                 # null boundaries are crossed whatever the depth; real vertices scatter below max_depth
                 bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), surface)
@@ -259,6 +287,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                 if dr.hint(track_prev, mode="scalar"):
                     prev_it[real] = it
                     prev_bsdf_pdf[real] = dr.select(scattered, phase_pdf, bsdf_sample.pdf)
+                if dr.hint(equiangular_on, mode="scalar"):
+                    prev_ea = dr.select(real, ea_here, prev_ea)
                 prev_bsdf_delta[real] = dr.select(scattered, ~mei.medium.use_emitter_sampling(),
                                                   mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Delta))
                 medium[surface & si.is_medium_transition()] = si.target_medium(ray.d)
@@ -324,7 +354,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         (equal to ``params.resolve(plugin_name, given)``; for file metadata and messages)."""
         values = {"max_depth": UNBOUNDED if self.max_depth == DEPTH_UNBOUNDED else self.max_depth,
                   "rr_depth": self.rr_depth, "hide_emitters": self.hide_emitters,
-                  "count_rays": self.count_rays, **self.estimator.settings()}
+                  "count_rays": self.count_rays, "medium_sampling": self.medium_sampling,
+                  "transmittance": self.tracking_kind, **self.estimator.settings()}
         return {p.name: values[p.name] for p in self.PARAMETERS}
 
     def to_string(self):

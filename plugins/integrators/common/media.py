@@ -96,11 +96,14 @@ def free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler,
 
 
 @dr.syntax
-def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampler, channel, active):
+def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampler, channel, active,
+                          tracking_kind: str = "ratio"):
     """T over ``ray`` (from its origin to ``ray.maxt``) inside ``medium``: Beer-Lambert in a
-    homogeneous medium; ratio tracking in a heterogeneous one, per channel the product of T / p_c
-    over the steps and of sigma_n at each tentative collision (= 1 - sigma_t / sigma_bar with
-    equal channels)."""
+    homogeneous medium. In a heterogeneous one, ``ratio`` tracking: per channel the product of
+    T / p_c over the steps and of sigma_n at each tentative collision (= 1 - sigma_t / sigma_bar
+    with equal channels); ``delta`` tracking: each tentative collision is null with probability
+    P_null (as in ``free_flight``), weighted sigma_n / P_null, and real otherwise, where T becomes
+    0 (with equal channels the estimate is 0 or 1)."""
     ray = mi.Ray3f(ray)
     T = mi.UnpolarizedSpectrum(1.0)
     exact = active & medium.is_homogeneous()
@@ -115,7 +118,14 @@ def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampl
         ratio = tracking & ~exact
         collided = ratio & m.is_valid()
         T[ratio] *= _tracked_weight(medium, m, ray.maxt, channel, ratio)
-        T[collided] *= m.sigma_n
+        if dr.hint(tracking_kind == "delta", mode="scalar"):
+            p_null = dr.mean(dr.select(m.combined_extinction > 0, m.sigma_n / m.combined_extinction, 0.0))
+            null = collided & (sampler.next_1d(collided) < p_null)
+            T[collided & ~null] = 0.0
+            T[null] *= m.sigma_n / p_null
+            collided = null
+        else:
+            T[collided] *= m.sigma_n
         ray.o[collided] = m.p
         ray.maxt[collided] = ray.maxt - m.t
         tracking = collided & (dr.max(mi.unpolarized_spectrum(T)) > 0)
@@ -124,12 +134,12 @@ def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampl
 
 @dr.syntax
 def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, target: mi.Point3f,
-                  sampler: mi.Sampler, channel, floor: float, active):
+                  sampler: mi.Sampler, channel, floor: float, active, tracking_kind: str = "ratio"):
     """T from the vertex ``it`` (inside ``medium``, which a surface vertex has already switched
     to the side facing ``target``) to the point ``target``: through media, and through the
     surfaces between whose BSDFs let light pass unscattered (``null`` boundaries, a mask's clear
     part: ``eval_null_transmission``); every other surface blocks it. Rays start and stop at
-    the lab's offsets (``spawn``)."""
+    the lab's offsets (``spawn``). ``tracking_kind``: ``segment_transmittance``'s."""
     ray = spawn.spawn_ray_to(it, target, floor)
     medium = mi.MediumPtr(medium)
     T = mi.UnpolarizedSpectrum(1.0)
@@ -140,7 +150,7 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
         segment = mi.Ray3f(ray)
         segment.maxt = dr.select(crossing, si.t, ray.maxt)
         inside = going & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
-        T[inside] *= segment_transmittance(medium, segment, sampler, channel, inside)
+        T[inside] *= segment_transmittance(medium, segment, sampler, channel, inside, tracking_kind)
         bsdf = si.bsdf(ray)
         T[crossing] *= bsdf.eval_null_transmission(si, crossing)
         medium[crossing & si.is_medium_transition()] = si.target_medium(ray.d)
@@ -151,7 +161,8 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
 
 
 def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, scattered, medium, channel,
-                     beta, L, sample_weight, n_L: int, active, floor: float):
+                     beta, L, sample_weight, n_L: int, active, floor: float, tracking_kind: str = "ratio",
+                     equiangular=None, nee: bool = True):
     """Next-event estimation at a vertex of a path in a scene with media: the surface ``si``
     (its ``bsdf``) or, where ``scattered``, the medium point ``mei`` (its ``phase`` function);
     ``it`` is the vertex as an ``Interaction3f``, ``medium`` the medium the path arrived in.
@@ -159,7 +170,9 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
     Adds to ``L`` n_L emitter samples, each beta w f L_e G T / (n_L p_L): an emitter point
     sampled without a visibility test, T the transmittance to it (``transmittance``: media and
     null boundaries pass light, other surfaces block it), f and p_B the BSDF's (with its cosine)
-    or the phase function's, and w = ``sample_weight(Densities)`` (direct.py's convention)."""
+    or the phase function's, and w = ``sample_weight(Densities)`` (direct.py's convention).
+    ``equiangular``: None, or the ``Equiangular`` state of the path's vertex, whose medium
+    vertices then weigh their samples against equi-angular sampling too."""
     from mitsuba_lab.plugins.integrators.common.direct import emitter_sample_contribution
     from mitsuba_lab.plugins.integrators.estimator import Densities
 
@@ -168,11 +181,162 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
         sampled = active & (ds.pdf != 0)
         # a surface at a medium boundary sends the shadow ray into the medium on its side
         start = dr.select(~scattered & si.is_medium_transition(), si.target_medium(ds.d), medium)
-        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled)
+        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled, tracking_kind)
         f_bsdf, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), sampled & ~scattered)
         f_phase, pdf_phase = phase.eval_pdf(phase_ctx, mei, ds.d, sampled & scattered)
         f = dr.select(scattered, f_phase, f_bsdf)
-        w = sample_weight(Densities(bsdf=dr.select(scattered, pdf_phase, pdf_bsdf), emitter=n_L * ds.pdf,
-                                    delta=ds.delta))
+        d = Densities(bsdf=dr.select(scattered, pdf_phase, pdf_bsdf), emitter=n_L * ds.pdf, delta=ds.delta)
+        if equiangular is not None:
+            d = equiangular.densities(scene, d, it, ds, sampled, nee)
+        w = sample_weight(d)
         L = L + emitter_sample_contribution(beta, ds, em_weight * T, f, w / n_L, sampled)
     return L
+
+
+# ---------------------------------------------------------------------------
+# Equi-angular sampling (Kulla and Fajardo 2012)
+# ---------------------------------------------------------------------------
+class Segment:
+    """A ray's path through a homogeneous medium: origin ``o``, unit direction ``d``, length
+    ``t_max`` (to the next surface; inf where there is none)."""
+    DRJIT_STRUCT = {"o": mi.Point3f, "d": mi.Vector3f, "t_max": mi.Float}
+
+    def __init__(self, o=None, d=None, t_max=None):
+        self.o = mi.Point3f(0) if o is None else o
+        self.d = mi.Vector3f(0) if d is None else d
+        self.t_max = mi.Float(0) if t_max is None else t_max
+
+
+def _angles(segment: Segment, y):
+    """(t0, D, theta_a, theta_b): the foot t0 of the perpendicular from ``y`` to the segment's
+    line, its length D, and the angles under which ``y`` sees the segment's ends."""
+    to_y = y - segment.o
+    t0 = dr.dot(to_y, segment.d)
+    D = dr.maximum(dr.norm(to_y - t0 * segment.d), 1e-7 * (1.0 + dr.norm(to_y)))
+    return t0, D, dr.atan2(-t0, D), dr.atan2(segment.t_max - t0, D)
+
+
+def equiangular_sample(segment: Segment, y, u):
+    """(t, pdf): a distance along the segment with density proportional to 1 / |x(t) - y|^2,
+    t = t0 + D tan(theta), theta uniform in [theta_a, theta_b], and that density
+    D / ((theta_b - theta_a)(D^2 + (t - t0)^2))."""
+    t0, D, a, b = _angles(segment, y)
+    t = t0 + D * dr.tan(dr.lerp(a, b, u))
+    return t, D / ((b - a) * (dr.square(D) + dr.square(t - t0)))
+
+
+def equiangular_pdf(segment: Segment, y, t):
+    """The density of ``equiangular_sample`` at distance ``t`` (0 outside the segment)."""
+    t0, D, a, b = _angles(segment, y)
+    inside = (t >= 0) & (t <= segment.t_max)
+    return dr.select(inside, D / ((b - a) * (dr.square(D) + dr.square(t - t0))), 0.0)
+
+
+def _origin(segment: Segment, wavelengths) -> mi.Interaction3f:
+    it = dr.zeros(mi.Interaction3f)
+    it.p, it.wavelengths = segment.o, wavelengths
+    return it
+
+
+def equiangular_density(scene, segment: Segment, it: mi.Interaction3f, ds: mi.DirectionSample3f, active):
+    """p_E at the medium point ``it`` (distance t = |it.p - o| along ``segment``) for the light
+    point of ``ds`` (sampled from ``it``): the equi-angular density of t given that point, times
+    the density with which a light sample from the segment's origin picks that point, expressed
+    per unit solid angle at ``it`` (the measure of the other two techniques' densities there).
+    0 for emitters at infinity, which have no point to aim at."""
+    o = _origin(segment, it.wavelengths)
+    at_o = dr.zeros(mi.DirectionSample3f)
+    at_o.p, at_o.n, at_o.uv, at_o.time, at_o.emitter, at_o.delta = ds.p, ds.n, ds.uv, ds.time, ds.emitter, ds.delta
+    to_y = ds.p - o.p
+    at_o.dist = dr.norm(to_y)
+    at_o.d = to_y / at_o.dist
+    finite = active & ~mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite)
+    pdf_o = scene.pdf_emitter_direction(o, at_o, finite & ~ds.delta)
+    # per unit area at y, then per unit solid angle at it
+    cos_o, cos_it = dr.abs(dr.dot(at_o.d, ds.n)), dr.abs(dr.dot(ds.d, ds.n))
+    to_it = pdf_o * cos_o / dr.square(at_o.dist) * dr.square(ds.dist) / cos_it
+    # a delta light: both light samples pick it with the same (discrete) probability
+    pdf_light = dr.select(ds.delta, ds.pdf, to_it)
+    t = dr.dot(it.p - segment.o, segment.d)
+    p = equiangular_pdf(segment, ds.p, t) * pdf_light
+    return dr.select(finite & dr.isfinite(p), p, 0.0)
+
+
+def distance_pdf(medium, segment_t, mei_sigma_t, channel):
+    """p_d(t) = sigma_t,c exp(-sigma_t,c t): the density of a free flight's collision at distance
+    t in a homogeneous medium, in the sampling channel c."""
+    sigma = channel_value(mei_sigma_t, channel)
+    return sigma * dr.exp(-sigma * segment_t)
+
+
+class Equiangular:
+    """What the MIS weights at a medium vertex need to know of equi-angular sampling: the segment
+    the vertex was found on, p_d (its free flight's density there), the lanes where equi-angular
+    sampling ran along that segment (``lanes``). ``densities``' ``nee``: whether NEE at the free
+    flight's collision is one of the techniques (mode ``mis``; not in mode ``equiangular``). Elsewhere (surface
+    vertices, heterogeneous media) the third density is 0 and p_d is 1."""
+    DRJIT_STRUCT = {"segment": Segment, "pdf_distance": mi.Float, "lanes": mi.Bool}
+
+    def __init__(self, segment=None, pdf_distance=None, lanes=None):
+        self.segment = Segment() if segment is None else segment
+        self.pdf_distance = mi.Float(1.0) if pdf_distance is None else pdf_distance
+        self.lanes = mi.Bool(False) if lanes is None else lanes
+
+    def densities(self, scene, d, it, ds, active, nee: bool):
+        """``d`` (the densities of a hit or an emitter sample at the vertex ``it``, in solid angle)
+        with the equi-angular density added, all per unit distance and solid angle."""
+        from mitsuba_lab.plugins.integrators.estimator import Densities
+
+        p_d = dr.select(self.lanes, self.pdf_distance, 1.0)
+        emitter = d.emitter if nee else dr.select(self.lanes, 0.0, d.emitter)
+        p_e = equiangular_density(scene, self.segment, it, ds, active & self.lanes)
+        return Densities(bsdf=p_d * d.bsdf, emitter=p_d * emitter, delta=d.delta, equiangular=p_e)
+
+
+def equiangular_scatter(scene, sampler, phase_ctx, medium, segment: Segment, wavelengths, beta, channel,
+                        equiangular_weight, n_L: int, nee: bool, active, floor: float,
+                        tracking_kind: str = "ratio"):
+    """One equi-angular sample of the direct light scattered towards the segment's origin along
+    ``segment`` (inside the homogeneous ``medium``): a light point y sampled from the origin,
+    a distance t towards it (``equiangular_sample``), and
+
+        beta T(0, t) sigma_s(t) f_p L_e T(t, y) w_E / (p_ea(t) p_y),
+
+    p_y the density of y per unit solid angle at x(t), w_E = ``equiangular_weight(Densities)``
+    against NEE at a free flight's collision (``nee``: n_L samples) and phase-function sampling,
+    both with the collision's density p_d(t). Returns the contribution (0 for
+    emitters at infinity, which have no point to aim at)."""
+    from mitsuba_lab.plugins.integrators.common.direct import spectrum_or_zero
+    from mitsuba_lab.plugins.integrators.estimator import Densities
+
+    o = _origin(segment, wavelengths)
+    ds_o, _ = scene.sample_emitter_direction(o, sampler.next_2d(), False, active)
+    ok = active & (ds_o.pdf > 0) & ~mi.has_flag(ds_o.emitter.flags(), mi.EmitterFlags.Infinite)
+    t, pdf_t = equiangular_sample(segment, ds_o.p, sampler.next_1d())
+    mei = dr.zeros(mi.MediumInteraction3f)
+    mei.p, mei.t, mei.time, mei.wavelengths, mei.medium = segment.o + t * segment.d, t, ds_o.time, wavelengths, medium
+    mei.wi = -segment.d
+    mei.sh_frame = mi.Frame3f(mei.wi)
+    sigma_s, _, sigma_t = medium.get_scattering_coefficients(mei, ok)
+    # the light point seen from x(t) (ds_o redirected: a copy would lose its emitter pointer)
+    cos_o, dist_o = dr.abs(dr.dot(ds_o.d, ds_o.n)), mi.Float(ds_o.dist)   # (a copy: the field is reassigned)
+    ds = ds_o
+    to_y = ds.p - mei.p
+    ds.dist = dr.norm(to_y)
+    ds.d = to_y / ds.dist
+    it = dr.zeros(mi.Interaction3f)
+    it.p, it.time, it.wavelengths = mei.p, mei.time, wavelengths
+    emitted = scene.eval_emitter_direction(it, ds, ok)
+    cos_t = dr.abs(dr.dot(ds.d, ds.n))
+    pdf_y = dr.select(ds.delta, ds.pdf, ds.pdf * cos_o / dr.square(dist_o) * dr.square(ds.dist) / cos_t)
+    phase = medium.phase_function()
+    f, pdf_phase = phase.eval_pdf(phase_ctx, mei, ds.d, ok)
+    T_light = transmittance(scene, medium, it, ds.p, sampler, channel, floor, ok, tracking_kind)
+    p_d = distance_pdf(medium, t, sigma_t, channel)
+    pdf_nee = dr.select(ds.delta, ds.pdf, scene.pdf_emitter_direction(it, ds, ok & ~ds.delta))
+    p_e = pdf_t * pdf_y
+    w = equiangular_weight(Densities(bsdf=p_d * pdf_phase, emitter=p_d * n_L * pdf_nee if nee else 0.0 * p_d,
+                                     delta=ds.delta, equiangular=p_e))
+    T_ray = dr.exp(-sigma_t * t)
+    value = beta * (T_ray * sigma_s * w / p_e) * f * emitted * T_light
+    return dr.select(ok & (p_e > 0) & dr.isfinite(p_e), spectrum_or_zero(value), 0.0)

@@ -105,11 +105,57 @@ def mis_weight(pdf_self, pdf_other, heuristic: str = "power", beta: float = 2.0)
 def hit_weight(d, heuristic: str = "power", beta: float = 2.0):
     """Weight of emission found by BSDF sampling, from the ``Densities`` ``d`` of both
     techniques (n_L p_L in ``d.emitter``): 1 after a delta lobe, which emitter sampling cannot
-    produce."""
-    return _ops_for(d.bsdf, d.emitter, d.delta).select(d.delta, 1.0, mis_weight(d.bsdf, d.emitter, heuristic, beta))
+    produce. Where ``d.equiangular`` is given (a medium vertex), of all three techniques."""
+    ops = _ops_for(d.bsdf, d.emitter, d.delta)
+    if getattr(d, "equiangular", None) is None:
+        return ops.select(d.delta, 1.0, mis_weight(d.bsdf, d.emitter, heuristic, beta))
+    return ops.select(d.delta, 1.0, mis_weight_many(d.bsdf, (d.emitter, d.equiangular), heuristic, beta))
 
 
 def sample_weight(d, heuristic: str = "power", beta: float = 2.0):
     """Weight of an emitter sample, from the ``Densities`` ``d``: 1 for a delta light, which
-    BSDF sampling cannot hit."""
-    return _ops_for(d.bsdf, d.emitter, d.delta).select(d.delta, 1.0, mis_weight(d.emitter, d.bsdf, heuristic, beta))
+    BSDF sampling cannot hit. Where ``d.equiangular`` is given (a medium vertex), of all three
+    techniques (equi-angular sampling reaches delta lights too)."""
+    ops = _ops_for(d.bsdf, d.emitter, d.delta)
+    if getattr(d, "equiangular", None) is None:
+        return ops.select(d.delta, 1.0, mis_weight(d.emitter, d.bsdf, heuristic, beta))
+    return mis_weight_many(d.emitter, (ops.select(d.delta, 0.0, d.bsdf), d.equiangular), heuristic, beta)
+
+
+def equiangular_weight(d, heuristic: str = "power", beta: float = 2.0):
+    """Weight of an equi-angular sample in a medium, from the ``Densities`` ``d`` of all three
+    techniques (``d.equiangular`` its own density)."""
+    ops = _ops_for(d.bsdf, d.emitter, d.delta)
+    return mis_weight_many(d.equiangular, (d.emitter, ops.select(d.delta, 0.0, d.bsdf)), heuristic, beta)
+
+
+def mis_weight_many(pdf_self, pdf_others, heuristic: str = "power", beta: float = 2.0):
+    """MIS weight of a sample of the technique with effective density ``pdf_self`` among three or
+    more techniques (``pdf_others``: the other techniques' effective densities, in the same
+    measure), so that the weights of all techniques sum to 1 wherever one density is positive:
+
+    * ``power`` / ``balance``: w = 1 / (1 + sum_j r_j^beta), r_j = pdf_j / pdf_self, each term
+      taken from the two-technique weight (r_j^beta = 1 / w_j - 1), so its limits are those of
+      ``mis_weight``;
+    * ``max``: 1 / (number of techniques tied at the largest density) for a largest one, else 0;
+    * ``average``: 1 / (number of techniques that can sample x) where this one can.
+    """
+    ops = _ops_for(pdf_self, *pdf_others)
+    pdf_self = ops.asarray(pdf_self)
+    with ops.quiet():
+        if heuristic in ("balance", "power"):
+            rest = 0.0
+            for other in pdf_others:
+                rest = rest + (ops.rcp(mis_weight(pdf_self, other, heuristic, beta)) - 1.0)
+            return ops.rcp(1.0 + rest)
+        count = 1.0
+        beaten = pdf_self > 0
+        for other in pdf_others:
+            other = ops.asarray(other)
+            other = ops.select(other > 0, other, 0.0)
+            if heuristic == "max":
+                beaten = beaten & (other <= pdf_self)
+                count = count + ops.select(other == pdf_self, 1.0, 0.0)
+            else:  # average
+                count = count + ops.select(other > 0, 1.0, 0.0)
+        return ops.select(beaten, ops.rcp(count), 0.0)
