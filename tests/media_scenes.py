@@ -33,6 +33,10 @@ def overhead_light(radiance: float = 4.0) -> dict:
             "emitter": {"type": "area", "radiance": rgb(radiance)}}
 
 
+def environment(radiance: float) -> dict:
+    return {"type": "constant", "radiance": rgb(radiance)}
+
+
 def smoke_grid(n: int = 8) -> mi.VolumeGrid:
     """A sparse plume: density 0 in most cells, up to 3.6 in a ball at the centre."""
     x = np.linspace(-1, 1, n)
