@@ -9,6 +9,12 @@ they give an emitter hit and an emitter sample (``naive.Naive``, ``nee.NEE``, ``
 Veach 1997, ch. 9). The shared pieces: ``direct`` (emitter sampling and emitter hits),
 ``roulette`` (Russian roulette), ``counters`` (ray counts).
 
+In a scene with participating media the loop gains a *Medium interaction* section (free
+flights by delta tracking, ``common.media``); a vertex is then a surface point or a medium
+point, whose phase function stands in for the BSDF with the same two weights, and lab_nee and
+lab_mis add a third technique for the light scattered along a ray in a homogeneous medium:
+equi-angular sampling towards a light point (Kulla and Fajardo 2012; ``medium_sampling``).
+
 The plugins ``lab_naive``, ``lab_nee`` and ``lab_mis`` are the subclasses at the end, each
 naming its estimator (``ESTIMATOR``), which also answers the experiment planner's questions
 (``estimator.Estimator``).
@@ -101,6 +107,17 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                          ``ray_counts()``. Costs one atomic add per sample.
                          (Default: true)
     ============= ====== ==========================================================
+
+    Participating media (homogeneous and heterogeneous, any phase function, behind ``null``
+    boundaries, inside dielectrics, around the sensor) are rendered as Mitsuba's ``volpath``
+    renders them: free flights sampled by delta tracking against each medium's majorant
+    (analytic in homogeneous media), the albedo at each scattering event, ``max_depth``
+    counting medium vertices but not null boundaries; shadow rays carry the transmittance
+    through media and null boundaries (exact in homogeneous media, ratio or delta tracking in
+    heterogeneous ones: ``transmittance``). Distances are sampled with one colour channel's
+    coefficients (the path's, picked uniformly in RGB; the hero wavelength in spectral
+    variants), every channel weighted by its own transmittance. Not in polarized variants
+    (refused in one line). lab_nee and lab_mis also declare ``medium_sampling``.
     """
     #: The estimator class (weights, own parameters, what it knows about scenes).
     ESTIMATOR: type[PathEstimator] = PathEstimator
@@ -402,7 +419,10 @@ class LabNEEIntegrator(LabPathIntegrator):
     BSDF lobe): that is what ``lab_mis`` fixes.
 
     Parameters: ``max_depth`` (default -1, unbounded), ``rr_depth`` (5), ``hide_emitters``
-    (false), ``count_rays`` (true); see ``LabPathIntegrator``. Estimator: ``nee.NEE``.
+    (false), ``count_rays`` (true); see ``LabPathIntegrator``. In media ``medium_sampling``
+    (``distance``, the default: NEE at free-flight collisions; ``equiangular``; or ``mis``, the two
+    light samples weighted by the balance heuristic) and ``transmittance``. Estimator:
+    ``nee.NEE``.
 
     .. code-block:: python
 
@@ -445,6 +465,15 @@ class LabMISIntegrator(LabPathIntegrator):
 
     All weights are computed from pdf ratios (``mis_weight.mis_weight``), so pdfs of 0, 1e-30,
     1e30 or inf give the right limit and never NaN. Estimator: ``mis.MIS``.
+
+    In a homogeneous medium, ``medium_sampling = mis`` (the default) adds a third technique for
+    the light scattered along each ray segment: a light point y sampled from the segment's
+    origin and a distance t with density proportional to 1 / |x(t) - y|^2 (equi-angular
+    sampling, Kulla and Fajardo 2012), which finds the light of point and spot lights in thin
+    media far better than free flights do. The three techniques (free flight + emitter sample,
+    free flight + phase sample, equi-angular) are weighted by the same heuristic over their
+    densities per unit distance and solid angle (``mis_weight.mis_weight_many``); ``distance``
+    and ``equiangular`` keep one of the two light samples.
 
     .. code-block:: python
 
