@@ -461,6 +461,11 @@ class LabMISIntegrator(LabPathIntegrator):
     hide_emitters   bool   Camera rays pass through area emitters; the bare
                            environment is invalid (Default: false)
     count_rays      bool   Count camera / extension / shadow rays (Default: true)
+    medium_sampling string ``distance`` | ``equiangular`` | ``mis``: the light
+                           scattered along a ray in a homogeneous medium, below
+                           (Default: ``mis``)
+    transmittance   string ``ratio`` | ``delta``: shadow rays' tracking in
+                           heterogeneous media (Default: ``ratio``)
     =============== ====== =====================================================
 
     All weights are computed from pdf ratios (``mis_weight.mis_weight``), so pdfs of 0, 1e-30,
