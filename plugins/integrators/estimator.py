@@ -202,8 +202,9 @@ class PathEstimator(Estimator):
           estimator's (Mitsuba's own, e.g. ``timeout``) must match; count_rays is ignored.
         """
         p = {k: v for k, v in params.items() if k not in NO_EFFECT}
-        if not traits.media:                                             # they act only in media
-            p = {k: v for k, v in p.items() if k not in MEDIUM_PARAMETERS}
+        # they act only in media, and only where vertices sample emitters
+        medium = {k: p.pop(k) for k in MEDIUM_PARAMETERS if k in p} if traits.media else {}
+        p = {k: v for k, v in p.items() if k not in MEDIUM_PARAMETERS}
         max_depth, rr_depth = p.pop("max_depth"), p.pop("rr_depth")
         hide = p.pop("hide_emitters") and traits.hittable_emitters         # nothing to hide otherwise
         own = {name: p.pop(name) for name in cls.OWN_PARAMETERS}
@@ -213,17 +214,18 @@ class PathEstimator(Estimator):
         if max_depth == 1:
             return (("emitters seen directly", hide, extras),
                     "max_depth 1: every strategy returns the emission its camera ray hits")
-        shared = (max_depth, rr_depth, hide, extras)
+        shared = (max_depth, rr_depth, hide, extras, tuple(sorted(medium.items())))
         if not traits.smooth_bsdf and not traits.media:
             return (("BSDF sampling only (all BSDFs delta)", shared),
                     "all BSDFs are delta: no vertex can sample an emitter, so every strategy is BSDF "
                     "sampling with weight 1")
-        return cls.technique_key(traits, own, shared)
+        return cls.technique_key(traits, {**own, **medium}, shared)
 
     @classmethod
     def technique_key(cls, traits, own: dict, shared: tuple) -> tuple[tuple, str]:
         """(key, reason) on a scene where vertices can sample emitters and max_depth >= 2;
-        ``own``: the estimator's own parameters, ``shared``: the rest, which must match."""
+        ``own``: the estimator's own parameters (and in a scene with media the medium ones),
+        ``shared``: the rest, which must match."""
         return (cls.plugin_name, shared), f"same parameters ({cls.plugin_name})"
 
     @staticmethod

@@ -46,9 +46,11 @@ class MIS(PathEstimator):
     def technique_key(cls, traits, own: dict, shared: tuple) -> tuple[tuple, str]:
         """With only delta emitters every weight is 1 whatever the heuristic: lab_mis with n_L
         shadow rays is NEE with n_L (lab_nee when n_L = 1). Otherwise the power heuristic with
-        beta = 1 is the balance heuristic, and beta does not enter balance, max or average."""
+        beta = 1 is the balance heuristic, and beta does not enter balance, max or average. (Not
+        with ``medium_sampling = mis`` in a medium: there the heuristic weighs NEE against
+        equi-angular sampling, delta lights included.)"""
         n_L = own["emitter_samples"]
-        if not traits.hittable_emitters:
+        if not traits.hittable_emitters and own.get("medium_sampling", "distance") != "mis":
             return cls.nee_key(traits, n_L, shared)
         heuristic, beta = cls.weighting(own["heuristic"], own["beta"])
         if heuristic == "power":

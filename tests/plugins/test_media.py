@@ -150,3 +150,18 @@ def test_a_medium_makes_the_estimators_differ_where_every_bsdf_is_delta():
     del scene["ball"]["interior"]
     traits = SceneTraits.from_scene(mi.load_dict(scene))
     assert set(equivalent_strategies(traits, strategies).values()) == {"naive"}
+
+
+def test_equivalent_strategies_in_media():
+    """With only a point light, lab_mis with free flights alone is lab_nee (every weight 1), but
+    with medium_sampling = mis its heuristic weighs NEE against equi-angular sampling; without a
+    medium the medium parameters change nothing."""
+    strategies = {"nee": ("lab_nee", {}), "mis_distance": ("lab_mis", {"medium_sampling": "distance"}),
+                  "mis": ("lab_mis", {}), "nee_mis": ("lab_nee", {"medium_sampling": "mis"})}
+    fog = SceneTraits.from_scene(mi.load_dict(media_scenes.fog_box_point()))
+    assert equivalent_strategies(fog, strategies) == {"nee": "nee", "mis_distance": "nee", "mis": "mis",
+                                                      "nee_mis": "nee_mis"}
+    clear = media_scenes.fog_box_point()
+    del clear["box"]["interior"]
+    clear = SceneTraits.from_scene(mi.load_dict(clear))
+    assert set(equivalent_strategies(clear, strategies).values()) == {"nee"}
