@@ -18,7 +18,7 @@ import statistics
 import sys
 
 import mitsuba_lab  # noqa: F401
-from mitsuba_lab.render import render
+from alternating import common_arguments, median_ratio, time_rounds
 from mitsuba_lab.runtime import versions
 from mitsuba_lab.scene import load_scene, make_integrator
 
@@ -27,11 +27,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--scene", default=os.path.join(ROOT, "scenes", "cornell_box.xml"))
-    parser.add_argument("--res", type=int, default=256, help="image width and height (default: 256)")
-    parser.add_argument("--spp", type=int, default=64, help="samples per pixel (default: 64)")
-    parser.add_argument("--max-depth", type=int, default=8, help="max_depth of every integrator (default: 8)")
-    parser.add_argument("--rounds", type=int, default=7, help="timed rounds (default: 7)")
+    common_arguments(parser, os.path.join(ROOT, "scenes", "cornell_box.xml"), res=256, spp=64, max_depth=8)
     args = parser.parse_args(argv)
 
     scene = load_scene(args.scene, res=args.res)
@@ -43,23 +39,15 @@ def main(argv=None) -> int:
         "lab_naive": make_integrator("lab_naive", depth),
         "lab_mis(power, count_rays=false)": make_integrator("lab_mis", {**depth, "count_rays": False}),
     }
-    for integrator in contenders.values():
-        render(scene, integrator, spp=args.spp, seed=0)          # warm-up: compile
-    times = {name: [] for name in contenders}
-    for round_index in range(args.rounds):
-        for name, integrator in contenders.items():
-            _, stats = render(scene, integrator, spp=args.spp, seed=1 + round_index)
-            times[name].append(stats.wall_s)
-            print(f"round {round_index}: {name:34s} {stats.wall_s:.3f} s", file=sys.stderr)
+    times = time_rounds(scene, contenders, args.spp, args.rounds)
 
     print(f"{os.path.basename(args.scene)} {args.res}x{args.res}, {args.spp} spp, max_depth "
           f"{args.max_depth}, {args.rounds} alternating rounds; {versions()}")
     print(f"{'integrator':34s} {'median s':>9s} {'ratio to path (median of rounds)':>34s}")
     for name, samples in times.items():
-        ratios = [t / p for t, p in zip(samples, times["path"])]
-        print(f"{name:34s} {statistics.median(samples):9.3f} {statistics.median(ratios):34.3f}")
+        print(f"{name:34s} {statistics.median(samples):9.3f} {median_ratio(samples, times['path']):34.3f}")
     on, off = times["lab_mis(power)"], times["lab_mis(power, count_rays=false)"]
-    counter_cost = statistics.median([a / b for a, b in zip(on, off)])
+    counter_cost = median_ratio(on, off)
     print(f"ray counters: lab_mis time with / without = {counter_cost:.3f}")
     return 0
 
