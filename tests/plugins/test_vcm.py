@@ -124,7 +124,7 @@ def test_aimed_light_vertices_without_the_mixture_density_are_caught(monkeypatch
     """Power: light subpaths weighted as if their direction had the cosine density plus the aimed
     one, without the cosine share's (1 - aim), carry a tenth of the light that leaves unaimed."""
     from agreement import block_test
-    from mitsuba_lab.plugins.integrators import aim as aim_module
+    from mitsuba_lab.plugins.integrators.common import aim as aim_module
 
     aimed = aim_module.AimedEmission._aimed_pdf
     monkeypatch.setattr(aim_module.AimedEmission, "pdf",
@@ -220,7 +220,7 @@ def test_a_camera_lane_connects_to_a_light_subpath_of_its_own_iteration(pixels, 
 
     integrator = vcm(light_paths=light_paths)
     lanes = pixels * spp
-    count = integrator.pass_light_subpaths(max(1, round(lanes * light_paths)), spp, lanes)
+    count = integrator.passes.light_subpaths(max(1, round(lanes * light_paths)), spp, lanes)
     assert 0 < count <= max(round(lanes * light_paths), spp) and count % spp == 0
     weights = BdptWeights("power", 2.0, "all")
     weights.lane_tables = (None, None, mi.UInt32(spp))
