@@ -16,6 +16,23 @@ def _run_from_project_root(monkeypatch):
     monkeypatch.chdir(ROOT)
 
 
+@pytest.fixture(autouse=True)
+def _sigint_stays_pythons(request):
+    """After each test SIGINT is handled by Python's default handler again. A test that leaves
+    another handler behind (SIG_IGN, or a C handler of Mitsuba's: getsignal gives None) would make
+    every later Ctrl-C test fail, in this process and in the CLI processes it starts (an ignored
+    SIGINT is inherited): the full run of 2026-11-28 lost 17 such tests this way while each file
+    passed alone. The handler is put back and the test named in a warning, so the culprit shows."""
+    import signal
+    import warnings
+
+    yield
+    handler = signal.getsignal(signal.SIGINT)
+    if handler is not signal.default_int_handler:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        warnings.warn(f"{request.node.nodeid} left SIGINT handled by {handler!r}; Python's default put back")
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _drop_the_module_scenes(request):
     """Scenes a test module keeps in a dict of its own (a cache shared by its tests) are dropped
