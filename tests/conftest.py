@@ -16,13 +16,23 @@ def _run_from_project_root(monkeypatch):
     monkeypatch.chdir(ROOT)
 
 
+def pytest_sessionstart(session):
+    """A suite started in the background of a script (``pytest &`` in a non-interactive shell)
+    inherits SIGINT ignored, and so would every CLI process its Ctrl-C tests start: those tests
+    would then test the shell, not the lab (17 failed this way in a full run of 2026-11-28, each
+    file passing alone). The suite runs as a user at a terminal would: Python's default handler."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 @pytest.fixture(autouse=True)
 def _sigint_stays_pythons(request):
     """After each test SIGINT is handled by Python's default handler again. A test that leaves
     another handler behind (SIG_IGN, or a C handler of Mitsuba's: getsignal gives None) would make
     every later Ctrl-C test fail, in this process and in the CLI processes it starts (an ignored
-    SIGINT is inherited): the full run of 2026-11-28 lost 17 such tests this way while each file
-    passed alone. The handler is put back and the test named in a warning, so the culprit shows."""
+    SIGINT is inherited). The handler is put back and the test named in a warning."""
     import signal
     import warnings
 
