@@ -166,34 +166,38 @@ def p7_predicted() -> dict[str, float]:
             "var_distance": integral(f**2 / p_d) - truth**2, "var_mis": mis}
 
 
-def delta_tracking(rng, n: int, sigma_t=p6_sigma_t, majorant: float = P6_MAJORANT,
-                   length: float = P6_LENGTH) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` delta-tracking transmittance estimates over [0, length] (1 when the walk escapes,
-    0 at its first real collision) and the number of ``sigma_t`` look-ups each made."""
+def _track(rng, n: int, sigma_t, majorant: float, length: float, ratio: bool):
+    """Tentative collisions at rate ``majorant`` over [0, length]. Ratio tracking multiplies
+    each lane's estimate by the null-collision probability ``1 - sigma_t/majorant`` at every one;
+    delta tracking plays it instead and ends the lane, at 0, on a real collision."""
     x, estimate, lookups = np.zeros(n), np.ones(n), np.zeros(n, dtype=np.int64)
     alive = np.arange(n)
     while alive.size:
         x[alive] += rng.exponential(1 / majorant, alive.size)
         alive = alive[x[alive] < length]
         lookups[alive] += 1
-        real = rng.random(alive.size) < sigma_t(x[alive]) / majorant
-        estimate[alive[real]] = 0.0
-        alive = alive[~real]
+        real_share = sigma_t(x[alive]) / majorant
+        if ratio:
+            estimate[alive] *= 1 - real_share
+        else:
+            real = rng.random(alive.size) < real_share
+            estimate[alive[real]] = 0.0
+            alive = alive[~real]
     return estimate, lookups
+
+
+def delta_tracking(rng, n: int, sigma_t=p6_sigma_t, majorant: float = P6_MAJORANT,
+                   length: float = P6_LENGTH) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` delta-tracking transmittance estimates over [0, length] (1 when the walk escapes,
+    0 at its first real collision) and the number of ``sigma_t`` look-ups each made."""
+    return _track(rng, n, sigma_t, majorant, length, ratio=False)
 
 
 def ratio_tracking(rng, n: int, sigma_t=p6_sigma_t, majorant: float = P6_MAJORANT,
                    length: float = P6_LENGTH) -> tuple[np.ndarray, np.ndarray]:
     """``n`` ratio-tracking estimates (the product of ``1 - sigma_t/majorant`` over every tentative
     collision in [0, length]) and the number of ``sigma_t`` look-ups each made."""
-    x, estimate, lookups = np.zeros(n), np.ones(n), np.zeros(n, dtype=np.int64)
-    alive = np.arange(n)
-    while alive.size:
-        x[alive] += rng.exponential(1 / majorant, alive.size)
-        alive = alive[x[alive] < length]
-        lookups[alive] += 1
-        estimate[alive] *= 1 - sigma_t(x[alive]) / majorant
-    return estimate, lookups
+    return _track(rng, n, sigma_t, majorant, length, ratio=True)
 
 
 def sample_equiangular(rng, n: int) -> np.ndarray:
