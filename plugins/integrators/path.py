@@ -27,6 +27,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import params
+from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins.integrators.common import direct, media, spawn
 from mitsuba_lab.plugins.integrators.common.counters import RayCounters
 from mitsuba_lab.plugins.integrators.estimator import PathEstimator
@@ -91,22 +92,10 @@ class KernelPlan:
 class LabPathIntegrator(mi.SamplingIntegrator):
     """Base class of the lab's path tracers: the path loop over an estimator (``ESTIMATOR``).
 
-    Parameters (declared in ``plugins/params.py``, ``params.PATH_TRACER``, and read from the
-    plugin's properties by ``params.read_properties``; an estimator may add its own):
-
-    ============= ====== ==========================================================
-    max_depth     int    Longest path, in segments: 1 = only emitters seen
-                         directly, 2 = direct lighting, 0 = nothing (black),
-                         -1 = unbounded (Default: -1)
-    rr_depth      int    Depth at which Russian roulette starts, >= 1 (Default: 5)
-    hide_emitters bool   Mitsuba's meaning: camera rays pass through area
-                         emitters to what lies behind them, and where they
-                         see only the environment the pixel is invalid
-                         (black, alpha 0). (Default: false)
-    count_rays    bool   Count camera, extension and shadow rays; read them with
-                         ``ray_counts()``. Costs one atomic add per sample.
-                         (Default: true)
-    ============= ====== ==========================================================
+    Parameters are declared in ``plugins/params.py`` (``params.PATH_TRACER``, and an
+    estimator's own), read by ``params.read_properties``, and listed at the end of each
+    plugin's docstring. ``max_depth`` counts segments: 1 = only emitters seen directly, 2 =
+    direct lighting, 0 = nothing (black). ``count_rays`` costs one atomic add per sample.
 
     Participating media (homogeneous and heterogeneous, any phase function, behind ``null``
     boundaries, inside dielectrics, around the sensor) are rendered as Mitsuba's ``volpath``
@@ -386,6 +375,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
 # ---------------------------------------------------------------------------
 # The plugins
 # ---------------------------------------------------------------------------
+@documented("lab_naive")
 class LabNaiveIntegrator(LabPathIntegrator):
     r"""Naive path tracer (:monosp:`lab_naive`)
 
@@ -407,6 +397,7 @@ class LabNaiveIntegrator(LabPathIntegrator):
     PARAMETERS = Naive.PARAMETERS
 
 
+@documented("lab_nee")
 class LabNEEIntegrator(LabPathIntegrator):
     r"""Next-event estimation (:monosp:`lab_nee`)
 
@@ -432,6 +423,7 @@ class LabNEEIntegrator(LabPathIntegrator):
     PARAMETERS = NEE.PARAMETERS
 
 
+@documented("lab_mis")
 class LabMISIntegrator(LabPathIntegrator):
     r"""Multiple importance sampling path tracer (:monosp:`lab_mis`)
 
@@ -445,31 +437,11 @@ class LabMISIntegrator(LabPathIntegrator):
     Delta emitters (only NEE reaches them) and delta BSDF lobes (only BSDF sampling reaches
     their emitters) get weight 1, which keeps the estimator unbiased.
 
-    =============== ====== =====================================================
-    heuristic       string ``balance`` | ``power`` | ``max`` | ``average``
-                           (Default: ``power``). ``average`` weights 1/2 each
-                           wherever both techniques can sample x: the plain
-                           average of the two estimators, Veach's cautionary
-                           example, kept for study (``mis_weight.mis_weight``).
-    beta            float  Exponent of the power heuristic, > 0; 1 = balance.
-                           (Default: 2)
-    emitter_samples int    Shadow rays per vertex, n_L >= 1. The kernel holds
-                           n_L copies of the emitter-sampling code. (Default: 1)
-    max_depth       int    Longest path in segments, -1 = unbounded, >= 0
-                           otherwise (0 renders black) (Default: -1)
-    rr_depth        int    Depth at which Russian roulette starts, >= 1 (Default: 5)
-    hide_emitters   bool   Camera rays pass through area emitters; the bare
-                           environment is invalid (Default: false)
-    count_rays      bool   Count camera / extension / shadow rays (Default: true)
-    medium_sampling string ``distance`` | ``equiangular`` | ``mis``: the light
-                           scattered along a ray in a homogeneous medium, below
-                           (Default: ``mis``)
-    transmittance   string ``ratio`` | ``delta``: shadow rays' tracking in
-                           heterogeneous media (Default: ``ratio``)
-    =============== ====== =====================================================
-
     All weights are computed from pdf ratios (``mis_weight.mis_weight``), so pdfs of 0, 1e-30,
-    1e30 or inf give the right limit and never NaN. Estimator: ``mis.MIS``.
+    1e30 or inf give the right limit and never NaN. Estimator: ``mis.MIS``. ``heuristic =
+    average`` weights 1/2 each wherever both techniques can sample x: the plain average of the
+    two estimators, Veach's cautionary example, kept for study. The kernel holds
+    ``emitter_samples`` copies of the emitter-sampling code.
 
     In a homogeneous medium, ``medium_sampling = mis`` (the default) adds a third technique for
     the light scattered along each ray segment: a light point y sampled from the segment's

@@ -6,6 +6,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitsuba_lab.plugins import params
+from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins.params import RANDOMIZATIONS  # noqa: F401 (re-exported)
 from mitsuba_lab.plugins.samplers.common import (
     ONE_MINUS_EPS, LabSampler, mix32, sample_key, to_float, to_unit_float, unit_key)
@@ -53,6 +54,7 @@ def digit_constants(base, inv_base):
     return base, inv_base, 0.5 * inv_base, base * 2.0 ** -23, base - 1.0
 
 
+@documented("lab_halton")
 class LabHaltonSampler(LabSampler):
     r"""Randomised Halton sampler (:monosp:`lab_halton`)
 
@@ -70,12 +72,6 @@ class LabHaltonSampler(LabSampler):
       digits of i (the prefix of the radical inverse), a nested (Owen 1995)
       scramble in base b: the hash of digit k is chained, h_{k+1} =
       mix(h_k xor d_k), h_0 = hash(pixel, dimension).
-
-    =============== ====== =====================================================
-    sample_count    int    Samples per pixel, 1 <= spp <= 2^21 (Default: 4)
-    randomization   string ``permute_digits`` | ``owen`` (Default: ``owen``)
-    seed            int    Base seed, added to the render seed (Default: 0)
-    =============== ====== =====================================================
 
     Only the K_b = ceil(log_b spp) digits the sample indices 0..spp-1 can
     fill are permuted (one for every base >= spp); the digits past them are

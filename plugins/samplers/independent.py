@@ -4,9 +4,11 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins.samplers.common import LabSampler, unit_keys
 
 
+@documented("lab_independent")
 class LabIndependentSampler(LabSampler):
     r"""Independent sampler (:monosp:`lab_independent`)
 
@@ -14,11 +16,6 @@ class LabIndependentSampler(LabSampler):
     ``next_1d`` / ``next_2d`` draws fresh uniform variates. This is Mitsuba's
     ``independent`` written in Python: it measures what a Python sampler costs
     and must render with the same error.
-
-    =============== ====== =====================================================
-    sample_count    int    Samples per pixel, >= 1 (Default: 4)
-    seed            int    Base seed, added to the render seed (Default: 0)
-    =============== ====== =====================================================
 
     Seeding: state and stream of lane i are the two words of its unit key
     (``common.unit_keys``: TEA of the render seed and i), exactly as Mitsuba's

@@ -3,11 +3,13 @@ from __future__ import annotations
 
 import mitsuba as mi
 
+from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins.samplers.common import (
     PERMUTE, SCRAMBLE_X, SCRAMBLE_Y, Base2PairSampler, log2_ceil, padded_index, sample_key,
     sobol_02_owen, unit_key)
 
 
+@documented("lab_sobol")
 class LabSobolSampler(Base2PairSampler):
     r"""Padded Owen-scrambled Sobol sampler (:monosp:`lab_sobol`)
 
@@ -23,17 +25,11 @@ class LabSobolSampler(Base2PairSampler):
       its own seed per (pixel, dimension, axis) (Burley 2020, "Practical
       Hash-based Owen Scrambling"; Laine & Karras 2011).
 
-    =============== ====== =====================================================
-    sample_count    int    Samples per pixel, >= 1; a power of two makes every
-                           pair a full (0,m,2)-net (a warning otherwise; the
-                           points are then a prefix of the sequence, still
-                           unbiased). (Default: 4)
-    seed            int    Base seed, added to the render seed (Default: 0)
-    =============== ====== =====================================================
-
     Only the first two Sobol dimensions are used, so no direction-number table
     is needed; each pair is a (0,m,2)-net, and there is no joint stratification
     across pairs (which a full high-dimensional Sobol sequence would give).
+    A ``sample_count`` that is a power of two makes every pair a full (0,m,2)-net;
+    any other count gives a prefix of the sequence (still unbiased) and a warning.
     A 1D request uses the first coordinate of a pair. Multi-pass rendering
     (``samples_per_pass``) rescrambles each pass independently.
 

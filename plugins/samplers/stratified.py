@@ -6,11 +6,13 @@ import math
 import drjit as dr
 import mitsuba as mi
 
+from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.samplers.common import (
     JITTER_X, JITTER_Y, PERMUTE, LabSampler, padded_index, sample_key, to_unit_float, unit_key)
 
 
+@documented("lab_stratified")
 class LabStratifiedSampler(LabSampler):
     r"""Stratified (jittered) sampler (:monosp:`lab_stratified`)
 
@@ -20,14 +22,6 @@ class LabStratifiedSampler(LabSampler):
     (pixel, dimension) (Kensler 2013, ``common.padded_index``): "padding", so
     different dimension pairs are not correlated. Inside its cell the sample
     is uniform (jitter, keyed by the sample's lane and the dimension).
-
-    =============== ====== =====================================================
-    sample_count    int    Samples per pixel, >= 1 (Default: 4)
-    jitter          bool   Uniform offset inside each cell; false puts every
-                           sample at its cell centre (biased, for study)
-                           (Default: true)
-    seed            int    Base seed, added to the render seed (Default: 0)
-    =============== ====== =====================================================
 
     Off a square number: the 2D grid is ``nx = floor(sqrt(spp))`` by
     ``ny = ceil(spp / nx)`` (``nx * ny >= spp``) and the spp samples of a pixel

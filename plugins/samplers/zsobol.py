@@ -7,6 +7,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import params
+from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins.samplers.common import (
     BLOCKS, IMAGE, PERMUTE, SCRAMBLE_X, SCRAMBLE_Y, Base2PairSampler, isqrt_exact, log2_ceil,
     mix32, morton_2d, owen_scramble_2, sample_key, sobol_02_owen, unit_key)
@@ -77,6 +78,7 @@ def permute_digits(m, shifts: list[int], odd_bit: bool, salt):
     return index
 
 
+@documented("lab_zsobol")
 class LabZSobolSampler(Base2PairSampler):
     r"""Blue-noise Z-ordered Sobol sampler (:monosp:`lab_zsobol`)
 
@@ -107,15 +109,7 @@ class LabZSobolSampler(Base2PairSampler):
     would get complementary blocks in every dimension at once, and the error
     would be less blue at low sample counts.
 
-    =============== ====== =====================================================
-    sample_count    int    Samples per pixel, >= 1; powers of two keep each
-                           pixel a full net (a warning otherwise) (Default: 4)
-    width           int    Width of the rendered pixel block (the film, or its
-                           crop window). 0 = take the shape from the film
-                           (nothing to set: see below) (Default: 0)
-    seed            int    Base seed, added to the render seed (Default: 0)
-    =============== ====== =====================================================
-
+    A ``sample_count`` that is a power of two keeps each pixel a full net (a warning otherwise).
     Any film works: square or not, crop windows, odd sizes (33x17, 1x64).
     Mitsuba tells a sampler only how many lanes it renders, so the film is bound
     to its sampler before the render (``layout.bind_film_layout``): every render

@@ -283,31 +283,29 @@ def test_params_module_needs_no_mitsuba():
 
 
 # ---------------------------------------------------------------------------
-# The docstring tables agree with the declarations
+# Each plugin's docstring ends with its declared parameters, and its source holds no table
 # ---------------------------------------------------------------------------
-def _doc_default(value) -> str:
-    if isinstance(value, bool):
-        return str(value).lower()
-    if isinstance(value, str):
-        return f"``{value}``"
-    special = {2.0 / 3.0: "2/3", 1 << 21: "2^21"}
-    if value in special:
-        return special[value]
-    if isinstance(value, float) and value.is_integer():
-        return str(int(value))
-    return str(value)
-
-
-@pytest.mark.parametrize("plugin", ("lab_mis", "lab_photon") + LAB_SAMPLERS)
-def test_docstring_tables_state_the_declared_defaults(plugin):
+@pytest.mark.parametrize("plugin", params.lab_plugins())
+def test_help_shows_every_declared_parameter_with_its_default(plugin):
     import re
 
-    cls = type(mi.load_dict({"type": plugin}))
-    doc = cls.__doc__
-    kinds = {int: "int", float: "float", bool: "bool", str: "string"}
-    for p in cls.PARAMETERS:
-        row = re.search(rf"^\s*{p.name}\s+(\w+)\s", doc, re.MULTILINE)
-        assert row, f"{plugin}: {p.name} missing from the docstring table"
-        assert row[1] == kinds[p.kind], p.name
-        default = re.search(r"\(Default: (.+?)[):]", doc[row.end():], re.DOTALL)
-        assert default and default[1] == _doc_default(p.default), (p.name, default and default[1])
+    from mitsuba_lab.plugins.param_docs import default_text, type_name
+
+    doc = type(mi.load_dict({"type": plugin})).__doc__
+    table = doc.split("Parameters (declared in ``plugins/params.py``):", 1)[1]
+    for p in params.declared(plugin):
+        row = re.search(rf"^{p.name} +(\w+) +(.*)$", table, re.MULTILINE)
+        assert row and row[1] == type_name(p), (plugin, p.name)
+        flat = " ".join(table[row.start():].split())
+        default = re.search(r"default: ``(.*?)``\)", flat)
+        assert default and default[1] == (default_text(p) or "empty"), (plugin, p.name)
+
+
+def test_no_plugin_source_writes_a_parameter_table_of_its_own():
+    """The declarations are the one source: a hand-written table would drift from them."""
+    import re
+
+    from mitsuba_lab.commands.plugin_text import docstrings
+
+    rule = re.compile(r"^\s*=+( +=+)+\s*$", re.MULTILINE)
+    assert not [name for name, doc in docstrings().items() if rule.search(doc)]

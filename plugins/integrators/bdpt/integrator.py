@@ -8,6 +8,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import interrupts
+from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins.integrators.common import spawn, spectral
 from mitsuba_lab.plugins.integrators.common.aim import AimedEmission
 from mitsuba_lab.plugins.integrators.common.counters import RayCounters
@@ -34,6 +35,7 @@ DEPTH_UNBOUNDED = 0xFFFFFFFF
 FIRST_GUESS_VERTICES = 3.0
 
 
+@documented("lab_bdpt")
 class LabBDPTIntegrator(mi.SamplingIntegrator):
     r"""Bidirectional path tracing (:monosp:`lab_bdpt`)
 
@@ -48,63 +50,23 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     quantities carried along both subpaths (Georgiev 2012, "Implementing vertex connection and
     merging"; ``weights.py``), with delta lobes and delta lights handled exactly. Unbiased.
 
-    ============= ====== ========================================================
-    max_depth     int    Longest path in segments, -1 = unbounded, >= 1 otherwise
-                         (1: emitters seen directly) (Default: -1)
-    rr_depth      int    Depth at which Russian roulette starts, on both subpaths,
-                         >= 1 (Default: 5)
-    hide_emitters bool   Mitsuba's meaning: camera rays pass through area emitters
-                         (and so do light tracing's rays to the sensor); emitters
-                         are not seen directly by any strategy (Default: false)
-    heuristic     string ``balance`` | ``power`` (Default: ``power``)
-    beta          float  Exponent of the power heuristic, > 0 (Default: 2)
-    strategies    string ``all``, ``camera`` (s <= 1: unidirectional path tracing
-                         with MIS, lab_mis's estimator), ``light`` (t = 1: light
-                         tracing alone), or kinds from ``hit`` (s = 0), ``nee``
-                         (s = 1), ``light`` (t = 1), ``connect`` (s, t >= 2)
-                         joined by '+'. The weights are renormalised over the
-                         enabled ones, so a subset is unbiased for the light it
-                         can reach. (Default: ``all``)
-    light_paths   float  Light subpaths traced per camera subpath, in [1/64, 64]:
-                         light tracing's share of the work. Above 1, camera
-                         sample i connects to light subpath i and the others
-                         add t = 1 splats only (and store no vertices); below
-                         1, camera samples share light subpaths (sample i uses
-                         subpath i mod N). The weights count each strategy's
-                         samples, so any value is unbiased; raise it where
-                         light tracing carries the image (light seen through
-                         glass). (Default: 1)
-    max_vertices  int    Most light-subpath vertices held at once (>= 1024;
-                         ``vertices.vertex_bytes``: 100 bytes each, 164 where a
-                         BSDF is anisotropic or has a normal or bump map). A render whose light subpaths need
-                         more is split into passes of fewer samples per pixel;
-                         when even one sample per pixel does not fit, a pass
-                         traces fewer light subpaths than camera subpaths and
-                         camera sample i uses light subpath i mod N (still
-                         unbiased; neighbouring passes share nothing).
-                         (Default: 2^21, 200-328 MiB)
-    only_strategy string ``s,t``: the image of strategy (s, t) alone, with its
-                         MIS weight (Veach's per-strategy images: over all (s, t)
-                         the images sum to the full one). Empty: all strategies.
-                         (Default: empty)
-    aim           float  Share in [0, 1) of an area light's emitted directions
-                         drawn in the cones towards the bounding spheres of the
-                         ``aim_at`` shapes (Jensen's projection map in its
-                         simplest form; ``aim.py``): more light subpaths through
-                         the glass that focuses a caustic. Unbiased: emission
-                         weights and MIS use the mixture's density. In a scene
-                         without aim_at shapes the light emits as Mitsuba's
-                         does, same random numbers (Default: 0.5; 0:
-                         Mitsuba's cosine-weighted emission everywhere)
-    aim_at        string ``specular`` (every shape whose BSDF has only delta
-                         lobes) or shape ids joined by ``,`` (Default: ``specular``)
-    count_rays    bool   Count rays by kind, read with ``ray_counts()``: camera,
-                         extension (camera subpaths' BSDF-sampled rays), shadow
-                         (next-event estimation), connection (the shadow rays of
-                         s, t >= 2 connections), light (rays of light subpaths)
-                         and sensor (light tracing's rays to the sensor; one per
-                         test, even through hidden emitters). (Default: true)
-    ============= ====== ========================================================
+    ``strategies`` subsets renormalise the weights over the enabled strategies, so a subset is
+    unbiased for the light it can reach; ``only_strategy`` renders one strategy's weighted
+    image (Veach's per-strategy images: over all (s, t) they sum to the full one).
+    ``light_paths`` above 1 lets camera sample i connect to light subpath i while the others
+    add t = 1 splats only (and store no vertices); below 1 camera samples share light
+    subpaths (sample i uses subpath i mod N). The weights count each strategy's samples, so
+    any value is unbiased; raise it where light tracing carries the image (light seen through
+    glass). ``max_vertices`` bounds the light-subpath vertices held at once (bytes per vertex:
+    ``vertices.vertex_bytes``, more where a BSDF is anisotropic or has a normal or bump map):
+    a render whose light subpaths need more is split into passes of fewer samples per pixel,
+    and when even one sample per pixel does not fit a pass traces fewer light subpaths than
+    camera subpaths, sample i using subpath i mod N (still unbiased; passes share nothing).
+    ``aim`` draws a share of an area light's directions towards the bounding spheres of the
+    ``aim_at`` shapes (``aim.py``), with emission weights and MIS using the mixture's
+    density; in a scene without such shapes the light emits as Mitsuba's does, with the same
+    random numbers. With ``hide_emitters`` light tracing's rays to the sensor pass through
+    area emitters too.
 
     Handles: area lights (any shape, textured or not), point, spot and directional lights,
     ``projector`` (constant or textured ``irradiance``: emitted by its texture through its

@@ -10,6 +10,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins import interrupts
 from mitsuba_lab.plugins import params
+from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins.integrators.common import spawn
 from mitsuba_lab.plugins.integrators.common.aim import AimedEmission
 from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
@@ -98,6 +99,7 @@ class PhotonStats:
         return d
 
 
+@documented("lab_photon")
 class LabPhotonIntegrator(mi.SamplingIntegrator):
     r"""Progressive photon mapping (:monosp:`lab_photon`)
 
@@ -128,51 +130,16 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     through (its delta lobes, sampled alone). Photons carry Veach's shading-normal
     (adjoint) correction (``tracer.py``).
 
-    ================ ====== ======================================================
-    photons_per_pass int    Photons emitted per pass, N >= 1 (Default: 100000)
-    passes           int    Passes P >= 1 (Default: 16). Each pass renders ``spp``
-                            camera samples per pixel, so an image costs
-                            P x spp camera samples per pixel.
-    alpha            float  Radius reduction, 0 < alpha < 1 (Default: 2/3)
-    radius           float  First-pass radius r_1 in scene units; 0 = automatic:
-                            one pixel's width at the first surfaces the camera
-                            sees (the median over a grid of pixels,
-                            ``footprint.py``), so it follows the film and the
-                            sensor. (Default: 0)
-    max_depth        int    Longest path in segments (camera + light subpath),
-                            -1 = unbounded, otherwise >= 1 (0 is refused: the
-                            camera needs one segment to reach a photon; the
-                            path tracers accept 0) (Default: -1)
-    rr_depth         int    Depth at which Russian roulette starts, on both
-                            subpaths, >= 1 (Default: 5)
-    direct           string ``photons``: all light at the camera vertex from the
-                            density estimate (photons stored from the first hit
-                            on). ``nee``: direct light by next-event estimation
-                            + BSDF sampling with the power heuristic; photons only
-                            for light that has bounced at least once (indirect
-                            light and caustics). (Default: ``nee``)
-    max_records      int    Most photon records held at once (>= 1024). A pass
-                            whose photons would need more is traced and gathered
-                            in batches with the same camera samples, which gives
-                            the same estimate. (Default: 2^21: 52 bytes each
-                            in RGB, 56 in spectral variants,
-                            ~110 MB, held up to three times during a batch:
-                            trace buffer, compacted and sorted copies)
-    hide_emitters    bool   Mitsuba's meaning: camera rays pass through area
-                            emitters to what lies behind them, and where they see
-                            only the environment the pixel is invalid (black,
-                            alpha 0) (Default: false)
-    aim              float  Share in [0, 1) of an area light's photons emitted
-                            towards the bounding spheres of the ``aim_at``
-                            shapes, their power scaled by the mixture's
-                            density, as lab_bdpt's light subpaths; nothing changes
-                            in a scene without aim_at shapes (Default: 0.5)
-    aim_at           string ``specular`` or shape ids joined by ``,``
-                            (Default: ``specular``)
-    ================ ====== ======================================================
-
     Pass seeds come from the render's ``seed``: different seeds give independent
-    photon maps and camera samples.
+    photon maps and camera samples. Each pass renders ``spp`` camera samples per pixel, so an
+    image costs ``passes`` x spp of them. ``max_depth = 0`` is refused (the camera needs one
+    segment to reach a photon; the path tracers accept it). ``direct = nee`` takes the direct
+    light at the camera vertex by next-event estimation and BSDF sampling under the power
+    heuristic, the photons only what has bounced at least once (indirect light, caustics);
+    ``photons`` takes all of it from the density estimate. A record takes 52 bytes in RGB and
+    56 in spectral variants, held up to three times during a batch (trace buffer, compacted
+    and sorted copies): the default ``max_records`` is about 110 MB; a pass needing more is
+    traced and gathered in batches with the same camera samples (the same estimate).
 
     Handles: any emitter with ``sample_ray`` (area, point, spot, directional,
     environment), chosen with probability proportional to its power; smooth, delta

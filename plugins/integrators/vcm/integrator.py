@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import drjit as dr
 import mitsuba as mi
 
+from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins.integrators.bdpt.integrator import LabBDPTIntegrator
 from mitsuba_lab.plugins.integrators.bdpt.passes import BdptStats, Passes
 from mitsuba_lab.plugins.integrators.bdpt.techniques import Technique
@@ -148,6 +149,7 @@ class VcmPasses(Passes):
         return grid
 
 
+@documented("lab_vcm")
 class LabVCMIntegrator(LabBDPTIntegrator):
     r"""Vertex connection and merging (:monosp:`lab_vcm`)
 
@@ -167,116 +169,6 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     iterations the image is biased wherever merging has weight (``bpt``, ``lt`` and ``pt``
     do not merge and are unbiased).
 
-    =============== ====== ========================================================
-    mode            string ``vcm`` (every technique), ``bpt`` (connections only:
-                           lab_bdpt's estimator), ``bpm`` (emitter hits and merging
-                           at every camera vertex that merges, with MIS among them:
-                           bidirectional photon mapping), ``ppm`` (merging at the
-                           first camera vertex with a smooth lobe, delta lobes
-                           followed, emitters seen along them; no MIS: progressive
-                           photon mapping), ``lt`` (light tracing),
-                           ``pt`` (emitter hits and next-event estimation: lab_mis's
-                           estimator). (Default: ``vcm``)
-    radius          float  r_1, the first iteration's merging radius in scene
-                           units; 0 = one pixel's width at the first surfaces
-                           the camera sees (``footprint.py``), as lab_photon
-                           (Default: 0)
-    alpha           float  Radius schedule r_i = r_1 i^((alpha - 1) / 2), in (0, 1)
-                           (Default: 0.75)
-    light_paths     float  Light subpaths per camera subpath in each iteration, in
-                           [1/64, 64]: every one is stored, merged with and splats
-                           its light tracing; camera subpath i connects to light
-                           subpath i. More of them make merging's estimate less
-                           noisy for the same camera work; below 1 camera
-                           subpaths of an iteration share them (i mod N, N a
-                           multiple of a pass's iterations), and the light pass,
-                           grid and merges cost less (Default: 1)
-    kernel          string Merging's density kernel over the disc of radius r_i:
-                           ``epanechnikov`` (2 / pi) (1 - d^2 / r_i^2) / r_i^2, as
-                           lab_photon, or ``constant`` 1 / (pi r_i^2), as SmallVCM.
-                           Epanechnikov's blur costs 2/3 the bias for 4/3 the
-                           variance, a lower error where merging carries the
-                           light; MIS counts merging with the disc's area
-                           either way (Default: ``epanechnikov``)
-    merge_first     bool   Merge at the camera's first vertex too (modes vcm and
-                           bpm), as Georgiev et al.'s VCM does. false: no
-                           merging there, as a technique or in any other
-                           technique's MIS sum, so the light arriving at what
-                           the camera sees directly comes from light tracing,
-                           NEE and connections. The merges of one iteration
-                           share its light vertices, and at the first vertex
-                           they add variance that light tracing does not
-                           (without them: equal or lower error on every scene of
-                           experiments/vcm.toml). ppm always
-                           merges there (Default: false)
-    merge_vertices  string ``all``: every stored light vertex merges;
-                           ``caustic``: only those reached through a delta lobe
-                           (a light subpath's vertex right after a specular
-                           bounce, Jensen's caustic photons). Merging at x_i is
-                           then a technique only where x_{i-1} is a delta-lobe
-                           vertex, in every MIS sum too, so the image stays
-                           consistent; paths without one get their light from
-                           the connections, NEE, emitter hits and light tracing,
-                           and the grid holds and merges fewer vertices, so
-                           scenes without caustics skip most merging. Mode vcm (Default: ``all``)
-    connections     string ``all``: a camera vertex connects to every stored
-                           vertex of its light subpath (lab_bdpt); ``one``: to
-                           one of the n it may use, picked uniformly and counted
-                           n times (unbiased), with the MIS weights counting
-                           each connection technique 1 / L times per camera
-                           vertex (L: stored vertices per light subpath, from
-                           the passes so far). Modes vcm and bpt
-                           (Default: ``all``)
-    pilot           bool   Efficiency-aware choice for the whole image (modes
-                           vcm and bpt): a pilot (4 renders each with every
-                           technique and with path tracing alone, spp / 128
-                           iterations each, at least 4; one 4x longer of path
-                           tracing; with light_paths_max, one more of every
-                           technique) estimates each choice's relative
-                           variance and cost per iteration, and the render
-                           is the lowest's: lab_mis's (path tracing alone,
-                           mode pt's estimator; the pilot's path tracing
-                           averaged in; it must win by 0.8x) or every
-                           technique's (``selection``; Default: true in mode
-                           vcm, false in the others)
-    light_paths_max float  With pilot: the most light subpaths per camera
-                           subpath it may choose, light_paths times a power
-                           of two up to it (more pay where light tracing and
-                           merging carry the image, as through glass); 0 =
-                           light_paths only (Default: 16 with the pilot, else 0)
-    count_rays      bool   Count rays as lab_bdpt does (``ray_counts()``), and
-                           under ``merge`` the light vertices merging's grid
-                           lookups read (reads, not rays). With
-                           ``pilot``, the pilot's rays and those of the render
-                           it chose are counted too (Default: true)
-    pilot_costs     string With pilot, an iteration's cost: ``counted``, the
-                           work the pilot renders count by kind (camera,
-                           extension and shadow rays, connections, merge
-                           lookups, light-subpath and sensor rays, stored
-                           light vertices, passes) times the ``cost_*``
-                           parameters, so the same scene, settings, seed and
-                           variant make the same choice on any machine, busy
-                           or not; ``measured``, the pilot renders' wall-clock
-                           times (the choice then depends on the machine's
-                           load). (Default: ``counted``)
-    cost_*          float  Nanoseconds per unit of each kind of counted work
-                           (``cost_camera_ray``, ``cost_extension_ray``,
-                           ``cost_shadow_ray``, ``cost_connection``,
-                           ``cost_merge``: a light vertex a merge reads,
-                           ``cost_light_ray``, ``cost_sensor_ray``,
-                           ``cost_light_vertex``, ``cost_pass``,
-                           ``cost_path_ray`` and ``cost_path_shadow_ray``:
-                           path tracing alone's). Defaults: fitted once by
-                           ``benchmarks/bench_pilot_costs.py``
-                           (``params.PILOT_WORK_COSTS``)
-    max_depth, rr_depth, hide_emitters, heuristic, beta, max_vertices, aim, aim_at: as
-                           lab_bdpt (``aim``: the light subpaths that merge too;
-                           Default: 0: where merging carries the direct light,
-                           modes ppm and bpm, only the unaimed 1 - aim of the
-                           light subpaths bring it, a noisier image away from
-                           the aimed shapes).
-    =============== ====== ========================================================
-
     A light vertex merges with a camera vertex when within r_i, facing the same way (normals
     within ~37 degrees, as lab_photon) and when the merged path is no longer than
     ``max_depth``. Where light tracing or connections compete with merging, a camera vertex's
@@ -291,6 +183,27 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     pilot's time, whether it chose path tracing alone, the light subpaths it chose, each
     choice's score (relative variance x seconds per iteration) and ``pilot_costs``; with counted
     costs the pilot's counts are in ``pilot.work`` (every technique's and path tracing's).
+
+    Modes: ``bpm`` is bidirectional photon mapping (emitter hits and merging at every camera
+    vertex that merges, with MIS among them); ``ppm`` is progressive photon mapping (merging at
+    the first camera vertex with a smooth lobe, delta lobes followed and emitters seen along
+    them, no MIS); ``bpt`` is lab_bdpt's estimator, ``pt`` lab_mis's. ``light_paths`` light
+    subpaths per camera subpath are all stored, merged with and splatted; more of them make
+    merging's estimate less noisy for the same camera work, and below 1 the camera subpaths of
+    an iteration share them (i mod N). MIS counts merging with the disc's area whatever the
+    ``kernel``. Without ``merge_first`` the merges at the first vertex are out of every MIS
+    sum: they share an iteration's light vertices and add variance that light tracing does
+    not (equal or lower error without them on every scene of experiments/vcm.toml).
+    ``merge_vertices = caustic`` makes merging at x_i a technique only where x_{i-1} is a
+    delta-lobe vertex, in every MIS sum too, so the image stays consistent and scenes without
+    caustics skip most merging. ``connections = one`` picks one of the n vertices a camera
+    vertex may connect to uniformly and counts it n times (unbiased). The pilot (on by default
+    in mode vcm; ``pilot.py``, ``selection.py``) makes a few short renders with every technique
+    and with path tracing alone (their sizes: ``selection.pilot_iterations``), path tracing's
+    averaged into the image when chosen, which it is only when it wins by a margin
+    (``selection.PATH_TRACING_MARGIN``); the ``cost_*`` defaults were fitted by
+    ``benchmarks/bench_pilot_costs.py``. With ``aim`` in modes ppm and bpm, only the unaimed
+    share of the light subpaths brings the direct light that merging carries.
 
     .. code-block:: python
 

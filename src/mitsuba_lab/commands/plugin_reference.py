@@ -13,7 +13,6 @@ from .plugin_text import allowed_text, default_text, docstrings, summaries, type
 REFERENCE_NAME = "README.md"
 
 _MONOSP = re.compile(r"\s*\(:monosp:`([^`]*)`\)")
-_RULE = re.compile(r"^=+( +=+)+\s*$")        # a reStructuredText simple table's rule
 
 
 def reference_path() -> str:
@@ -63,23 +62,14 @@ def _cell(text: str) -> str:
 
 
 def _prose(doc: str) -> list[str]:
-    """A docstring as Markdown: the plugin's name mark dropped from the title line, parameter
-    tables left out (the declared table replaces them), code blocks fenced."""
+    """A docstring as Markdown: the plugin's name mark dropped from the title line, code blocks
+    fenced (the source's docstrings hold no parameter table: the declared one follows)."""
     lines = doc.strip().splitlines()
     if lines:
         lines[0] = _MONOSP.sub("", lines[0]).rstrip(".") + "."
-    out, rules, i = [], 0, 0
+    out, i = [], 0
     while i < len(lines):
         line = lines[i]
-        if _RULE.match(line):                     # a table: three rules (top, under the header or not, bottom)
-            rules += 1
-            i += 1
-            if rules == 3 or (rules == 2 and i < len(lines) and not lines[i].strip()):
-                rules = 0
-            continue
-        if rules:
-            i += 1
-            continue
         if line.strip().startswith(".. code-block::"):
             language = line.split("::", 1)[1].strip()
             i += 1
@@ -97,14 +87,4 @@ def _prose(doc: str) -> list[str]:
         i += 1
     while out and not out[-1].strip():
         out.pop()
-    return _squeeze(out)
-
-
-def _squeeze(lines: list[str]) -> list[str]:
-    """At most one blank line in a row (a table left out leaves two)."""
-    out = []
-    for line in lines:
-        if not line.strip() and out and not out[-1].strip():
-            continue
-        out.append(line)
     return out

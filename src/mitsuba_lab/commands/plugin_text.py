@@ -1,41 +1,15 @@
-"""Text of the lab plugins read without importing them: a declared parameter's type,
-default and allowed values (``plugins/params.py``), and each plugin's docstring (parsed from
-its source, so no Mitsuba variant is needed)."""
+"""Text of the lab plugins read without importing them: each plugin's docstring, parsed from
+its source, so no Mitsuba variant is needed (a declared parameter's type, default and allowed
+values as text are ``plugins/param_docs.py``'s, re-exported here)."""
 from __future__ import annotations
 
 import ast
 import os
 import re
 
-TYPE_NAMES = {int: "int", float: "float", bool: "bool", str: "string"}
+from ..plugins.param_docs import allowed_text, default_text, show, type_name  # noqa: F401
+
 _MONOSP = re.compile(r"\s*\(:monosp:`[^`]*`\)\s*$")
-
-
-def type_name(param) -> str:
-    return TYPE_NAMES.get(param.kind, getattr(param.kind, "__name__", str(param.kind)))
-
-
-def show(value) -> str:
-    """A default as a user writes it: true/false, 2 not 2.0, 0.666667, strings bare."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return f"{value:g}"
-    return str(value)
-
-
-def default_text(param) -> str:
-    return show(param.default)
-
-
-def allowed_text(param) -> str:
-    """The values the parameter takes: its choices, its constraint, or its type."""
-    if param.choices:
-        return " | ".join(param.choices)
-    if param.expected:
-        return param.expected
-    return {int: "an integer", float: "a number", bool: "true | false", str: "a string"}.get(
-        param.kind, type_name(param))
 
 
 def summaries() -> dict[str, str]:
