@@ -100,7 +100,8 @@ def references(path, name, args, defines, traits):
     twin_name, twin_path, twin_defines = found
     twin_reference, twin_cached = check_reference(twin_path, args, twin_defines, integrator)
     twin_ref, twin_row = reference_summary(twin_reference, args.firefly_k)
-    twin = Twin.compare(twin_name, twin_ref["mean"], twin_ref["mean_variance"], ref["mean"], ref["mean_variance"])
+    twin = Twin.compare(twin_name, twin_ref["mean"], twin_ref["mean_variance"], ref["mean"], ref["mean_variance"],
+                        integrator)
     rows[0].update(ref_mean=twin.mean, z=twin.z_path, z_twin=twin.z_path)
     rows.append({"scene": name, "strategy": f"{integrator} (twin)", "status": "twin reference", **twin_row,
                  "ref_mean": twin.mean, "note": f"{integrator} on the unscaled twin {twin_name}: "

@@ -286,18 +286,21 @@ def judge_consistent(rungs: list[BiasRung], mean: float) -> Verdict:
 
 @dataclass
 class Twin:
-    """The scene's `path` reference against `path` on its unscaled twin."""
+    """The scene's reference (Mitsuba's `path`, or `volpathmis` in media) against the same
+    integrator on its unscaled twin."""
     name: str                       # as the scene declares it
     mean: float                     # the twin reference's mean luminance
     variance: float                 # and the variance of that mean
-    z_path: float                   # the scene's path against the twin
-    rel_path: float                 # (path mean / twin mean) - 1
+    z_path: float                   # the scene's reference against the twin
+    rel_path: float                 # (reference mean / twin mean) - 1
+    integrator: str = "path"        # the reference integrator
 
     @staticmethod
     def compare(name: str, twin_mean: float, twin_variance: float, path_mean: float,
-                path_variance: float) -> "Twin":
+                path_variance: float, integrator: str = "path") -> "Twin":
         z = metrics.z_score(path_mean, path_variance, 1, twin_mean, twin_variance, 1)
-        return Twin(name, twin_mean, twin_variance, z, path_mean / twin_mean - 1 if twin_mean else math.inf)
+        return Twin(name, twin_mean, twin_variance, z, path_mean / twin_mean - 1 if twin_mean else math.inf,
+                    integrator)
 
     def path_off(self, z_max: float) -> bool:
         return not abs(self.z_path) <= z_max
@@ -313,7 +316,7 @@ def offsets_note(bbox_min, bbox_max) -> str:
 
 
 def path_off_note(twin: Twin, bbox_min, bbox_max) -> str:
-    return (f"Mitsuba's path is off on this scene: {twin.rel_path:+.1%} against its render of the "
+    return (f"Mitsuba's {twin.integrator} is off on this scene: {twin.rel_path:+.1%} against its render of the "
             f"unscaled twin {twin.name} (z {twin.z_path:+.1f}); the two differ only in scale, so "
             f"this is floating-point precision: ray offsets at this scale ({offsets_note(bbox_min, bbox_max)}). "
             f"The lab strategies are judged against the twin.")
@@ -324,7 +327,7 @@ def twin_status(verdict: Verdict, z_lab_path: float, rel_lab_twin: float, twin: 
     """(status, note) of a strategy on a scene whose `path` is off (``Twin.path_off``);
     ``verdict`` judges the strategy against the twin."""
     if verdict.kind == "ok":
-        return "ok", (f"agrees with the unscaled twin ({rel_lab_twin:+.1%}); Mitsuba's path is off here "
+        return "ok", (f"agrees with the unscaled twin ({rel_lab_twin:+.1%}); Mitsuba's {twin.integrator} is off here "
                       f"({twin.rel_path:+.1%}, ray offsets), not the lab's estimator")
     if verdict.kind == "heavy tail":
         return "WARN: heavy tail", verdict.summary + " (judged against the unscaled twin)"

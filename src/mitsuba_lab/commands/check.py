@@ -33,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "and ppm, lab_photon) are judged by their bias^2 shrinking as the budget grows. A scene that declares an "
         "unscaled twin (<default name=\"twin\" .../>) is also compared with path on the twin.")
     parser.add_argument("scenes", nargs="*", metavar="SCENE",
-                        help="Mitsuba XML scene files (default: every scenes/stiff/*.xml)")
+                        help="Mitsuba XML scene files (default: every scenes/stiff/*.xml and scenes/stiff/media/*.xml)")
     parser.add_argument("--res", type=resolution_arg, default=32,
                         help="film size (default: 32): N is passed as the scene's 'res' parameter when "
                              "the scene declares <default name=\"res\" .../>, otherwise it sets the first "
@@ -71,8 +71,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def default_scenes() -> list[str]:
-    """Every scenes/stiff/*.xml of the checkout."""
-    return sorted(glob.glob(os.path.join(project_root(), "scenes", "stiff", "*.xml")))
+    """Every scenes/stiff/*.xml of the checkout, then the media cases of scenes/stiff/media/."""
+    stiff = os.path.join(project_root(), "scenes", "stiff")
+    return sorted(glob.glob(os.path.join(stiff, "*.xml"))) + sorted(glob.glob(os.path.join(stiff, "media", "*.xml")))
 
 
 def run(args, out) -> int:
