@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 import pytest
 
-from mitsuba_lab import theory, theory_media
+from mitsuba_lab import metrics, theory, theory_media
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +32,7 @@ def test_quick_run_matches_every_prediction(quick_rows):
 @pytest.mark.slow
 def test_rows_are_well_formed(quick_rows):
     keys = {"problem", "quantity", "predicted", "measured", "tolerance", "note"}
-    assert {row["problem"] for row in quick_rows} == {"P1", "P2", "P3", "P4", "P5", "P6", "P7"}
+    assert {row["problem"] for row in quick_rows} == {"P1", "P2", "P3", "P4", "P5", "P6", "P7", "P8"}
     for row in quick_rows:
         assert set(row) == keys
         assert math.isfinite(row["measured"]) and row["tolerance"] > 0
@@ -245,3 +245,42 @@ def test_theory_uses_the_plugins_mis_weight(monkeypatch):
     w_a, w_b = theory.mis_weights(np.array([0.2]), np.array([0.6]), "power", beta=3.0, n_a=2, n_b=1)
     assert calls == [([0.2], [0.3], "power", 3.0), ([0.3], [0.2], "power", 3.0)]   # scaled by 1/max(n)
     np.testing.assert_allclose(w_a, shared.mis_weight(0.4, 0.6, "power", 3.0))
+
+
+# ------------------------------------------------------------- problem 8 (Metropolis-Hastings)
+def test_problem8_predictions_do_not_depend_on_the_grid():
+    from mitsuba_lab import theory_mlt
+
+    coarse = [theory_mlt.p8_predicted(s, l, cells=250) for s, l in theory_mlt.P8_MIXING]
+    fine = [theory_mlt.p8_predicted(s, l, cells=theory_mlt.P8_GRID) for s, l in theory_mlt.P8_MIXING]
+    for a, b in zip(coarse, fine):
+        assert abs(a["tau"] / b["tau"] - 1) < 2e-3 and abs(a["acceptance"] - b["acceptance"]) < 1e-3
+    # the kernel's rows are probabilities and the target is its stationary law (detailed balance)
+    x, pi, P = theory_mlt.p8_kernel(0.05, 0.3, 200)
+    assert np.allclose(P.sum(axis=1), 1) and (P >= 0).all()
+    assert np.allclose(pi @ P, pi, atol=1e-12)
+
+
+def test_problem8_catches_a_chain_that_forgets_its_rejections():
+    """Power: a chain whose rejected steps are not counted as repeats of the current state (a
+    common mistake: only accepted states averaged) weights each state by its acceptance
+    probability, which differs between the narrow and the wide peak; its mean of g misses
+    E_pi[g] by many times the tolerance of P8's mean row, which the right chain meets."""
+    from mitsuba_lab import theory_mlt
+    from mitsuba_lab.theory_rows import TOL_SE
+
+    chains, steps, sigma = 2000, 200, 0.2
+    rng = np.random.default_rng(3)
+    x = theory_mlt._sample_target(rng, chains)
+    g_sum, accepted = np.zeros(chains), np.zeros(chains)
+    for _ in range(steps):
+        y = (x + sigma * rng.standard_normal(chains)) % 1.0
+        move = rng.random(chains) * theory_mlt.p8_target(x) < theory_mlt.p8_target(y)
+        x = np.where(move, y, x)
+        g_sum += move & (x < 0.5)
+        accepted += move
+    wrong = g_sum / np.maximum(accepted, 1)
+    truth = theory_mlt.p8_predicted(sigma, 0.0, steps)["mean_g"]
+    _, right = theory_mlt.run_chains(np.random.default_rng(4), chains, steps, sigma)
+    assert abs(right.mean() - truth) <= TOL_SE * metrics.standard_error(right)
+    assert abs(wrong.mean() - truth) > 3 * TOL_SE * metrics.standard_error(wrong), (wrong.mean(), truth)

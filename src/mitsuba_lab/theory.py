@@ -1,4 +1,4 @@
-"""Seven worked Monte Carlo problems (toy estimators), with their analytic predictions.
+"""Eight worked Monte Carlo problems (toy estimators), with their analytic predictions.
 
 Each problem predicts a number before measuring it: (1) an RMSE from a single-sample
 variance and its N^-1/2 law, (2) the variance reduction of importance sampling,
@@ -7,7 +7,9 @@ ch. 9), (5) the cost of Russian roulette, (6) transmittance through a heterogene
 medium by delta tracking and by ratio tracking (means, variances, density look-ups),
 (7) single scattering from a point light along a ray in a thin medium by distance
 sampling, equi-angular sampling (Kulla and Fajardo 2012) and their MIS (both in
-:mod:`mitsuba_lab.theory_media`; rows in :mod:`mitsuba_lab.theory_rows`). This module derives the
+:mod:`mitsuba_lab.theory_media`), (8) a Metropolis-Hastings chain on a two-peaked target:
+acceptance rate against step size and the variance inflation of correlated samples
+(:mod:`mitsuba_lab.theory_mlt`; rows in :mod:`mitsuba_lab.theory_rows`). This module derives the
 predictions, runs the estimators with numpy (fixed seeds), measures them
 through :mod:`mitsuba_lab.metrics` so the same metric code the renderer
 experiments use is exercised, and reports both side by side::
@@ -30,6 +32,7 @@ import numpy as np
 
 from . import metrics
 from .theory_media import problem6, problem7
+from .theory_mlt import problem8
 from .theory_rows import FP_TOL, TOL_SE
 from .theory_rows import mean_row as _mean_row
 from .theory_rows import ratio_row as _ratio_row
@@ -61,8 +64,9 @@ CHUNK_ELEMENTS = 1 << 21
 
 # Trials per problem by default, and ~10x fewer when quick.
 _DEFAULT = dict(p1=4000, p2=4000, p3=100_000, p4=3000, p5=2_000_000, p6=1_000_000, p7=1_000_000,
-                var=1_000_000)
-_QUICK = dict(p1=400, p2=400, p3=100_000, p4=1000, p5=200_000, p6=100_000, p7=100_000, var=100_000)
+                p8=4000, var=1_000_000)
+_QUICK = dict(p1=400, p2=400, p3=100_000, p4=1000, p5=200_000, p6=100_000, p7=100_000, p8=1000,
+              var=100_000)
 
 
 # --------------------------------------------------------------------------
@@ -418,17 +422,17 @@ def _problem5(rng, n, value=5.0, q=0.6):
 
 
 def run_all(seed: int = 0, quick: bool = False) -> list[dict]:
-    """Run Problems 1-7 and return one row per predicted quantity.
+    """Run Problems 1-8 and return one row per predicted quantity.
 
     Each row is ``{"problem", "quantity", "predicted", "measured",
     "tolerance", "note"}``. Each problem draws from its own child of
     ``SeedSequence(seed)``, so rows are reproducible and independent of
     problem order. ``quick=True`` uses ~10x fewer trials (for
     CI); the default uses the full trial counts (4000, 4000, 1e5,
-    3000, 2e6, 1e6, 1e6), processed in chunks to bound memory.
+    3000, 2e6, 1e6, 1e6, 4000 chains), processed in chunks to bound memory.
     """
     counts = _QUICK if quick else _DEFAULT
-    problems = (_problem1, _problem2, _problem3, _problem4, _problem5, problem6, problem7)
+    problems = (_problem1, _problem2, _problem3, _problem4, _problem5, problem6, problem7, problem8)
     children = np.random.SeedSequence(seed).spawn(len(problems))
     rows = []
     for problem, child in zip(problems, children, strict=True):

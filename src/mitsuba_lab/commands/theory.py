@@ -1,11 +1,12 @@
-"""``mitsuba-lab theory``: seven worked Monte Carlo problems (P1-P7), predicted against measured (no variant)."""
+"""``mitsuba-lab theory``: eight worked Monte Carlo problems (P1-P8), predicted against measured (no variant)."""
 from __future__ import annotations
 
 
 def add_arguments(parser) -> None:
-    parser.description = ("Run seven toy estimators (uniform MC, importance sampling, cosine "
+    parser.description = ("Run eight toy estimators (uniform MC, importance sampling, cosine "
                           "sampling, MIS weights and MIS, Russian roulette, delta and ratio "
-                          "tracking, equi-angular and distance sampling) and print predicted "
+                          "tracking, equi-angular and distance sampling, a Metropolis-Hastings "
+                          "chain) and print predicted "
                           "against measured values. Exit status 1 when a measurement misses its "
                           "stated tolerance.")
     parser.add_argument("--json", action="store_true",
