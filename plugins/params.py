@@ -165,12 +165,17 @@ LAB_MIS = PATH_TRACER + (
 ) + _media("mis")
 
 #: Aimed emission (``integrators/common/aim.py``): lab_photon, lab_bdpt and lab_vcm. Aiming changes nothing in
-#: a scene without aim_at shapes (the light emits as Mitsuba samples it), so lab_bdpt and lab_photon aim
-#: by default. lab_vcm does not: where merging carries the direct light too (modes ppm and bpm)
-#: only the 1 - aim of the light subpaths that leave unaimed bring it, each with 1 / (1 - aim) the
-#: weight, so away from the targets its image is noisier and heavier-tailed (not biased:
+#: a scene without aim_at shapes (the light emits as Mitsuba samples it, with the same random numbers),
+#: so every one aims by default. lab_vcm's default depends on its mode (``VCM_AIM_DEFAULTS``, set by the
+#: plugin unless ``aim`` is given): 0.9 in mode vcm (vcm.toml's vcm_auto; issue 41's sweep,
+#: experiments/results/2026-11-28-vcm-defaults-2.md), lab_bdpt's 0.5 in bpt and lt (so mode bpt with
+#: no parameter renders lab_bdpt's image), none in ppm and bpm: there merging carries the direct light
+#: too, and only the 1 - aim of the light subpaths that leave unaimed bring it, each with 1 / (1 - aim)
+#: the weight, so away from the targets the image is noisier and heavier-tailed (not biased:
 #: tests/plugins/test_vcm.py::test_merging_aimed_light_vertices_agrees_with_mitsuba_path).
-AIM_DEFAULT, VCM_AIM_DEFAULT = 0.5, 0.0
+AIM_DEFAULT = 0.5
+VCM_AIM_DEFAULTS = {"vcm": 0.9, "bpt": AIM_DEFAULT, "lt": AIM_DEFAULT, "bpm": 0.0, "ppm": 0.0, "pt": 0.0}
+VCM_AIM_DEFAULT = VCM_AIM_DEFAULTS["vcm"]      # (mode vcm's, the default mode: the declared default)
 
 
 def _aim(default: float) -> tuple[Param, ...]:
@@ -281,6 +286,14 @@ PILOT_WORK_COSTS = (
 #: lab_vcm's pilot: the most light subpaths per camera subpath it may choose unless told.
 VCM_LIGHT_PATHS_MAX = 16.0
 
+def _vcm_aim() -> tuple[Param, ...]:
+    """lab_vcm's aim and aim_at: aim's default depends on the mode (``VCM_AIM_DEFAULTS``)."""
+    aim, aim_at = _aim(VCM_AIM_DEFAULT)
+    return (replace(aim, doc=aim.doc + "; unless given: 0.9 in mode vcm, 0.5 in bpt and lt (lab_bdpt's), 0 in bpm "
+                    "and ppm (merging carries the direct light there, and only the unaimed light subpaths bring it)"),
+            aim_at)
+
+
 #: lab_vcm (vertex connection and merging).
 LAB_VCM = (
     Param("mode", str, "vcm", "which techniques: vcm (all), bpt (connections: lab_bdpt), bpm (merging), "
@@ -320,7 +333,7 @@ LAB_VCM = (
           "its light subpath (lab_bdpt), or one, to one of them picked uniformly and counted n times, the MIS "
           "weights counting a connection as 1 / (mean vertices per light subpath)", choices=("all", "one")),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
-                                            "max_vertices")) + _aim(VCM_AIM_DEFAULT) + (
+                                            "max_vertices")) + _vcm_aim() + (
     replace(LAB_BDPT[-1], doc="count rays as lab_bdpt does, and under 'merge' the light vertices merging's grid "
                               "lookups read (ray_counts())"),
 )
