@@ -23,7 +23,7 @@ _ORDER = (
     "integrators", "integrators.common", "integrators.bdpt", "integrators.photon",
     "integrators.vcm", "samplers",
     # needing no variant
-    "integrators.bdpt.techniques", "params", "param_docs", "variant", "interrupts", "integrators.estimator", "integrators.common.kernels",
+    "integrators.bdpt.techniques", "param_types", "params", "param_docs", "variant", "interrupts", "integrators.estimator", "integrators.common.kernels",
     "integrators.common.mis_weight", "integrators.naive", "integrators.nee", "integrators.mis",
     "integrators.photon.estimator", "integrators.bdpt.recursion", "integrators.bdpt.weights", "integrators.bdpt.estimator",
     "integrators.vcm.estimator", "integrators.vcm.selection",

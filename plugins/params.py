@@ -23,88 +23,10 @@ from __future__ import annotations
 
 import difflib
 import math
-import numbers
-from dataclasses import dataclass, replace
-from typing import Any, Callable
+from dataclasses import replace
 
 
-class ParameterError(ValueError):
-    """A lab plugin parameter with a wrong name, type or value (one-line message)."""
-
-
-def _show(value) -> str:
-    """A value as the messages show it: strings quoted, numbers plain."""
-    if isinstance(value, str):
-        return repr(value)
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        return repr(value)
-    if isinstance(value, numbers.Integral):
-        return repr(int(value))
-    return repr(float(value))
-
-
-def _is_bool(value) -> bool:
-    return isinstance(value, bool) or (type(value).__module__ == "numpy" and type(value).__name__ in ("bool_", "bool"))
-
-
-@dataclass(frozen=True)
-class Param:
-    """One declared parameter.
-
-    ``kind``: int, float, bool or str. ``check``: a predicate on the converted value,
-    with ``expected`` the text after "must be" when it fails ("an integer >= 1");
-    ``choices``: the allowed strings. ``doc``: one line for tables and messages.
-    """
-    name: str
-    kind: type
-    default: Any
-    doc: str = ""
-    check: Callable[[Any], bool] | None = None
-    expected: str = ""
-    choices: tuple[str, ...] = ()
-
-    def convert(self, plugin: str, value):
-        """``value`` checked and normalised to ``kind``; ParameterError otherwise."""
-        def fail(text):
-            raise ParameterError(f"{plugin}: parameter '{self.name}' {text}")
-
-        if self.kind is int:
-            if _is_bool(value) or not isinstance(value, numbers.Real):
-                fail(f"expects an integer, got {_show(value)}")
-            if not isinstance(value, numbers.Integral):
-                f = float(value)
-                if not (math.isfinite(f) and f.is_integer()):
-                    fail(f"expects an integer, got {_show(value)}")
-            value = int(value)
-        elif self.kind is float:
-            if _is_bool(value) or not isinstance(value, numbers.Real):
-                fail(f"expects a number, got {_show(value)}")
-            value = float(value)
-        elif self.kind is bool:
-            if not _is_bool(value):
-                fail(f"expects a boolean, got {_show(value)}")
-            value = bool(value)
-        elif self.kind is str:
-            if not isinstance(value, str):
-                fail(f"expects a string, got {_show(value)}")
-            value = str(value)
-        else:  # pragma: no cover - a declaration error
-            raise TypeError(f"{plugin}: parameter '{self.name}' has unsupported kind {self.kind!r}")
-        if self.choices and value not in self.choices:
-            fail(f"must be one of {', '.join(self.choices)}, got {_show(value)}")
-        if self.check is not None and not self.check(value):
-            fail(f"must be {self.expected or 'valid'}, got {_show(value)}")
-        return value
-
-
-def _int_at_least(lo: int) -> dict:
-    return {"check": lambda v: v >= lo, "expected": f"an integer >= {lo}"}
-
-
-def _override(parameters: tuple[Param, ...], *replacements: Param) -> tuple[Param, ...]:
-    """``parameters`` with the entries of the same names replaced, order kept."""
-    by_name = {p.name: p for p in replacements}
-    return tuple(by_name.get(p.name, p) for p in parameters)
+from .param_types import Param, ParameterError, _int_at_least, _override, _show  # noqa: F401 (re-exported)
 
 
 # ---------------------------------------------------------------------------
@@ -165,12 +87,17 @@ LAB_MIS = PATH_TRACER + (
 ) + _media("mis")
 
 #: Aimed emission (``integrators/common/aim.py``): lab_photon, lab_bdpt and lab_vcm. Aiming changes nothing in
-#: a scene without aim_at shapes (the light emits as Mitsuba samples it), so lab_bdpt and lab_photon aim
-#: by default. lab_vcm does not: where merging carries the direct light too (modes ppm and bpm)
-#: only the 1 - aim of the light subpaths that leave unaimed bring it, each with 1 / (1 - aim) the
-#: weight, so away from the targets its image is noisier and heavier-tailed (not biased:
+#: a scene without aim_at shapes (the light emits as Mitsuba samples it, with the same random numbers),
+#: so every one aims by default. lab_vcm's default depends on its mode (``VCM_AIM_DEFAULTS``, set by the
+#: plugin unless ``aim`` is given): 0.9 in mode vcm (vcm.toml's vcm_auto; issue 41's sweep,
+#: experiments/results/2026-11-28-vcm-defaults-2.md), lab_bdpt's 0.5 in bpt and lt (so mode bpt with
+#: no parameter renders lab_bdpt's image), none in ppm and bpm: there merging carries the direct light
+#: too, and only the 1 - aim of the light subpaths that leave unaimed bring it, each with 1 / (1 - aim)
+#: the weight, so away from the targets the image is noisier and heavier-tailed (not biased:
 #: tests/plugins/test_vcm.py::test_merging_aimed_light_vertices_agrees_with_mitsuba_path).
-AIM_DEFAULT, VCM_AIM_DEFAULT = 0.5, 0.0
+AIM_DEFAULT = 0.5
+VCM_AIM_DEFAULTS = {"vcm": 0.9, "bpt": AIM_DEFAULT, "lt": AIM_DEFAULT, "bpm": 0.0, "ppm": 0.0, "pt": 0.0}
+VCM_AIM_DEFAULT = VCM_AIM_DEFAULTS["vcm"]      # (mode vcm's, the default mode: the declared default)
 
 
 def _aim(default: float) -> tuple[Param, ...]:
@@ -207,10 +134,11 @@ LAB_PHOTON = (
     PATH_TRACER[2],                                   # hide_emitters, Mitsuba's meaning
 ) + AIM
 
+
 def _techniques():
     """``integrators.bdpt.techniques``, which parses lab_bdpt's ``strategies`` and
-    ``only_strategy`` (imported when first needed: this module imports nothing of the package
-    when it loads, so tools can read it on its own)."""
+    ``only_strategy`` (imported when first needed: this module imports only ``param_types`` of
+    the package when it loads)."""
     from mitsuba_lab.plugins.integrators.bdpt import techniques
 
     return techniques
@@ -281,6 +209,14 @@ PILOT_WORK_COSTS = (
 #: lab_vcm's pilot: the most light subpaths per camera subpath it may choose unless told.
 VCM_LIGHT_PATHS_MAX = 16.0
 
+def _vcm_aim() -> tuple[Param, ...]:
+    """lab_vcm's aim and aim_at: aim's default depends on the mode (``VCM_AIM_DEFAULTS``)."""
+    aim, aim_at = _aim(VCM_AIM_DEFAULT)
+    return (replace(aim, doc=aim.doc + "; unless given: 0.9 in mode vcm, 0.5 in bpt and lt (lab_bdpt's), 0 in bpm "
+                    "and ppm (merging carries the direct light there, and only the unaimed light subpaths bring it)"),
+            aim_at)
+
+
 #: lab_vcm (vertex connection and merging).
 LAB_VCM = (
     Param("mode", str, "vcm", "which techniques: vcm (all), bpt (connections: lab_bdpt), bpm (merging), "
@@ -320,7 +256,7 @@ LAB_VCM = (
           "its light subpath (lab_bdpt), or one, to one of them picked uniformly and counted n times, the MIS "
           "weights counting a connection as 1 / (mean vertices per light subpath)", choices=("all", "one")),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
-                                            "max_vertices")) + _aim(VCM_AIM_DEFAULT) + (
+                                            "max_vertices")) + _vcm_aim() + (
     replace(LAB_BDPT[-1], doc="count rays as lab_bdpt does, and under 'merge' the light vertices merging's grid "
                               "lookups read (ray_counts())"),
 )
@@ -432,8 +368,27 @@ def _check(plugin: str, given: dict, parameters: tuple[Param, ...], passthrough:
         raise ParameterError(_unknown_message(plugin, unknown, parameters))
     values = {p.name: p.convert(plugin, given[p.name]) if p.name in given else p.default
               for p in parameters}
+    if plugin in DEPENDENT_DEFAULTS:
+        DEPENDENT_DEFAULTS[plugin](values, given)
     extra = {k: v for k, v in given.items() if k in passthrough}
     return values, extra
+
+
+def _vcm_dependent_defaults(values: dict, given) -> None:
+    """lab_vcm's defaults that follow its mode, unless given: the pilot in mode vcm only (mode bpt is
+    lab_bdpt's estimator, the other modes have no choice to make), choosing up to
+    VCM_LIGHT_PATHS_MAX light subpaths; the mode's aim (``VCM_AIM_DEFAULTS``)."""
+    if "pilot" not in given:
+        values["pilot"] = values["mode"] == "vcm"
+    if "aim" not in given:
+        values["aim"] = VCM_AIM_DEFAULTS[values["mode"]]
+    if "light_paths_max" not in given:
+        values["light_paths_max"] = max(VCM_LIGHT_PATHS_MAX, values["light_paths"]) if values["pilot"] else 0.0
+
+
+#: Defaults that depend on other parameters' values, filled in wherever parameters are read (the
+#: plugin's properties and the runner's ``resolve`` alike, so a run records what renders).
+DEPENDENT_DEFAULTS = {"lab_vcm": _vcm_dependent_defaults}
 
 
 def resolve(plugin_type: str, params: dict) -> dict:

@@ -5,9 +5,11 @@
   angular width (perspective, thin lens), or the view's width over the film's (orthographic),
   on a non-square film; it follows the film's resolution. Tolerance 4%: off-axis pixels of a
   20-degree view see the wall a little farther and at a little smaller angle.
-* lab_vcm in mode vcm runs its pilot (counted costs, up to 16 light subpaths) and merges from
-  the camera's second vertex, without aim (``params.VCM_AIM_DEFAULT``); in other modes no pilot; lab_bdpt and lab_photon aim (0.5). A scene without specular shapes renders the same image with and
-  without aim (aiming changes nothing there).
+* lab_vcm in mode vcm runs its pilot (counted costs, up to 16 light subpaths), merges from the
+  camera's second vertex and aims 0.9 of its light subpaths at the specular shapes; in other modes
+  no pilot, and the mode's aim (``params.VCM_AIM_DEFAULTS``: lab_bdpt's 0.5 in bpt and lt, none in
+  bpm and ppm, where merging carries the direct light). lab_bdpt and lab_photon aim 0.5. A scene
+  without specular shapes renders the same image with and without aim (aiming changes nothing there).
 """
 import math
 
@@ -60,12 +62,26 @@ def test_a_view_of_nothing_falls_back_to_the_scenes_size_over_the_films():
     assert pixel_footprint(scene, scene.sensors()[0]) == pytest.approx(4 * math.sqrt(3) / 32, rel=1e-4)
 
 
-def test_lab_vcm_with_no_parameters_pilots_and_merges_after_the_first_vertex():
+def test_lab_vcm_with_no_parameters_pilots_aims_and_merges_after_the_first_vertex():
     settings = make_integrator("lab_vcm", {}).settings()
     assert (settings["mode"], settings["pilot"], settings["light_paths_max"], settings["aim"],
-            settings["merge_first"], settings["pilot_costs"]) == ("vcm", True, 16.0, 0.0, False, "counted")
+            settings["merge_first"], settings["pilot_costs"], settings["radius"]) == \
+        ("vcm", True, 16.0, 0.9, False, "counted", 0.0)
     bpt = make_integrator("lab_vcm", {"mode": "bpt"}).settings()
     assert (bpt["pilot"], bpt["light_paths_max"]) == (False, 0.0)
+    assert {mode: make_integrator("lab_vcm", {"mode": mode}).settings()["aim"]
+            for mode in ("vcm", "bpt", "lt", "bpm", "ppm", "pt")} == \
+        {"vcm": 0.9, "bpt": 0.5, "lt": 0.5, "bpm": 0.0, "ppm": 0.0, "pt": 0.0}
+    # what the runner records (params.resolve) is what the plugin renders with, in every mode
+    from mitsuba_lab.plugins import params
+    for given in ({}, {"mode": "bpt"}, {"mode": "ppm"}, {"mode": "vcm", "pilot": False}, {"light_paths": 32}):
+        resolved = params.resolve("lab_vcm", given)
+        assert {k: resolved[k] for k in ("pilot", "aim", "light_paths_max")} == \
+            {k: make_integrator("lab_vcm", given).settings()[k] for k in ("pilot", "aim", "light_paths_max")}, given
+    assert params.resolve("lab_vcm", {"mode": "bpt"})["aim"] == 0.5
+    # a given aim wins in every mode
+    assert make_integrator("lab_vcm", {"mode": "ppm", "aim": 0.3}).settings()["aim"] == 0.3
+    assert make_integrator("lab_vcm", {"aim": 0.0}).settings()["aim"] == 0.0
     # a pilot given with more light subpaths than the default's maximum chooses from them up
     assert make_integrator("lab_vcm", {"light_paths": 32}).settings()["light_paths_max"] == 32.0
     for plugin in ("lab_bdpt", "lab_photon"):

@@ -12,9 +12,17 @@ the variant.
   scores and renders the same image; with ``pilot_costs = measured`` the same clocks change its
   scores (the fake clocks do reach the pilot). No assertion depends on the real clock.
 
+* lab_vcm with no parameter on the caustic, where its defaults do something: the pilot chooses
+  every technique and the light aims 0.9 of its subpaths at the glass sphere.
+
 The renders run on one Dr.Jit thread: with several, float atomics (light tracing's splats, the
 film) add in the order the threads reach them, so the last bits of a pixel can differ from run
-to run whatever the inputs; one thread fixes that order.
+to run whatever the inputs; one thread fixes that order. Measured (2026-11-28, 32x32, 64 spp,
+seed 7, max_depth 8; one thread against two): lab_vcm's defaults on the caustic and
+light_in_glass and lab_bdpt on the caustic and the Cornell box differ by at most 5.0e-5 (2.7e-6
+relative), and the pilot's scores by up to 4e-4 relative, its choice the same; path tracing alone
+(lab_mis, and lab_vcm's pilot choosing it on the Cornell box) is bit-identical. No test asserts
+identity across thread counts (experiments/results/2026-11-28-vcm-defaults-2.md).
 """
 import time
 
@@ -117,3 +125,22 @@ def test_measured_costs_follow_the_clock(monkeypatch, one_thread):
     scores = {name: choice[2] for name, (choice, _) in runs.items()}
     print(f"measured: {scores}")
     assert len({tuple(sorted((str(k), v) for k, v in s.items())) for s in scores.values()}) > 1
+
+
+def test_the_defaults_where_they_aim_render_the_same_image_twice(one_thread):
+    """lab_vcm with no parameter on the caustic: the pilot (counted costs) and aim 0.9 at the glass
+    sphere; the same instance, the same seed, the same choice, scores and image."""
+    from mitsuba_lab.plugins.integrators.common.aim import AimedEmission
+
+    scene = load_scene(scene_path("caustic.xml"), res=32)      # (at 16x16 the pilot chooses path tracing)
+    integrator = make_integrator("lab_vcm", {"max_depth": 6})
+    assert integrator.settings()["aim"] == 0.9 and AimedEmission(scene, 0.9).enabled
+    runs = []
+    for _ in range(2):
+        image = render(scene, integrator, spp=8, seed=7)
+        stats = integrator.bdpt_stats()
+        runs.append(((stats["chose_path_tracing"], stats["light_paths_chosen"], stats["pilot_scores"]), image))
+    (choice, first), (other, second) = runs
+    print(f"chose {choice[1]:g} light subpaths (path tracing: {choice[0]}), scores {choice[2]}")
+    assert not choice[0] and other == choice
+    assert np.array_equal(first, second), f"max difference {np.abs(first - second).max()}"

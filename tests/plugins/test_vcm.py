@@ -54,10 +54,9 @@ def render(scene, integrator, spp=4, seed=3):
 @pytest.mark.parametrize("name", ["cornell_box.xml", "caustic.xml", "stiff/light_in_glass.xml"])
 def test_modes_without_merging_are_lab_bdpt_and_lab_mis(name):
     scene = load_scene(scene_path(name), res=RES)
-    bdpt = {"max_depth": MAX_DEPTH}
-    same_aim = {**bdpt, "aim": 0.0}                # (lab_vcm's default; lab_bdpt aims by default)
-    pairs = (("bpt", make_integrator("lab_bdpt", same_aim)),
-             ("lt", make_integrator("lab_bdpt", {**same_aim, "strategies": "light"})),
+    bdpt = {"max_depth": MAX_DEPTH}               # (defaults: bpt and lt aim as lab_bdpt does, 0.5)
+    pairs = (("bpt", make_integrator("lab_bdpt", bdpt)),
+             ("lt", make_integrator("lab_bdpt", {**bdpt, "strategies": "light"})),
              ("pt", make_integrator("lab_mis", bdpt)))
     for mode, other in pairs:
         np.testing.assert_allclose(render(scene, vcm(mode=mode)), render(scene, other), rtol=2e-4, atol=1e-5,

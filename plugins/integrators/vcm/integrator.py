@@ -14,7 +14,6 @@ from mitsuba_lab.plugins.integrators.bdpt.passes import BdptStats, Passes
 from mitsuba_lab.plugins.integrators.bdpt.techniques import Technique
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, iteration_sizes
 from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
-from mitsuba_lab.plugins.params import VCM_LIGHT_PATHS_MAX
 
 from .estimator import VertexMerging, merges_first
 from .merging import VertexGrid, table
@@ -202,8 +201,11 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     and with path tracing alone (their sizes: ``selection.pilot_iterations``), path tracing's
     averaged into the image when chosen, which it is only when it wins by a margin
     (``selection.PATH_TRACING_MARGIN``); the ``cost_*`` defaults were fitted by
-    ``benchmarks/bench_pilot_costs.py``. With ``aim`` in modes ppm and bpm, only the unaimed
-    share of the light subpaths brings the direct light that merging carries.
+    ``benchmarks/bench_pilot_costs.py``. ``aim``'s default depends on the mode: 0.9 in vcm,
+    lab_bdpt's 0.5 in bpt and lt, 0 in bpm and ppm, where merging carries the direct light too
+    and only the unaimed share of the light subpaths would bring it (a noisier, heavier-tailed
+    image away from the aimed shapes, not a biased one); aiming changes nothing where no shape
+    is aimed at (experiments/results/2026-11-28-vcm-defaults.md measures the choice).
 
     .. code-block:: python
 
@@ -227,7 +229,6 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                              "merge_first = false does not apply to it")
         #: r_1, the first iteration's merging radius (set by ``render``: ``radius``, or automatic)
         self.first_radius = 0.0
-        self._pilot_defaults(props)
         #: the pilot's choice and the renders it makes (``pilot.Pilot``)
         self.pilot = Pilot(self)
         if self.values["light_paths_max"] and not self.values["pilot"]:
@@ -254,15 +255,6 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                                 connect_one=self.values["connections"] == "one" and Technique.CONNECT in self.techniques,
                                 caustic_merges=caustic_merges, ppm=ppm)
         self.stats = VcmStats()
-
-    def _pilot_defaults(self, props):
-        """Unless given: the pilot in mode vcm only (mode bpt is lab_bdpt's estimator, the other modes
-        have no choice to make), choosing up to VCM_LIGHT_PATHS_MAX light subpaths."""
-        v = self.values
-        if "pilot" not in props:
-            v["pilot"] = v["mode"] == "vcm"
-        if "light_paths_max" not in props:
-            v["light_paths_max"] = max(VCM_LIGHT_PATHS_MAX, v["light_paths"]) if v["pilot"] else 0.0
 
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
