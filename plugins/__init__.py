@@ -21,12 +21,12 @@ import sys
 #: Every module of the package but itself, each after the package modules it imports.
 _ORDER = (
     "integrators", "integrators.common", "integrators.bdpt", "integrators.photon",
-    "integrators.vcm", "samplers",
+    "integrators.vcm", "integrators.mlt", "samplers",
     # needing no variant
     "integrators.bdpt.techniques", "param_types", "params", "param_docs", "variant", "interrupts", "integrators.estimator", "integrators.common.kernels",
     "integrators.common.mis_weight", "integrators.naive", "integrators.nee", "integrators.mis",
     "integrators.photon.estimator", "integrators.bdpt.recursion", "integrators.bdpt.weights", "integrators.bdpt.estimator",
-    "integrators.vcm.estimator", "integrators.vcm.selection",
+    "integrators.vcm.estimator", "integrators.vcm.selection", "integrators.mlt.estimator",
     # variant-bound: what the plugins share
     "scene_traits", "samplers.layout", "integrators.common.spectral",
     "integrators.common.adjoint", "integrators.common.counters", "integrators.common.roulette",
@@ -46,12 +46,14 @@ _ORDER = (
     # the samplers
     "samplers.common", "samplers.halton", "samplers.independent", "samplers.sobol",
     "samplers.stratified", "samplers.zsobol",
+    # lab_pssmlt (its chains read numbers through samplers.common's hash)
+    "integrators.mlt.chain", "integrators.mlt.sampler", "integrators.mlt.integrator",
 )
 #: The modules of ``_ORDER`` that import no Mitsuba variant, not even through another module.
 _VARIANT_FREE = frozenset(_ORDER[:_ORDER.index("scene_traits")])
 #: The modules that register plugins (``mi.register_integrator`` / ``mi.register_sampler``).
 _REGISTERING = ("integrators.path", "integrators.photon.integrator", "integrators.bdpt.integrator",
-                "integrators.vcm.integrator", "samplers.halton", "samplers.independent",
+                "integrators.vcm.integrator", "integrators.mlt.integrator", "samplers.halton", "samplers.independent",
                 "samplers.sobol", "samplers.stratified", "samplers.zsobol")
 
 #: Every module of the package (full names), in import order.

@@ -1,0 +1,28 @@
+"""``lab_pssmlt``'s estimator class: what the planner knows of it without a Mitsuba variant."""
+from __future__ import annotations
+
+from mitsuba_lab.plugins import params as declarations
+from mitsuba_lab.plugins.integrators.estimator import exact_key
+from mitsuba_lab.plugins.integrators.mis import MIS
+
+#: The parameters of the chains (the rest are lab_mis's).
+CHAIN_PARAMETERS = ("chains", "bootstrap", "large_step", "small_step", "sigma")
+
+
+class PSSMLT(MIS):
+    """lab_pssmlt: lab_mis's path tracer (its two MIS weights) driven by Markov chains in primary
+    sample space. A different estimator from lab_mis on every scene that has light (its pixels
+    are correlated, its distribution not lab_mis's), so it is equivalent only to itself."""
+    plugin_name = "lab_pssmlt"
+    PARAMETERS = declarations.LAB_PSSMLT
+    OWN_PARAMETERS = MIS.OWN_PARAMETERS + CHAIN_PARAMETERS
+    SIMPLICITY = 4
+
+    @classmethod
+    def equivalence(cls, traits, params: dict) -> tuple[tuple, str]:
+        if params.get("max_depth") == 0 or not traits.emits_light:
+            extras = tuple(sorted((k, repr(v)) for k, v in params.items()
+                                  if k not in {p.name for p in cls.PARAMETERS}))
+            return ("black", extras), "every pixel is 0 (max_depth 0, or no emitter emits)"
+        return exact_key(cls.plugin_name, {k: v for k, v in params.items() if k != "count_rays"}), \
+            "same parameters (lab_pssmlt)"

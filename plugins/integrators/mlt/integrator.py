@@ -1,0 +1,259 @@
+"""``lab_pssmlt``: the driver (bootstrap, chains, splats, normalisation) and the plugin."""
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import asdict, dataclass, field
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mitsuba_lab.plugins import interrupts
+from mitsuba_lab.plugins.integrators.bdpt import splats
+from mitsuba_lab.plugins.integrators.common.support import render_arguments, warn_if_unsupported
+from mitsuba_lab.plugins.integrators.path import KernelPlan, LabMISIntegrator
+from mitsuba_lab.plugins.scene_traits import SceneTraits
+
+from . import chain
+from .estimator import PSSMLT
+from .sampler import PrimarySampleSampler
+
+#: The most primary-sample dimensions a chain stores (chains x MAX_DIMS x 4 bytes, twice);
+#: a path reading more draws the rest afresh at every step (``chain`` module docstring).
+MAX_DIMS = 256
+
+
+@dataclass
+class MLTStats:
+    """What the last render's chains did (``mlt_stats()``)."""
+    b: float = 0.0                      # the normaliser: mean luminance of the bootstrap's paths
+    b_standard_error: float = 0.0
+    bootstrap: int = 0                  # bootstrap paths
+    bootstrap_nonzero: int = 0          # ... of which carried light (I > 0)
+    dims: int = 0                       # primary-sample dimensions stored per chain
+    dims_read_max: int = 0              # the most any bootstrap path read
+    chains: int = 0
+    steps: int = 0                      # steps of every chain
+    mutations: int = 0                  # chains x steps
+    mutations_per_pixel: float = 0.0
+    acceptance: float = 0.0             # mean acceptance probability over all steps
+    acceptance_quantiles: list = field(default_factory=list)   # per chain: 5%, 50%, 95%
+    accepted_share: float = 0.0         # proposals accepted (the coin's outcomes)
+    large_step_share: float = 0.0       # steps that were large steps
+    large_step_acceptance: float = 0.0  # mean acceptance probability of large steps
+    small_step_acceptance: float = 0.0
+    bootstrap_s: float = 0.0
+    chains_s: float = 0.0
+    seconds_per_mutation: float = 0.0   # chains_s / mutations (with the splats)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+class LabPSSMLTIntegrator(LabMISIntegrator):
+    r"""Primary-sample-space Metropolis light transport (:monosp:`lab_pssmlt`)
+
+    Kelemen, Szirmay-Kalos, Antal and Csonka 2002 ("A simple and robust mutation strategy for the
+    Metropolis light transport algorithm") over lab_mis's path tracer: a path is a function of
+    its primary sample u, the numbers in [0, 1) it reads (the first two choose the film
+    position over the whole crop window, then time, wavelength and aperture where the sensor
+    needs them, then the path loop's). Markov chains over u, one per lane, advance in
+    lock-step; each proposal is traced by the lab_mis path loop, its target I(u) is the
+    luminance of the path's contribution f(u), and each step splats the current and the proposed
+    sample weighted by the acceptance probability (expected-value splatting):
+
+        image = (b / mutations per pixel) sum over steps [(1 - a) f(u) / I(u) + a f(v) / I(v)]
+
+    at their film positions, through the film's reconstruction filter (corrected at the crop's
+    edges as lab_bdpt's light tracing is: ``bdpt/splats.py``). b, the integral of I, is the mean I
+    of ``bootstrap`` independent paths; each chain starts from one of them drawn in proportion to
+    I, which makes the image unbiased (``mlt/chain.py`` has the argument; b's error adds
+    variance, one factor on the whole image, no bias). spp is mutations per pixel: the render
+    runs ceil(pixels x spp / chains) steps of min(chains, pixels x spp) chains.
+
+    Steps (``mlt/chain.py``): with probability ``large_step`` every stored number is drawn
+    afresh, else every stored number is perturbed (``small_step``: a normal of standard deviation
+    ``sigma``, pbrt-v4's, or Kelemen's exponential perturbation) and wrapped to [0, 1); both are
+    symmetric, so a = min(1, I(v) / I(u)). The mutation is eager: every stored number moves,
+    whether the path reads it or not (pbrt-v4 mutates lazily). A chain stores D numbers, D the
+    most any bootstrap path read (at most 256: memory chains x D x 8 bytes); numbers past D are
+    drawn afresh by every proposal (an independence proposal in those dimensions, still exact).
+
+    Parameters: lab_mis's (``max_depth``, ``rr_depth``, ``hide_emitters``, ``count_rays``,
+    ``heuristic``, ``beta``, ``emitter_samples``, ``medium_sampling``, ``transmittance``) and
+
+    ============= ====== ========================================================
+    chains        int    Chains in lock-step, one per lane (Default: 8192)
+    bootstrap     int    Independent paths for b and the chains' start
+                         (Default: 100000)
+    large_step    float  Probability of a large step, in [0, 1] (Default: 0.3)
+    small_step    string ``normal`` | ``exponential`` (Default: ``normal``)
+    sigma         float  The normal small step's standard deviation (Default: 0.01)
+    ============= ====== ========================================================
+
+    Every render seed is an independent bootstrap and set of chains. A scene whose bootstrap
+    finds no light renders black, with a warning. The alpha channel is 1. Refused in one line:
+    polarized variants, ``render(develop=False)``. Participating media go through lab_mis's
+    path loop unchanged (not yet checked against volpath). Statistics of the last render:
+    ``mlt_stats()``.
+
+    .. code-block:: python
+
+        {'type': 'lab_pssmlt', 'max_depth': 8, 'chains': 8192, 'bootstrap': 100000,
+         'large_step': 0.3, 'sigma': 0.01}
+    """
+    ESTIMATOR = PSSMLT
+    PARAMETERS = PSSMLT.PARAMETERS
+
+    def __init__(self, props: mi.Properties):
+        super().__init__(props)
+        e = self.estimator
+        self.chains, self.bootstrap = e.chains, e.bootstrap
+        self.large_step, self.small_step, self.sigma = e.large_step, e.small_step, e.sigma
+        self.stats = MLTStats()
+
+    def error(self, text: str) -> ValueError:
+        return ValueError(f"{self.ESTIMATOR.plugin_name}: {text}")
+
+    # -- Driver -------------------------------------------------------------------
+
+    def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
+               evaluate: bool = True):
+        if not develop:
+            raise self.error("render(develop=False) is not supported: the chains splat into a film of their "
+                             "own, normalised by b when developed")
+        if mi.is_polarized:
+            raise self.error(f"variant '{mi.variant()}' is not supported: the target is a luminance; use "
+                             f"{mi.variant().replace('_polarized', '')}")
+        traits = SceneTraits.from_scene(scene)
+        warn_if_unsupported(self, traits)
+        sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
+        interrupts.restore()
+        self._plan = (scene, KernelPlan.of(traits, self.estimator))
+        try:
+            return self._render(scene, sensor, seed, spp)
+        finally:
+            self._plan = None
+
+    def _render(self, scene, sensor, seed: int, spp: int):
+        film = sensor.film()
+        width, height = (int(v) for v in film.crop_size())
+        pixels = width * height
+        key = chain.seed_key(seed)
+        self.stats = stats = MLTStats(bootstrap=self.bootstrap)
+
+        # ---------------- Bootstrap: b and the paths the chains start from ----------------
+        start = _now()
+        n = self.bootstrap
+        boot_keys = chain.key_of(key, chain.P_BOOTSTRAP, dr.arange(mi.UInt32, n))
+        boot_value, boot_payload, dims_read = self.evaluate(scene, sensor, chain.PrimarySamples(n, boot_keys),
+                                                            width, height)
+        dr.eval(boot_keys, boot_value, *boot_payload, dims_read)
+        values = np.array(boot_value, dtype=np.float64)
+        stats.b, stats.b_standard_error = chain.normaliser(values)
+        stats.bootstrap_nonzero = int(np.count_nonzero(values))
+        stats.dims_read_max = int(dr.max(dims_read)[0]) if n else 0
+        stats.bootstrap_s = _now() - start
+        block = splats.new_block(film)
+        if not stats.b > 0:
+            warnings.warn(f"lab_pssmlt: none of the {n} bootstrap paths carried light (the scene has no "
+                          f"emitter the paths reach, or bootstrap is too small): the image is black", stacklevel=2)
+            return self._image(film, block, 0.0)
+
+        # ---------------- The chains ----------------
+        start = _now()
+        mutations = pixels * spp
+        stats.chains = n_chains = max(1, min(self.chains, mutations))
+        stats.steps = steps = math.ceil(mutations / n_chains)
+        stats.dims = dims = min(stats.dims_read_max, MAX_DIMS)
+        chains = chain.MarkovChains(n_chains, dims, key, self.large_step, self.small_step, self.sigma)
+        chains.start(boot_keys, values, boot_value, boot_payload)
+        del boot_value, boot_payload, boot_keys
+
+        def evaluate(v, tail_keys):
+            value, payload, _ = self.evaluate(scene, sensor, chain.PrimarySamples(n_chains, tail_keys, v, dims),
+                                              width, height)
+            return value, payload
+
+        def splat(payload, weight):
+            wavelengths = payload[2] if len(payload) > 2 else type(mi.Ray3f().wavelengths)()   # (rgb, mono: none)
+            splats.splat(block, payload[1], wavelengths, payload[0] * weight, weight > 0)
+
+        chain.run(chains, steps, evaluate, splat, checkpoint=lambda: interrupts.checkpoint(self))
+        stats.mutations = n_chains * steps
+        stats.mutations_per_pixel = stats.mutations / pixels
+        self._count(chains)
+        image = self._image(film, block, stats.b / stats.mutations_per_pixel)
+        stats.chains_s = _now() - start
+        stats.seconds_per_mutation = stats.chains_s / stats.mutations
+        return image
+
+    def _count(self, chains: chain.MarkovChains) -> None:
+        stats, counts, steps = self.stats, chains.counts, chains.steps
+        acceptance = np.array(counts.acceptance, dtype=np.float64)
+        large = np.array(counts.large, dtype=np.float64)
+        large_acceptance = np.array(counts.large_acceptance, dtype=np.float64)
+        total = steps * chains.chains
+        stats.acceptance = float(acceptance.sum() / total)
+        stats.acceptance_quantiles = chain.quantiles(acceptance / steps)
+        stats.accepted_share = float(np.array(counts.accepted, dtype=np.float64).sum() / total)
+        stats.large_step_share = float(large.sum() / total)
+        stats.large_step_acceptance = float(large_acceptance.sum() / large.sum()) if large.sum() else float("nan")
+        small = total - large.sum()
+        stats.small_step_acceptance = (float((acceptance.sum() - large_acceptance.sum()) / small) if small
+                                       else float("nan"))
+
+    def _image(self, film, block, scale: float):
+        """The developed splats times ``scale`` in the colour channels; alpha (and any other
+        channel) 1."""
+        image = np.array(splats.develop(film, block), dtype=np.float32)
+        channels = 1 if mi.is_monochromatic else 3
+        image[:, :, :channels] *= scale
+        image[:, :, channels:] = 1.0
+        return mi.TensorXf(image)
+
+    # -- One path per lane, from its primary sample ---------------------------------------
+
+    def evaluate(self, scene, sensor, samples: chain.PrimarySamples, width: int, height: int):
+        """(I, (f, film position in pixels[, wavelengths]), numbers read) of one path per lane of
+        ``samples``: f = the sensor's ray weight times lab_mis's L, I its luminance (0 where not
+        finite or not positive, and f 0 there)."""
+        sampler = PrimarySampleSampler(samples)
+        film_u = sampler.next_2d()
+        time = mi.Float(sensor.shutter_open())
+        if sensor.shutter_open_time() > 0:
+            time = time + sampler.next_1d() * sensor.shutter_open_time()
+        wavelength_u = sampler.next_1d() if mi.is_spectral else mi.Float(0.5)
+        aperture_u = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
+        ray, ray_weight = sensor.sample_ray_differential(time, wavelength_u, film_u, aperture_u)
+        L, _, _ = self.sample(scene, sampler, ray, sensor.get_medium(), True)
+        f = mi.Spectrum(ray_weight * L)
+        if mi.is_spectral:
+            value = mi.luminance(f, ray.wavelengths)
+        elif mi.is_monochromatic:
+            value = f[0]
+        else:
+            value = mi.luminance(f)
+        value = mi.Float(value)
+        ok = dr.isfinite(value) & (value > 0)
+        value = dr.select(ok, value, 0.0)
+        f = dr.select(ok, f, 0.0)
+        position = mi.Point2f(film_u.x * width, film_u.y * height)
+        payload = (f, position, ray.wavelengths) if mi.is_spectral else (f, position)
+        return value, payload, sampler.dim
+
+    # -- Reporting --------------------------------------------------------------------
+
+    def mlt_stats(self) -> dict:
+        """Statistics of the last render (``MLTStats``), as plain values."""
+        return self.stats.as_dict()
+
+
+def _now() -> float:
+    dr.sync_thread()
+    return time.perf_counter()
+
+
+mi.register_integrator("lab_pssmlt", lambda props: LabPSSMLTIntegrator(props))
