@@ -300,7 +300,7 @@ def run(chains: MarkovChains, steps: int, evaluate, splat, proposal=None, checkp
             v, large, q_ratio = proposal(chains, key)
         value, payload = evaluate(v, chains.tail_keys(key))
         a, w_current, w_proposal = chains.weigh(value, q_ratio)
-        dr.eval(a, w_current, w_proposal)
+        dr.eval(value, *payload, a, w_current, w_proposal)    # (the proposal traced once)
         splat(chains.payload, w_current)
         splat(payload, w_proposal)
         chains.accept(key, v, value, payload, a, large)
