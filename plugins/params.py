@@ -261,14 +261,9 @@ LAB_VCM = (
                               "lookups read (ray_counts())"),
 )
 
-#: lab_pssmlt's small steps (``integrators/mlt/chain.py``): a normal of standard deviation ``sigma``
-#: (pbrt-v4's MLTSampler), or Kelemen's exponential perturbation (s1 = 1/1024, s2 = 1/64).
-MLT_SMALL_STEPS = ("normal", "exponential")
-#: lab_pssmlt: the most bootstrap paths (they are traced in one wavefront and kept for the chains' start).
-MLT_MAX_BOOTSTRAP = 1 << 22
-
-#: lab_pssmlt (Kelemen's primary-sample-space MLT over lab_mis's path tracer): lab_mis's parameters and
-#: the chains'.
+#: lab_pssmlt (Kelemen's primary-sample-space MLT over lab_mis's path loop, ``integrators/mlt/``): lab_mis's
+#: parameters and the chains'; its small steps, and its most bootstrap paths (traced in one wavefront).
+MLT_SMALL_STEPS, MLT_MAX_BOOTSTRAP = ("normal", "exponential"), 1 << 22
 LAB_PSSMLT = LAB_MIS + (
     Param("chains", int, 8192, "Markov chains advancing in lock-step, one per lane (at most the render's "
           "mutations: width x height x spp)", **_int_at_least(1)),
@@ -278,8 +273,8 @@ LAB_PSSMLT = LAB_MIS + (
     Param("large_step", float, 0.3, "probability that a step draws every primary sample afresh (a large step)",
           check=lambda v: 0.0 <= v <= 1.0, expected="a number in [0, 1]"),
     Param("small_step", str, "normal", "the small step's perturbation of each primary sample (wrapped to "
-          "[0, 1)): normal (standard deviation sigma) or exponential (Kelemen et al. 2002, offsets from "
-          "1/1024 to 1/64)", choices=MLT_SMALL_STEPS),
+          "[0, 1)): normal (standard deviation sigma, pbrt-v4's) or exponential (Kelemen et al. 2002, offsets "
+          "from 1/1024 to 1/64)", choices=MLT_SMALL_STEPS),
     Param("sigma", float, 0.01, "standard deviation of the normal small step, in primary sample space",
           check=lambda v: 0.0 < v <= 1.0, expected="a number in (0, 1]"),
 )
