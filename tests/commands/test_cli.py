@@ -196,4 +196,4 @@ def test_render_help_states_the_declared_defaults_and_values():
         assert section.startswith(holders[0].doc), (option, section)      # the first declaration's meaning
         for p in holders:
             assert f"{allowed_text(p)} (default: {default_text(p)})" in section, (option, section)
-    assert "lab_mis: balance | power | max | average (default: power)" in text
+    assert "lab_mis, lab_pssmlt: balance | power | max | average (default: power)" in text

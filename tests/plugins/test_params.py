@@ -15,7 +15,7 @@ from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.params import declared, resolve
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis", "lab_photon", "lab_bdpt", "lab_vcm")
+LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis", "lab_photon", "lab_bdpt", "lab_vcm", "lab_pssmlt")
 LAB_SAMPLERS = ("lab_independent", "lab_stratified", "lab_halton", "lab_sobol", "lab_zsobol")
 MIS_VALID = ("beta, count_rays, emitter_samples, heuristic, hide_emitters, max_depth, medium_sampling, rr_depth, "
              "transmittance")
@@ -162,6 +162,9 @@ DEFAULTS = {
     "lab_photon": {"photons_per_pass": 100_000, "passes": 16, "alpha": 2.0 / 3.0, "radius": 0.0,
                    "max_depth": -1, "rr_depth": 5, "direct": "nee", "max_records": 1 << 21,
                    "hide_emitters": False, "aim": 0.5, "aim_at": "specular"},
+    "lab_pssmlt": {**PATH_DEFAULTS, "heuristic": "power", "beta": 2.0, "emitter_samples": 1, "medium_sampling": "mis",
+                   "transmittance": "ratio", "chains": 8192, "bootstrap": 100_000, "large_step": 0.3,
+                   "small_step": "normal", "sigma": 0.01},
     "lab_independent": {"sample_count": 4, "seed": 0},
     "lab_stratified": {"sample_count": 4, "seed": 0, "jitter": True},
     "lab_halton": {"sample_count": 4, "seed": 0, "randomization": "owen"},
