@@ -13,6 +13,11 @@ the others), correlations along each chain included. Fixed seeds; a correct kern
 probability 1e-3 (the p-value bound). Power: a non-symmetric step (an independence proposal of
 density 2x) with its proposal density left out of the acceptance fails with p < 1e-9; with the
 density in, it passes.
+
+Measured (seed 11, 48 steps): T^2 74.8 (normal steps, p 0.15), 57.7 (exponential, p 0.66), 70.3 (small
+steps alone, p 0.25), 63.9 (y unstored, p 0.44), 58.1 (the non-symmetric step with its density, p
+0.65) over 63 bins; without the density 17551 (p 0). The per-bin relative standard error of the mean
+over the chains is 2.2% to 4.0%.
 """
 import math
 

@@ -222,12 +222,12 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         finite or not positive, and f 0 there)."""
         sampler = PrimarySampleSampler(samples)
         film_u = sampler.next_2d()
-        time = mi.Float(sensor.shutter_open())
+        shutter = mi.Float(sensor.shutter_open())
         if sensor.shutter_open_time() > 0:
-            time = time + sampler.next_1d() * sensor.shutter_open_time()
+            shutter = shutter + sampler.next_1d() * sensor.shutter_open_time()
         wavelength_u = sampler.next_1d() if mi.is_spectral else mi.Float(0.5)
         aperture_u = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
-        ray, ray_weight = sensor.sample_ray_differential(time, wavelength_u, film_u, aperture_u)
+        ray, ray_weight = sensor.sample_ray_differential(shutter, wavelength_u, film_u, aperture_u)
         L, _, _ = self.sample(scene, sampler, ray, sensor.get_medium(), True)
         f = mi.Spectrum(ray_weight * L)
         if mi.is_spectral:
