@@ -55,19 +55,22 @@ def target(x, y):
     return FLOOR + dr.exp(-((x - CENTRE[0]) ** 2 + (y - CENTRE[1]) ** 2) / (2.0 * WIDTH ** 2))
 
 
-def toy_evaluate(samples: chain.PrimarySamples):
+def toy_evaluate(samples: chain.PrimarySamples, switch: bool = False):
     """(I, payload) of each lane's primary sample: the toy target at its first two numbers; the
-    payload is (f, position) with f = I (a scalar target, as a grey image's luminance)."""
-    x, y = samples.get(0), samples.get(1)
+    payload is (f, position) with f = I (a scalar target, as a grey image's luminance). With
+    ``switch``, y is number 1 where x < 1/2 and number 2 elsewhere: a chain reads one of them per
+    step, as a path reads more or fewer numbers, so the lazy steps skip and catch up numbers."""
+    x = samples.get(0)
+    y = samples.get(dr.select(x < 0.5, mi.UInt32(1), mi.UInt32(2)) if switch else 1)
     value = target(x, y)
     return value, (value, mi.Point2f(x, y))
 
 
-def run_toy(seed: int, small_step="normal", sigma=0.03, large_step=0.3, dims=3, proposal=None):
+def run_toy(seed: int, small_step="normal", sigma=0.03, large_step=0.3, dims=3, proposal=None, switch=False):
     """Per-chain histograms (chains, BINS, BINS) of b_exact x splats / steps, and b_hat."""
     key = chain.seed_key(seed)
     boot_keys = chain.key_of(key, chain.P_BOOTSTRAP, dr.arange(mi.UInt32, BOOTSTRAP))
-    boot_value, boot_payload = toy_evaluate(chain.PrimarySamples(BOOTSTRAP, boot_keys))
+    boot_value, boot_payload = toy_evaluate(chain.PrimarySamples(BOOTSTRAP, boot_keys), switch)
     values = np.array(boot_value, dtype=np.float64)
     b_hat, b_se = chain.normaliser(values)
     chains = chain.MarkovChains(CHAINS, dims, key, large_step, small_step, sigma)
@@ -75,15 +78,12 @@ def run_toy(seed: int, small_step="normal", sigma=0.03, large_step=0.3, dims=3, 
     histogram = dr.zeros(mi.Float, CHAINS * BINS * BINS)
     lane = dr.arange(mi.UInt32, CHAINS)
 
-    def evaluate(v, tail_keys):
-        return toy_evaluate(chain.PrimarySamples(CHAINS, tail_keys, v, dims))
-
     def splat(payload, weight):
         f, p = payload
         cell = (mi.UInt32(dr.minimum(p.y * BINS, BINS - 1)) * BINS + mi.UInt32(dr.minimum(p.x * BINS, BINS - 1)))
         dr.scatter_reduce(dr.ReduceOp.Add, histogram, f * weight, lane * (BINS * BINS) + cell)
 
-    chain.run(chains, STEPS, evaluate, splat, proposal=proposal)
+    chain.run(chains, STEPS, lambda samples: toy_evaluate(samples, switch), splat, proposal=proposal)
     per_chain = np.array(histogram, dtype=np.float64).reshape(CHAINS, BINS, BINS) * B / STEPS
     return per_chain, b_hat, b_se, chains
 
@@ -103,6 +103,9 @@ def chi_squared(per_chain: np.ndarray) -> tuple[float, float]:
     {"small_step": "exponential"},
     {"small_step": "normal", "large_step": 0.0},              # small steps alone (they wrap)
     {"small_step": "normal", "dims": 1},                      # y unstored: drawn afresh each step
+    {"small_step": "normal", "switch": True},                 # lazy steps skip numbers and catch up
+    {"small_step": "normal", "switch": True, "dims": 2},      # ... and number 2 unstored
+    {"small_step": "exponential", "switch": True},            # (eager)
 ])
 def test_the_chains_leave_the_toy_target_invariant(case):
     per_chain, b_hat, b_se, chains = run_toy(11, **case)
@@ -126,7 +129,7 @@ def _independence_proposal(with_density: bool):
     q(v -> u) / q(u -> v) = g(u_x) / g(v_x) the acceptance needs; ``with_density`` False leaves it
     out (the deliberate error)."""
     def proposal(chains: chain.MarkovChains, key):
-        v_lab, large = chains.propose(key)
+        v_lab, large = chains.eager_proposal(key), chains.large_steps(key)   # (the lab's steps, eagerly)
         lane, flat = chains.lane, chains.flat
         xi = chain.uniform(chain.key_of(key, 0x1234567), flat)
         first = flat < chains.chains                         # dimension 0 of every chain

@@ -65,6 +65,7 @@ P_MUTATE = 0x4F1BBCDC      # the new numbers (large) or perturbations (small), p
 P_ACCEPT = 0x68E31DA4      # acceptance, per chain and step
 P_TAIL = 0x7A4E0D3B        # the unstored dimensions' fresh numbers, per chain and step
 P_STEP = 0x8CB92BA7        # a step's key
+P_CATCH_UP = 0x9E3779B1    # a lazily read number's fresh start after an accepted large step
 #: 2^-24: the uniform numbers are (k + 1/2) 2^-24, k < 2^24: never 0, never 1.
 INV_2_24 = 2.0 ** -24
 
@@ -98,17 +99,20 @@ def seed_key(seed: int):
 
 class PrimarySamples:
     """The primary samples of ``lanes`` lanes, read dimension by dimension: dimension d < ``dims``
-    of lane c from ``state[d * lanes + c]``, every other from ``uniform(keys[c], d)``.
+    of lane c from ``state[d * lanes + c]``, every other from ``uniform(keys[c], d)``. With
+    ``lazy`` (a ``LazyProposal``) the stored numbers are the chain's current state and each one
+    read is mutated as it is read (``LazyProposal.mutate``).
 
     A plain Python object on purpose: the sampler that holds it is traversed by Dr.Jit's
     symbolic loops (its Dr.Jit attributes become loop state), and the state is wider than a
-    loop; read-only inside the loop, it is captured, not carried."""
+    loop; inside the loop it is captured, not carried."""
 
-    def __init__(self, lanes: int, keys, state=None, dims: int = 0):
+    def __init__(self, lanes: int, keys, state=None, dims: int = 0, lazy: "LazyProposal | None" = None):
         self.lanes = lanes
         self.keys = keys
         self.state = state
         self.dims = dims if state is not None else 0
+        self.lazy = lazy
         self.lane = dr.arange(mi.UInt32, lanes)
 
     def get(self, dim, active=True):
@@ -117,8 +121,63 @@ class PrimarySamples:
             return fresh
         dim = mi.UInt32(dim)
         stored = dim < self.dims
-        value = dr.gather(mi.Float, self.state, dim * self.lanes + self.lane, stored & active)
+        index = dim * self.lanes + self.lane
+        if self.lazy is not None:
+            # (every stored number read is mutated, used or not: its value is then a symmetric
+            # proposal from the current one, which the acceptance needs)
+            value = self.lazy.mutate(self.state, index, self.lane, dim, stored)
+        else:
+            value = dr.gather(mi.Float, self.state, index, stored & active)
         return dr.select(stored, value, fresh)
+
+
+@dataclass
+class LazyProposal:
+    """A step's proposal made lazily (pbrt-v4's ``MLTSampler``), for the normal small step: a
+    stored number is mutated only when a path reads it, by all the steps it missed at once.
+
+    Per chain: ``iteration`` (accepted steps so far, plus one: the proposal's), ``last_large`` (the
+    iteration of the last accepted large step) and ``large`` (this step is a large one); per
+    stored number: ``last`` (the iteration it was last brought up to date at). Reading number d:
+    if a large step was accepted since ``last``, it starts from a fresh uniform at ``last_large``;
+    then a large step draws it afresh, and a small step adds a normal of standard deviation
+    sigma sqrt(iteration - last) (the sum of the accepted small steps it missed), wrapped. The
+    proposal and the step's ``stamp`` are written to ``proposal`` and ``stamps``; accepting a
+    chain copies its numbers stamped this step. In distribution this is the eager step (every
+    stored number moved at every accepted step): the numbers no path read influence nothing."""
+    chains: int
+    sigma: float
+    key: object                 # the step's key (per chain: ``keys``)
+    iteration: object           # UInt32 per chain
+    last_large: object          # UInt32 per chain
+    large: object               # Bool per chain
+    last: object                # UInt32 per stored number
+    proposal: object            # Float per stored number (written)
+    stamps: object              # UInt32 per stored number (written)
+    stamp: object               # the step's stamp (opaque UInt32)
+
+    def __post_init__(self):
+        # per chain, made once outside the path loop: the keys of the mutations and of the fresh starts
+        lane = dr.arange(mi.UInt32, self.chains)
+        self.mutate_keys = key_of(self.key, P_MUTATE, lane)
+        self.catch_up_keys = key_of(self.key, P_CATCH_UP, lane)
+        dr.eval(self.mutate_keys, self.catch_up_keys)
+
+    def mutate(self, state, index, lane, dim, stored):
+        """Number ``dim`` of each lane's proposal (flat ``index``; per-chain arrays are lane-aligned)."""
+        u = dr.gather(mi.Float, state, index, stored)
+        last = dr.gather(mi.UInt32, self.last, index, stored)
+        iteration, last_large, large = self.iteration, self.last_large, self.large
+        # a large step accepted since the number was last brought up to date: a fresh start there
+        stale = last < last_large
+        u = dr.select(stale, uniform(self.catch_up_keys, dim), u)
+        last = dr.maximum(last, last_large)
+        xi = uniform(self.mutate_keys, dim)
+        spread = self.sigma * dr.sqrt(mi.Float(iteration - last))
+        value = dr.select(large, xi, wrap(u + spread * math.sqrt(2.0) * dr.erfinv(2.0 * xi - 1.0)))
+        dr.scatter(self.proposal, value, index, stored)
+        dr.scatter(self.stamps, self.stamp, index, stored)
+        return value
 
 
 # ----------------------------------------------------------------------------
@@ -195,7 +254,10 @@ class MarkovChains:
     """``chains`` Metropolis-Hastings chains in lock-step on [0, 1)^dims (see the module docstring).
 
     ``u`` (flat, index d * chains + c), ``value`` (I of each chain's current state, > 0) and
-    ``payload`` (a tuple of Dr.Jit arrays of width ``chains``) are set by ``start``."""
+    ``payload`` (a tuple of Dr.Jit arrays of width ``chains``) are set by ``start``. ``lazy``
+    (the normal small step only: Kelemen's exponential one is always eager): steps mutate only
+    the numbers a path reads (``LazyProposal``), with the counters ``iteration``, ``last_large``
+    and ``last`` and the buffers ``proposal`` and ``stamps`` (chains x dims x 16 bytes in all)."""
     chains: int
     dims: int
     key: object                 # the render's key (``seed_key``)
@@ -207,13 +269,22 @@ class MarkovChains:
     payload: tuple = ()
     counts: ChainCounts = field(default=None)
     steps: int = 0
+    lazy: bool = True
 
     def __post_init__(self):
         if self.small_step not in MLT_SMALL_STEPS:
             raise ValueError(f"small_step must be one of {', '.join(MLT_SMALL_STEPS)}, got {self.small_step!r}")
+        self.lazy = self.lazy and self.small_step == "normal" and self.dims > 0
         self.counts = ChainCounts.zeros(self.chains)
         self.lane = dr.arange(mi.UInt32, self.chains)
         self.flat = dr.arange(mi.UInt32, self.chains * self.dims)
+        # (the lazy steps' counters: accepted iterations, the last accepted large step's, and per number)
+        self.iteration = dr.zeros(mi.UInt32, self.chains)
+        self.last_large = dr.zeros(mi.UInt32, self.chains)
+        self.last = dr.zeros(mi.UInt32, self.chains * self.dims)
+        if self.lazy:
+            self.proposal = dr.zeros(mi.Float, self.chains * self.dims)
+            self.stamps = dr.zeros(mi.UInt32, self.chains * self.dims)
 
     # -- start ------------------------------------------------------------------------
 
@@ -243,15 +314,32 @@ class MarkovChains:
         return key_of(key, P_TAIL, self.lane)
 
     def propose(self, key):
-        """(v, large): the proposal (flat, like ``u``) and which chains take a large step."""
-        large = uniform(key_of(key, P_LARGE), self.lane) < self.large_step
+        """(samples, large): the proposal as ``PrimarySamples`` for ``evaluate`` and which chains
+        take a large step. Eager: every stored number moved here (``eager_proposal``); lazy: as
+        the path reads them (``LazyProposal``)."""
+        large = self.large_steps(key)
+        if not self.lazy:
+            return self.samples(self.eager_proposal(key), key), large
+        lazy = LazyProposal(self.chains, self.sigma, key, self.iteration + 1, self.last_large, large, self.last,
+                            self.proposal, self.stamps, dr.opaque(mi.UInt32, self.steps + 1))
+        return PrimarySamples(self.chains, self.tail_keys(key), self.u, self.dims, lazy), large
+
+    def large_steps(self, key):
+        """Which chains take a large step (Bool per chain)."""
+        return uniform(key_of(key, P_LARGE), self.lane) < self.large_step
+
+    def eager_proposal(self, key):
+        """Every stored number of every chain moved: afresh (large step) or perturbed (flat, like ``u``)."""
         if not self.dims:
-            return self.u, large
+            return self.u
         chain = self.flat % self.chains
         large_here = uniform(key_of(key, P_LARGE), chain) < self.large_step
         xi = uniform(key_of(key, P_MUTATE), self.flat)
-        v = dr.select(large_here, xi, perturb(self.u, xi, self.small_step, self.sigma))
-        return v, large
+        return dr.select(large_here, xi, perturb(self.u, xi, self.small_step, self.sigma))
+
+    def samples(self, v, key) -> PrimarySamples:
+        """The eager proposal ``v`` (flat) as ``PrimarySamples``."""
+        return PrimarySamples(self.chains, self.tail_keys(key), v, self.dims)
 
     def weigh(self, value, q_ratio=None):
         """(a, current's weight (1 - a) / I(u), proposal's weight a / I(v)) for proposals of target
@@ -264,14 +352,22 @@ class MarkovChains:
         a = dr.select(ok, dr.minimum(ratio, 1.0), 0.0)
         return a, (1.0 - a) / self.value, dr.select(ok, a / value, 0.0)
 
-    def accept(self, key, v, value, payload: tuple, a, large) -> None:
+    def accept(self, key, samples: PrimarySamples, value, payload: tuple, a, large) -> None:
         """Each chain moves to its proposal with probability ``a``."""
         xi = uniform(key_of(key, P_ACCEPT), self.lane)
         moves = xi < a
         if self.dims:
             chain = self.flat % self.chains
             moves_here = uniform(key_of(key, P_ACCEPT), chain) < dr.gather(mi.Float, a, chain)
-            self.u = dr.select(moves_here, v, self.u)
+            next_iteration = dr.gather(mi.UInt32, self.iteration, chain) + 1
+            if samples.lazy is not None:             # the numbers its path read
+                moves_here &= self.stamps == samples.lazy.stamp
+                self.u = dr.select(moves_here, self.proposal, self.u)
+            else:                                    # every number
+                self.u = dr.select(moves_here, samples.state, self.u)
+            self.last = dr.select(moves_here, next_iteration, self.last)
+        self.iteration = dr.select(moves, self.iteration + 1, self.iteration)
+        self.last_large = dr.select(moves & large, self.iteration, self.last_large)
         self.value = dr.select(moves, value, self.value)
         self.payload = tuple(dr.select(moves, p, q) for p, q in zip(payload, self.payload))
         c = self.counts
@@ -282,28 +378,30 @@ class MarkovChains:
         self.steps += 1
 
     def arrays(self) -> tuple:
-        return (self.u, self.value, *self.payload, *self.counts.arrays())
+        return (self.u, self.value, *self.payload, *self.counts.arrays(), self.iteration, self.last_large, self.last)
 
 
 def run(chains: MarkovChains, steps: int, evaluate, splat, proposal=None, checkpoint=None) -> None:
-    """``steps`` steps of every chain: propose, ``evaluate(v, tail_keys)`` -> (I, payload), splat
-    the current (``splat(payload, (1 - a) / I(u))``) and the proposal (``splat(payload, a / I(v))``),
-    accept. ``proposal(chains, key)`` -> (v, large, q_ratio) replaces the lab's symmetric steps
-    (a test's non-symmetric proposal). Dr.Jit evaluates the state (and the splats) once per step;
-    ``checkpoint()`` runs after each."""
+    """``steps`` steps of every chain: propose, ``evaluate(samples)`` -> (I, payload) of the
+    proposal (``samples``: ``PrimarySamples``), splat the current (``splat(payload, (1 - a) / I(u))``)
+    and the proposal (``splat(payload, a / I(v))``), accept. ``proposal(chains, key)`` -> (v, large,
+    q_ratio), v flat like ``chains.u``, replaces the lab's symmetric steps (a test's non-symmetric
+    proposal). Dr.Jit evaluates the state (and the splats) once per step; ``checkpoint()`` runs
+    after each."""
     for _ in range(steps):
         key = chains.step_key(chains.steps)
         if proposal is None:
-            v, large = chains.propose(key)
+            samples, large = chains.propose(key)
             q_ratio = None
         else:
             v, large, q_ratio = proposal(chains, key)
-        value, payload = evaluate(v, chains.tail_keys(key))
+            samples = chains.samples(v, key)
+        value, payload = evaluate(samples)
         a, w_current, w_proposal = chains.weigh(value, q_ratio)
         dr.eval(value, *payload, a, w_current, w_proposal)    # (the proposal traced once)
         splat(chains.payload, w_current)
         splat(payload, w_proposal)
-        chains.accept(key, v, value, payload, a, large)
+        chains.accept(key, samples, value, payload, a, large)
         dr.eval(*chains.arrays())
         if checkpoint is not None:
             checkpoint()

@@ -172,9 +172,8 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         chains.start(boot_keys, values, boot_value, boot_payload)
         del boot_value, boot_payload, boot_keys
 
-        def evaluate(v, tail_keys):
-            value, payload, _ = self.evaluate(scene, sensor, chain.PrimarySamples(n_chains, tail_keys, v, dims),
-                                              width, height)
+        def evaluate(samples):
+            value, payload, _ = self.evaluate(scene, sensor, samples, width, height)
             return value, payload
 
         def splat(payload, weight):
