@@ -7,7 +7,8 @@ Nothing here renders: a chain's target I(u) and the payload a splat needs come f
 State
 -----
 ``chains`` chains, one per lane. Chain c's primary sample is a point u of [0, 1)^D held in one flat
-array at index ``d * chains + c`` (D = ``dims``: chains x D x 4 bytes, twice during a step), with
+array at index ``d * chains + c`` (D = ``dims``; chains x D x 16 bytes with the lazy steps'
+counters and proposal), with
 its target I(u) > 0 and its payload (for lab_pssmlt: contribution and film position). Dimensions
 d >= D are not stored: every evaluation draws them afresh (``PrimarySamples``), an independence
 proposal from their uniform density, whose density ratio is 1, so the step below is still a
@@ -17,11 +18,13 @@ those numbers no more once its I and payload are cached.
 One step (``run``)
 ------------------
 1. Propose v from u: with probability ``large_step`` (per chain) a *large step*, every stored
-   number drawn afresh; else a *small step*, every stored number perturbed (eagerly: all D of
-   them, used by the path or not; pbrt-v4 perturbs lazily only those a path reads) by a normal
-   of standard deviation ``sigma`` or by Kelemen's exponential perturbation, and wrapped to
-   [0, 1). Both steps are symmetric on the torus, q(u -> v) = q(v -> u).
-2. Evaluate I(v) and its payload.
+   number drawn afresh; else a *small step*, every stored number perturbed by a normal of
+   standard deviation ``sigma`` or by Kelemen's exponential perturbation, and wrapped to [0, 1).
+   Both steps are symmetric on the torus, q(u -> v) = q(v -> u). The normal step is made lazily,
+   as pbrt-v4's ``MLTSampler`` makes it: a number is mutated only when the path reads it, by all
+   the accepted steps it missed at once (``LazyProposal``: the same process in distribution);
+   the exponential step eagerly, all D numbers at every step (no closed form for a sum of them).
+2. Evaluate I(v) and its payload (for the lazy step, evaluating v is proposing it).
 3. Acceptance a = min(1, I(v) q(v -> u) / (I(u) q(u -> v))), 0 where I(v) is 0 or not finite
    (the lab's steps pass no q ratio: it is 1).
 4. Expected-value splatting: the current sample splats with weight (1 - a) / I(u), the proposal

@@ -20,7 +20,7 @@ from . import chain
 from .estimator import PSSMLT
 from .sampler import PrimarySampleSampler
 
-#: The most primary-sample dimensions a chain stores (chains x MAX_DIMS x 4 bytes, twice);
+#: The most primary-sample dimensions a chain stores (chains x MAX_DIMS x 16 bytes);
 #: a path reading more draws the rest afresh at every step (``chain`` module docstring).
 MAX_DIMS = 256
 
@@ -76,10 +76,12 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     Steps (``mlt/chain.py``): with probability ``large_step`` every stored number is drawn
     afresh, else every stored number is perturbed (``small_step``: a normal of standard deviation
     ``sigma``, pbrt-v4's, or Kelemen's exponential perturbation) and wrapped to [0, 1); both are
-    symmetric, so a = min(1, I(v) / I(u)). The mutation is eager: every stored number moves,
-    whether the path reads it or not (pbrt-v4 mutates lazily). A chain stores D numbers, D the
-    most any bootstrap path read (at most 256: memory chains x D x 8 bytes); numbers past D are
-    drawn afresh by every proposal (an independence proposal in those dimensions, still exact).
+    symmetric, so a = min(1, I(v) / I(u)). The normal step is lazy, as pbrt-v4's: a number moves
+    when the path reads it, by the accepted steps it missed; the exponential step is eager (all
+    stored numbers at every step). A chain stores D numbers, D the most any bootstrap path read
+    (at most 256: memory chains x D x 16 bytes, the numbers, their counters and the proposal's);
+    numbers past D are drawn afresh by every proposal (an independence proposal in those
+    dimensions, still exact).
 
     Parameters: lab_mis's (``max_depth``, ``rr_depth``, ``hide_emitters``, ``count_rays``,
     ``heuristic``, ``beta``, ``emitter_samples``, ``medium_sampling``, ``transmittance``) and
