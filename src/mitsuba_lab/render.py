@@ -76,7 +76,7 @@ def timed_kernels(fn):
 
 
 #: The methods by which lab integrators report statistics of their last render.
-STATS_METHODS = ("bdpt_stats", "photon_stats")
+STATS_METHODS = ("bdpt_stats", "photon_stats", "mlt_stats")
 
 
 def _plain(value):
