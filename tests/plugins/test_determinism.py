@@ -48,6 +48,7 @@ CASES = [
     ("lab_bdpt", LEARNT_PASSES),
     *[("lab_vcm", {"mode": mode, "radius": 0.05, **LEARNT_PASSES}) for mode in VCM_MODES],
     ("lab_vcm", {"pilot": True, "light_paths_max": 4, "radius": 0.05, **LEARNT_PASSES}),
+    ("lab_pssmlt", {"chains": 256, "bootstrap": 4096}),
 ]
 #: The issue's case, smaller: light_in_glass with the pilot choosing up to 16 light subpaths.
 PILOT = {"pilot": True, "light_paths_max": 16, "max_depth": 8}
