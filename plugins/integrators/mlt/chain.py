@@ -150,7 +150,7 @@ class LazyProposal:
     stored number moved at every accepted step): the numbers no path read influence nothing."""
     chains: int
     sigma: float
-    key: object                 # the step's key (per chain: ``keys``)
+    key: object                 # the step's key (the per-chain keys are derived from it)
     iteration: object           # UInt32 per chain
     last_large: object          # UInt32 per chain
     large: object               # Bool per chain
