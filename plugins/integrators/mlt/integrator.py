@@ -14,6 +14,7 @@ from mitsuba_lab.plugins import interrupts
 from mitsuba_lab.plugins.integrators.bdpt import splats
 from mitsuba_lab.plugins.integrators.common.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.integrators.path import KernelPlan, LabMISIntegrator
+from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins.scene_traits import SceneTraits
 
 from . import chain
@@ -52,6 +53,7 @@ class MLTStats:
         return asdict(self)
 
 
+@documented("lab_pssmlt")
 class LabPSSMLTIntegrator(LabMISIntegrator):
     r"""Primary-sample-space Metropolis light transport (:monosp:`lab_pssmlt`)
 
@@ -83,17 +85,9 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     numbers past D are drawn afresh by every proposal (an independence proposal in those
     dimensions, still exact).
 
-    Parameters: lab_mis's (``max_depth``, ``rr_depth``, ``hide_emitters``, ``count_rays``,
-    ``heuristic``, ``beta``, ``emitter_samples``, ``medium_sampling``, ``transmittance``) and
-
-    ============= ====== ========================================================
-    chains        int    Chains in lock-step, one per lane (Default: 8192)
-    bootstrap     int    Independent paths for b and the chains' start
-                         (Default: 100000)
-    large_step    float  Probability of a large step, in [0, 1] (Default: 0.3)
-    small_step    string ``normal`` | ``exponential`` (Default: ``normal``)
-    sigma         float  The normal small step's standard deviation (Default: 0.01)
-    ============= ====== ========================================================
+    Parameters: lab_mis's (its path loop and weights) and the chains': ``chains`` (lanes in
+    lock-step), ``bootstrap`` (paths for b and the chains' start), ``large_step``, ``small_step``
+    and ``sigma`` (the table below).
 
     Every render seed is an independent bootstrap and set of chains. A scene whose bootstrap
     finds no light renders black, with a warning. The alpha channel is 1. Refused in one line:
