@@ -27,7 +27,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_lab.plugins import params
-from mitsuba_lab.plugins.integrators.common import direct, media, spawn
+from mitsuba_lab.plugins.integrators.common import direct, majorants, media, spawn
 from mitsuba_lab.plugins.integrators.common.counters import RayCounters
 from mitsuba_lab.plugins.integrators.estimator import PathEstimator
 from mitsuba_lab.plugins.integrators.mis import MIS
@@ -109,15 +109,14 @@ class LabPathIntegrator(mi.SamplingIntegrator):
     ============= ====== ==========================================================
 
     Participating media (homogeneous and heterogeneous, any phase function, behind ``null``
-    boundaries, inside dielectrics, around the sensor) are rendered as Mitsuba's ``volpath``
-    renders them: free flights sampled by delta tracking against each medium's majorant
-    (analytic in homogeneous media), the albedo at each scattering event, ``max_depth``
-    counting medium vertices but not null boundaries; shadow rays carry the transmittance
-    through media and null boundaries (exact in homogeneous media, ratio or delta tracking in
-    heterogeneous ones: ``transmittance``). Distances are sampled with one colour channel's
-    coefficients (the path's, picked uniformly in RGB; the hero wavelength in spectral
-    variants), every channel weighted by its own transmittance. Not in polarized variants
-    (refused in one line). lab_nee and lab_mis also declare ``medium_sampling``.
+    boundaries, inside dielectrics, around the sensor) as Mitsuba's ``volpath`` renders them:
+    free flights by delta tracking (analytic in homogeneous media), the albedo at each
+    scattering event, ``max_depth`` counting medium vertices but not null boundaries, shadow
+    rays carrying the transmittance through media and null boundaries (``common.media``).
+    Distances are sampled with one colour channel's coefficients (the path's: uniform in RGB,
+    the hero wavelength in spectral variants). Not in polarized variants (refused in one line).
+    lab_nee and lab_mis declare the medium parameters (``params._media``): ``medium_sampling``,
+    ``transmittance``, ``majorants`` (``common.majorants``) and ``spectral_mis``.
     """
     #: The estimator class (weights, own parameters, what it knows about scenes).
     ESTIMATOR: type[PathEstimator] = PathEstimator
@@ -136,6 +135,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         # (declared by the path tracers that sample emitters: lab_nee, lab_mis)
         self.medium_sampling = values.get("medium_sampling", "distance")
         self.tracking_kind = values.get("transmittance", "ratio")
+        self.majorants, self.majorant_resolution = values.get("majorants", "global"), values.get("majorant_resolution", 16)
+        self.spectral_mis = values.get("spectral_mis", False)
         self.estimator = self.ESTIMATOR(values)
         self.counters = RayCounters()
         self._plan = None                      # (scene, KernelPlan) while render() runs
@@ -162,6 +163,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             raise ValueError(f"{self.ESTIMATOR.plugin_name}: participating media in the polarized variant "
                              f"'{variant}' are not supported yet: use {variant.replace('_polarized', '')} "
                              f"or Mitsuba's volpath")
+        if traits.media:
+            majorants.of_integrator(self, scene)     # majorants = grid: built once per scene, or refused
         bind_film_layout(scene, sensor)           # samplers that order pixels learn the film's shape
         self._plan = (scene, KernelPlan.of(traits, self.estimator))
         try:
@@ -217,6 +220,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             medium = mi.MediumPtr(medium) if medium is not None else dr.zeros(mi.MediumPtr)
             channel = media.sampling_channel(sampler, active)
             phase_ctx = mi.PhaseFunctionContext(sampler)
+            grid = majorants.of_integrator(self, scene)
         # the previous vertex's equi-angular state, for emitter hits' weights
         prev_ea = media.Equiangular() if equiangular_on else mi.Bool(False)
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
@@ -240,9 +244,9 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                                 & (depth + 1 < self.max_depth))
                     L += media.equiangular_scatter(scene, sampler, phase_ctx, medium, segment, ray.wavelengths,
                                                    beta, channel, estimator.equiangular_weight, n_L,
-                                                   nee_in_media, ea_lanes, floor, tracking)
+                                                   nee_in_media, ea_lanes, floor, tracking, grid)
                     n_shadow += dr.select(ea_lanes, 1, 0)
-                mei, scattered, w_flight = media.free_flight(medium, ray, si.t, sampler, channel, in_medium)
+                mei, scattered, w_flight = media.free_flight(medium, ray, si.t, sampler, channel, in_medium, grid)
                 beta[in_medium] *= w_flight
                 on_surface = active & ~scattered
 
@@ -286,7 +290,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                                            | in_medium_nee)
                     L = media.emitter_sampling(scene, sampler, bsdf_ctx, phase_ctx, it, si, bsdf, mei, phase,
                                                scattered, medium, channel, beta, L, estimator.sample_weight,
-                                               n_L, active_em, floor, tracking, ea_here, nee_in_media)
+                                               n_L, active_em, floor, tracking, ea_here, nee_in_media, grid)
                     n_shadow += dr.select(active_em, n_L, 0)
                 # null boundaries are crossed whatever the depth; real vertices scatter below max_depth
                 bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), surface)
@@ -372,7 +376,9 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         values = {"max_depth": UNBOUNDED if self.max_depth == DEPTH_UNBOUNDED else self.max_depth,
                   "rr_depth": self.rr_depth, "hide_emitters": self.hide_emitters,
                   "count_rays": self.count_rays, "medium_sampling": self.medium_sampling,
-                  "transmittance": self.tracking_kind, **self.estimator.settings()}
+                  "transmittance": self.tracking_kind, "majorants": self.majorants,
+                  "majorant_resolution": self.majorant_resolution, "spectral_mis": self.spectral_mis,
+                  **self.estimator.settings()}
         return {p.name: values[p.name] for p in self.PARAMETERS}
 
     def to_string(self):
@@ -445,40 +451,41 @@ class LabMISIntegrator(LabPathIntegrator):
     Delta emitters (only NEE reaches them) and delta BSDF lobes (only BSDF sampling reaches
     their emitters) get weight 1, which keeps the estimator unbiased.
 
-    =============== ====== =====================================================
-    heuristic       string ``balance`` | ``power`` | ``max`` | ``average``
-                           (Default: ``power``). ``average`` weights 1/2 each
-                           wherever both techniques can sample x: the plain
-                           average of the two estimators, Veach's cautionary
-                           example, kept for study (``mis_weight.mis_weight``).
-    beta            float  Exponent of the power heuristic, > 0; 1 = balance.
-                           (Default: 2)
-    emitter_samples int    Shadow rays per vertex, n_L >= 1. The kernel holds
-                           n_L copies of the emitter-sampling code. (Default: 1)
-    max_depth       int    Longest path in segments, -1 = unbounded, >= 0
-                           otherwise (0 renders black) (Default: -1)
-    rr_depth        int    Depth at which Russian roulette starts, >= 1 (Default: 5)
-    hide_emitters   bool   Camera rays pass through area emitters; the bare
-                           environment is invalid (Default: false)
-    count_rays      bool   Count camera / extension / shadow rays (Default: true)
-    medium_sampling string ``distance`` | ``equiangular`` | ``mis``: the light
-                           scattered along a ray in a homogeneous medium, below
-                           (Default: ``mis``)
-    transmittance   string ``ratio`` | ``delta``: shadow rays' tracking in
-                           heterogeneous media (Default: ``ratio``)
-    =============== ====== =====================================================
+    =================== ====== =================================================
+    heuristic           string ``balance`` | ``power`` | ``max`` | ``average``
+                               (Default: ``power``). ``average`` weights 1/2 each
+                               wherever both techniques can sample x: the plain
+                               average of the two estimators, Veach's cautionary
+                               example, kept for study (``mis_weight.mis_weight``).
+    beta                float  Exponent of the power heuristic, > 0; 1 = balance.
+                               (Default: 2)
+    emitter_samples     int    Shadow rays per vertex, n_L >= 1. The kernel holds
+                               n_L copies of the emitter-sampling code. (Default: 1)
+    max_depth           int    Longest path in segments, -1 = unbounded, >= 0
+                               otherwise (0 renders black) (Default: -1)
+    rr_depth            int    Depth at which Russian roulette starts, >= 1 (Default: 5)
+    hide_emitters       bool   Camera rays pass through area emitters; the bare
+                               environment is invalid (Default: false)
+    count_rays          bool   Count camera / extension / shadow rays (Default: true)
+    medium_sampling     string ``distance`` | ``equiangular`` | ``mis``: the light
+                               scattered along a ray in a homogeneous medium, below
+                               (Default: ``mis``)
+    transmittance       string ``ratio`` | ``delta``: shadow rays' tracking in
+                               heterogeneous media (Default: ``ratio``)
+    majorants           string ``global`` | ``grid`` (local bounds): tracking
+                               in heterogeneous media (Default: ``global``)
+    majorant_resolution int    Majorant grid cells per axis (Default: 16)
+    =================== ====== =================================================
 
     All weights are computed from pdf ratios (``mis_weight.mis_weight``), so pdfs of 0, 1e-30,
     1e30 or inf give the right limit and never NaN. Estimator: ``mis.MIS``.
 
-    In a homogeneous medium, ``medium_sampling = mis`` (the default) adds a third technique for
-    the light scattered along each ray segment: a light point y sampled from the segment's
-    origin and a distance t with density proportional to 1 / |x(t) - y|^2 (equi-angular
-    sampling, Kulla and Fajardo 2012), which finds the light of point and spot lights in thin
-    media far better than free flights do. The three techniques (free flight + emitter sample,
-    free flight + phase sample, equi-angular) are weighted by the same heuristic over their
-    densities per unit distance and solid angle (``mis_weight.mis_weight_many``); ``distance``
-    and ``equiangular`` keep one of the two light samples.
+    In a homogeneous medium, ``medium_sampling = mis`` adds a third technique for the light
+    scattered along each ray segment: a light point y sampled from the segment's origin and a
+    distance t with density proportional to 1 / |x(t) - y|^2 (equi-angular sampling, Kulla and
+    Fajardo 2012). The three techniques (free flight + emitter sample, free flight + phase
+    sample, equi-angular) are weighted by the heuristic over their densities per unit distance
+    and solid angle (``mis_weight.mis_weight_many``).
 
     .. code-block:: python
 

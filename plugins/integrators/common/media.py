@@ -29,7 +29,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators.common import spawn
+from mitsuba_lab.plugins.integrators.common import majorants, spawn
 
 
 def sampling_channel(sampler: mi.Sampler, active) -> mi.UInt32:
@@ -60,8 +60,22 @@ def _tracked_weight(medium, m, ray_maxt, channel, active):
     return dr.select(active & (pdf_c > 0), tr / pdf_c, 0.0)
 
 
+def free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler, channel, active, grid=None):
+    """``global_free_flight``, or where ``grid`` (a ``majorants.MajorantGrid``) is given, in the
+    lanes whose medium is the grid's, delta tracking against the grid's local bounds
+    (``majorants.free_flight``; its weights are ``global_free_flight``'s with a majorant that is
+    one number for every channel). Returns (mei, scattered, weight)."""
+    if grid is None:
+        return global_free_flight(medium, ray, t_max, sampler, channel, active)
+    on_grid = active & (medium == grid.pointer)
+    mei, scattered, weight = global_free_flight(medium, ray, t_max, sampler, channel, active & ~on_grid)
+    mei_g, scattered_g, weight_g = majorants.free_flight(grid, ray, t_max, sampler, on_grid)
+    mei[on_grid] = mei_g
+    return mei, scattered | scattered_g, dr.select(on_grid, weight_g, weight)
+
+
 @dr.syntax
-def free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler, channel, active):
+def global_free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler, channel, active):
     """Delta tracking along ``ray`` inside ``medium`` up to distance ``t_max`` (the next surface).
 
     Returns (mei, scattered, weight): ``scattered`` where a real collision was found before
@@ -95,9 +109,21 @@ def free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler,
     return mei, scattered, weight
 
 
-@dr.syntax
 def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampler, channel, active,
-                          tracking_kind: str = "ratio"):
+                          tracking_kind: str = "ratio", grid=None):
+    """``global_segment_transmittance``, or in the lanes whose medium is ``grid``'s, ratio or
+    delta tracking against the grid's local bounds (``majorants.track``)."""
+    if grid is None:
+        return global_segment_transmittance(medium, ray, sampler, channel, active, tracking_kind)
+    on_grid = active & (medium == grid.pointer)
+    T = global_segment_transmittance(medium, ray, sampler, channel, active & ~on_grid, tracking_kind)
+    _, _, T_grid = majorants.track(grid, ray, ray.maxt, sampler, on_grid, tracking_kind)
+    return dr.select(on_grid, T_grid, T)
+
+
+@dr.syntax
+def global_segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampler, channel, active,
+                                 tracking_kind: str = "ratio"):
     """T over ``ray`` (from its origin to ``ray.maxt``) inside ``medium``: Beer-Lambert in a
     homogeneous medium. In a heterogeneous one, ``ratio`` tracking: per channel the product of
     T / p_c over the steps and of sigma_n at each tentative collision (= 1 - sigma_t / sigma_bar
@@ -134,12 +160,12 @@ def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampl
 
 @dr.syntax
 def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, target: mi.Point3f,
-                  sampler: mi.Sampler, channel, floor: float, active, tracking_kind: str = "ratio"):
+                  sampler: mi.Sampler, channel, floor: float, active, tracking_kind: str = "ratio", grid=None):
     """T from the vertex ``it`` (inside ``medium``, which a surface vertex has already switched
     to the side facing ``target``) to the point ``target``: through media, and through the
     surfaces between whose BSDFs let light pass unscattered (``null`` boundaries, a mask's clear
     part: ``eval_null_transmission``); every other surface blocks it. Rays start and stop at
-    the lab's offsets (``spawn``). ``tracking_kind``: ``segment_transmittance``'s."""
+    the lab's offsets (``spawn``). ``tracking_kind``, ``grid``: ``segment_transmittance``'s."""
     ray = spawn.spawn_ray_to(it, target, floor)
     medium = mi.MediumPtr(medium)
     T = mi.UnpolarizedSpectrum(1.0)
@@ -150,7 +176,7 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
         segment = mi.Ray3f(ray)
         segment.maxt = dr.select(crossing, si.t, ray.maxt)
         inside = going & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
-        T[inside] *= segment_transmittance(medium, segment, sampler, channel, inside, tracking_kind)
+        T[inside] *= segment_transmittance(medium, segment, sampler, channel, inside, tracking_kind, grid)
         bsdf = si.bsdf(ray)
         T[crossing] *= bsdf.eval_null_transmission(si, crossing)
         medium[crossing & si.is_medium_transition()] = si.target_medium(ray.d)
@@ -162,7 +188,7 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
 
 def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, scattered, medium, channel,
                      beta, L, sample_weight, n_L: int, active, floor: float, tracking_kind: str = "ratio",
-                     equiangular=None, nee: bool = True):
+                     equiangular=None, nee: bool = True, grid=None):
     """Next-event estimation at a vertex of a path in a scene with media: the surface ``si``
     (its ``bsdf``) or, where ``scattered``, the medium point ``mei`` (its ``phase`` function);
     ``it`` is the vertex as an ``Interaction3f``, ``medium`` the medium the path arrived in.
@@ -181,7 +207,7 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
         sampled = active & (ds.pdf != 0)
         # a surface at a medium boundary sends the shadow ray into the medium on its side
         start = dr.select(~scattered & si.is_medium_transition(), si.target_medium(ds.d), medium)
-        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled, tracking_kind)
+        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled, tracking_kind, grid)
         f_bsdf, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), sampled & ~scattered)
         f_phase, pdf_phase = phase.eval_pdf(phase_ctx, mei, ds.d, sampled & scattered)
         f = dr.select(scattered, f_phase, f_bsdf)
@@ -295,7 +321,7 @@ class Equiangular:
 
 def equiangular_scatter(scene, sampler, phase_ctx, medium, segment: Segment, wavelengths, beta, channel,
                         equiangular_weight, n_L: int, nee: bool, active, floor: float,
-                        tracking_kind: str = "ratio"):
+                        tracking_kind: str = "ratio", grid=None):
     """One equi-angular sample of the direct light scattered towards the segment's origin along
     ``segment`` (inside the homogeneous ``medium``): a light point y sampled from the origin,
     a distance t towards it (``equiangular_sample``), and
@@ -331,7 +357,7 @@ def equiangular_scatter(scene, sampler, phase_ctx, medium, segment: Segment, wav
     pdf_y = dr.select(ds.delta, ds.pdf, ds.pdf * cos_o / dr.square(dist_o) * dr.square(ds.dist) / cos_t)
     phase = medium.phase_function()
     f, pdf_phase = phase.eval_pdf(phase_ctx, mei, ds.d, ok)
-    T_light = transmittance(scene, medium, it, ds.p, sampler, channel, floor, ok, tracking_kind)
+    T_light = transmittance(scene, medium, it, ds.p, sampler, channel, floor, ok, tracking_kind, grid)
     p_d = distance_pdf(medium, t, sigma_t, channel)
     pdf_nee = dr.select(ds.delta, ds.pdf, scene.pdf_emitter_direction(it, ds, ok & ~ds.delta))
     p_e = pdf_t * pdf_y
