@@ -161,6 +161,10 @@ def _media(sampling_default: str) -> tuple[Param, ...]:
         Param("majorant_resolution", int, 16,
               "majorant grid cells along each axis (at most the sigma_t grid's own resolution there)",
               **_int_at_least(1)),
+        Param("spectral_mis", bool, True,
+              "with chromatic extinction, weight the distances sampled with the path's channel by "
+              "one-sample MIS over all channels' densities (volpathmis); false: divide by the sampling "
+              "channel's density alone (volpath). No effect in grey media"),
     )
 
 

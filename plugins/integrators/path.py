@@ -108,15 +108,11 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                          (Default: true)
     ============= ====== ==========================================================
 
-    Participating media (homogeneous and heterogeneous, any phase function, behind ``null``
-    boundaries, inside dielectrics, around the sensor) as Mitsuba's ``volpath`` renders them:
-    free flights by delta tracking (analytic in homogeneous media), the albedo at each
-    scattering event, ``max_depth`` counting medium vertices but not null boundaries, shadow
-    rays carrying the transmittance through media and null boundaries (``common.media``).
-    Distances are sampled with one colour channel's coefficients (the path's: uniform in RGB,
-    the hero wavelength in spectral variants). Not in polarized variants (refused in one line).
-    lab_nee and lab_mis declare the medium parameters (``params._media``): ``medium_sampling``,
-    ``transmittance``, ``majorants`` (``common.majorants``) and ``spectral_mis``.
+    Participating media (any phase function, behind ``null`` boundaries, inside dielectrics,
+    around the sensor) as ``volpath`` renders them (``common.media``): free flights by delta
+    tracking, max_depth counting medium vertices, not null boundaries; not in polarized
+    variants. lab_nee and lab_mis declare the medium parameters (``params._media``):
+    ``medium_sampling``, ``transmittance``, ``majorants`` and ``spectral_mis``.
     """
     #: The estimator class (weights, own parameters, what it knows about scenes).
     ESTIMATOR: type[PathEstimator] = PathEstimator
@@ -133,10 +129,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         self.hide_emitters = values["hide_emitters"]
         self.count_rays = values["count_rays"]
         # (declared by the path tracers that sample emitters: lab_nee, lab_mis)
-        self.medium_sampling = values.get("medium_sampling", "distance")
-        self.tracking_kind = values.get("transmittance", "ratio")
-        self.majorants, self.majorant_resolution = values.get("majorants", "global"), values.get("majorant_resolution", 16)
-        self.spectral_mis = values.get("spectral_mis", False)
+        for name, attribute, default in media.SETTINGS:      # lab_naive: the defaults
+            setattr(self, attribute, values.get(name, default))
         self.estimator = self.ESTIMATOR(values)
         self.counters = RayCounters()
         self._plan = None                      # (scene, KernelPlan) while render() runs
@@ -194,6 +188,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         # mis), and whether NEE at free-flight collisions is a technique beside it (mis)
         equiangular_on = has_media and emitter_sampling and self.medium_sampling != "distance"
         nee_in_media = self.medium_sampling != "equiangular"
+        spectral = has_media and self.spectral_mis and not mi.is_monochromatic   # (media.free_flight)
         tracking = self.tracking_kind
         estimator = self.estimator
         n_L = estimator.emitter_samples
@@ -223,6 +218,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             grid = majorants.of_integrator(self, scene)
         # the previous vertex's equi-angular state, for emitter hits' weights
         prev_ea = media.Equiangular() if equiangular_on else mi.Bool(False)
+        ratios = mi.UnpolarizedSpectrum(1.0) if spectral else mi.Bool(False)   # spectral MIS's r_c
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
         if dr.hint(self.hide_emitters and emitter_hits, mode="scalar"):
             # Mitsuba's meaning: camera rays pass through area emitters to what lies behind them
@@ -244,9 +240,11 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                                 & (depth + 1 < self.max_depth))
                     L += media.equiangular_scatter(scene, sampler, phase_ctx, medium, segment, ray.wavelengths,
                                                    beta, channel, estimator.equiangular_weight, n_L,
-                                                   nee_in_media, ea_lanes, floor, tracking, grid)
+                                                   nee_in_media, ea_lanes, floor, tracking, grid,
+                                                   ratios if spectral else None)
                     n_shadow += dr.select(ea_lanes, 1, 0)
-                mei, scattered, w_flight = media.free_flight(medium, ray, si.t, sampler, channel, in_medium, grid)
+                mei, scattered, w_flight, ratios_next = media.free_flight(
+                    medium, ray, si.t, sampler, channel, in_medium, grid, ratios if spectral else None)
                 beta[in_medium] *= w_flight
                 on_surface = active & ~scattered
 
@@ -280,8 +278,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                 it[scattered] = mei
                 ea_here = None
                 if dr.hint(equiangular_on, mode="scalar"):
-                    ea_here = media.Equiangular(segment, media.distance_pdf(medium, mei.t, mei.sigma_t, channel),
-                                                scattered & ea_lanes)
+                    p_d = media.distance_pdf(medium, mei.t, mei.sigma_t, channel, ratios if spectral else None)
+                    ea_here = media.Equiangular(segment, p_d, scattered & ea_lanes)
                 if dr.hint(emitter_sampling, mode="scalar"):
                     in_medium_nee = scattered & mei.medium.use_emitter_sampling()
                     if dr.hint(equiangular_on and not nee_in_media, mode="scalar"):
@@ -314,6 +312,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                                                   mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Delta))
                 medium[surface & si.is_medium_transition()] = si.target_medium(ray.d)
                 depth[real] += 1
+                if dr.hint(spectral, mode="scalar"):
+                    ratios = ratios_next
             else:
                 active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
 
@@ -375,9 +375,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         (equal to ``params.resolve(plugin_name, given)``; for file metadata and messages)."""
         values = {"max_depth": UNBOUNDED if self.max_depth == DEPTH_UNBOUNDED else self.max_depth,
                   "rr_depth": self.rr_depth, "hide_emitters": self.hide_emitters,
-                  "count_rays": self.count_rays, "medium_sampling": self.medium_sampling,
-                  "transmittance": self.tracking_kind, "majorants": self.majorants,
-                  "majorant_resolution": self.majorant_resolution, "spectral_mis": self.spectral_mis,
+                  "count_rays": self.count_rays, **{name: getattr(self, a) for name, a, _ in media.SETTINGS},
                   **self.estimator.settings()}
         return {p.name: values[p.name] for p in self.PARAMETERS}
 
@@ -475,6 +473,8 @@ class LabMISIntegrator(LabPathIntegrator):
     majorants           string ``global`` | ``grid`` (local bounds): tracking
                                in heterogeneous media (Default: ``global``)
     majorant_resolution int    Majorant grid cells per axis (Default: 16)
+    spectral_mis        bool   One-sample MIS over the channels' distance
+                               densities in chromatic media (Default: true)
     =================== ====== =================================================
 
     All weights are computed from pdf ratios (``mis_weight.mis_weight``), so pdfs of 0, 1e-30,

@@ -100,8 +100,8 @@ def test_a_three_percent_error_in_a_medium_estimator_is_caught(monkeypatch, what
     def biased(*args, **kwargs):
         out = original(*args, **kwargs)
         if what == "free_flight":
-            mei, scattered, weight = out
-            return mei, scattered, weight * 1.03
+            mei, scattered, weight, ratios = out
+            return mei, scattered, weight * 1.03, ratios
         return out * (1.3 if what == "equiangular_pdf" else 1.03)
 
     monkeypatch.setattr(media, what, biased)
@@ -243,3 +243,36 @@ def test_majorant_grid_is_refused_in_one_line_where_it_cannot_apply_and_ignored_
     images = [render(fog, make_integrator("lab_mis", {"max_depth": DEPTH, "majorants": m}), spp=4, seed=3)[0]
               for m in ("global", "grid")]
     assert np.array_equal(images[0], images[1])
+
+
+# ------------------------------------------------------------------ spectral MIS (issue 44)
+def test_spectral_mis_agrees_with_volpathmis():
+    """lab_mis's default (spectral_mis on, medium_sampling mis: the equi-angular weights see the
+    channel-averaged distance density) in the tenfold chromatic medium in glass, against
+    volpathmis (the same one-sample MIS over channels in Mitsuba)."""
+    scene = mi.load_dict(media_scenes.chromatic_in_glass())
+    ref = renders(scene, make_integrator("volpathmis", {"max_depth": DEPTH}), SPP, SEEDS_REF)
+    assert_agrees(lab(scene, spectral_mis=True), ref, "lab_mis spectral_mis on chromatic_in_glass vs volpathmis")
+    assert_agrees(lab(scene, "lab_nee", spectral_mis=True), ref, "lab_nee spectral_mis on chromatic_in_glass")
+
+
+def test_spectral_mis_without_the_carried_ratios_is_caught(monkeypatch):
+    """Power: each flight weighted by its own channel mean, mean_c(q_c), forgetting the ratios
+    r_c that the path carries from its earlier flights (a product of means instead of the mean
+    of products), must fail the bound (max_depth 16: paths of many flights, where it shows)."""
+    from mitsuba_lab.plugins.integrators.common import media
+
+    original = media.free_flight
+
+    def forgetful(*args, **kwargs):
+        mei, scattered, weight, ratios = original(*args, **kwargs)
+        return mei, scattered, weight, None if ratios is None else dr.ones(type(ratios))
+
+    import drjit as dr
+    monkeypatch.setattr(media, "free_flight", forgetful)
+    scene = mi.load_dict(media_scenes.chromatic_in_glass())
+    ref = renders(scene, make_integrator("volpathmis", {"max_depth": 16}), SPP, SEEDS_REF)
+    result = z_scores(lab(scene, max_depth=16, spectral_mis=True), ref)
+    print(f"spectral MIS without carried ratios: max |z| {result.max_abs_z:.1f}, "
+          f"relative difference {result.rel_diff.round(4)}")
+    assert result.max_abs_z > Z_BOUND

@@ -18,7 +18,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis", "lab_photon", "lab_bdpt", "lab_vcm")
 LAB_SAMPLERS = ("lab_independent", "lab_stratified", "lab_halton", "lab_sobol", "lab_zsobol")
 MIS_VALID = ("beta, count_rays, emitter_samples, heuristic, hide_emitters, majorant_resolution, majorants, max_depth, "
-             "medium_sampling, rr_depth, transmittance")
+             "medium_sampling, rr_depth, spectral_mis, transmittance")
 
 
 def load_error(d: dict) -> str:
@@ -127,7 +127,7 @@ def test_unknown_name_without_a_close_match():
         resolve("lab_nee", {"heuristic": "power"})
     assert str(err.value) == ("lab_nee: unknown parameter 'heuristic'; valid parameters: count_rays, "
                               "hide_emitters, majorant_resolution, majorants, max_depth, medium_sampling, rr_depth, "
-                              "transmittance")
+                              "spectral_mis, transmittance")
     with pytest.raises(ValueError) as err:
         resolve("lab_zsobol", {"widht": 4, "zzz": 1})
     assert str(err.value) == ("lab_zsobol: unknown parameters 'widht', 'zzz'; valid parameters: sample_count, "
@@ -155,7 +155,7 @@ def test_mitsuba_base_parameters_and_nested_objects_are_left_to_mitsuba():
 # resolve, declared, settings()
 # ---------------------------------------------------------------------------
 PATH_DEFAULTS = {"max_depth": -1, "rr_depth": 5, "hide_emitters": False, "count_rays": True}
-MEDIA_DEFAULTS = {"majorants": "global", "majorant_resolution": 16}
+MEDIA_DEFAULTS = {"majorants": "global", "majorant_resolution": 16, "spectral_mis": True}
 DEFAULTS = {
     "lab_naive": PATH_DEFAULTS,
     "lab_nee": {**PATH_DEFAULTS, "medium_sampling": "distance", "transmittance": "ratio", **MEDIA_DEFAULTS},
