@@ -194,22 +194,21 @@ def _coefficients(medium, ray: mi.Ray3f, t, active):
 
 
 @dr.syntax
-def _walk(grid: MajorantGrid, o, d, step, t, t_end, tau, cell, active):
-    """The DDA: from distance ``t`` in ``cell``, spend the optical depth ``tau`` against the cells'
-    bounds along o + t d (grid-local). Returns (t, cell, bound, collide): where it ran out (the
-    tentative collision, in ``cell`` of bound ``bound``) where ``collide``, else the ray left
+def _walk(grid: MajorantGrid, step, spacing, t, t_end, tau, cell, cross, active):
+    """The DDA (Amanatides and Woo): from distance ``t`` in ``cell``, whose planes ahead the ray
+    meets at ``cross`` (per axis; successive planes ``spacing`` apart), spend the optical depth
+    ``tau`` against the cells' bounds. Returns (t, cell, cross, bound, collide): where it ran out
+    (the tentative collision, in ``cell`` of bound ``bound``) where ``collide``, else the ray left
     the grid or reached ``t_end`` first."""
-    res = mi.Vector3f(*grid.resolution)
+    res = mi.Vector3i(*grid.resolution)
     nx, ny = grid.resolution[0], grid.resolution[1]
-    t, tau, cell = mi.Float(t), mi.Float(tau), mi.Vector3i(cell)
+    t, tau, cell, cross = mi.Float(t), mi.Float(tau), mi.Vector3i(cell), mi.Vector3f(cross)
     bound = mi.Float(0.0)
     collide = mi.Bool(False)
     walking = mi.Bool(active)
     while walking:
         bound = dr.gather(mi.Float, grid.values, cell.x + nx * (cell.y + ny * cell.z), walking)
         # where the ray leaves the cell: the nearest of the three planes ahead of it
-        ahead = (mi.Vector3f(cell) + dr.select(d > 0, 1.0, 0.0)) / res
-        cross = dr.select(step != 0, (ahead - o) / d, dr.inf)
         t_cell = dr.maximum(dr.minimum(dr.min(cross), t_end), t)
         dt = tau / bound                              # inf in an empty cell
         here = walking & (t + dt < t_cell)
@@ -220,14 +219,18 @@ def _walk(grid: MajorantGrid, o, d, step, t, t_end, tau, cell, active):
         tau[passes] = tau - bound * (t_cell - t)
         t[passes] = t_cell
         moving = passes & (t_cell < t_end)
-        axis_x = (cross.x <= cross.y) & (cross.x <= cross.z)
-        axis_y = ~axis_x & (cross.y <= cross.z)
-        cell.x[moving & axis_x] = cell.x + step.x
-        cell.y[moving & ~axis_x & axis_y] = cell.y + step.y
-        cell.z[moving & ~axis_x & ~axis_y] = cell.z + step.z
-        inside = ~dr.any((cell < 0) | (cell >= mi.Vector3i(res)))
+        axis_x = moving & (cross.x <= cross.y) & (cross.x <= cross.z)
+        axis_y = moving & ~axis_x & (cross.y <= cross.z)
+        axis_z = moving & ~axis_x & ~axis_y
+        cell.x[axis_x] = cell.x + step.x
+        cross.x[axis_x] = cross.x + spacing.x
+        cell.y[axis_y] = cell.y + step.y
+        cross.y[axis_y] = cross.y + spacing.y
+        cell.z[axis_z] = cell.z + step.z
+        cross.z[axis_z] = cross.z + spacing.z
+        inside = ~dr.any((cell < 0) | (cell >= res))
         walking = moving & inside
-    return t, cell, bound, collide
+    return t, cell, cross, bound, collide
 
 
 @dr.syntax
@@ -254,13 +257,16 @@ def track(grid: MajorantGrid, ray: mi.Ray3f, t_max, sampler: mi.Sampler, active,
     start = (o + t * d) * res
     cell = mi.Vector3i(dr.clip(mi.Vector3i(dr.floor(start)), 0, mi.Vector3i(res) - 1))
     step = mi.Vector3i(dr.select(d > 0, 1, dr.select(d < 0, -1, 0)))
+    ahead = (mi.Vector3f(cell) + dr.select(d > 0, 1.0, 0.0)) / res
+    cross = dr.select(step != 0, (ahead - o) / d, dr.inf)       # the planes ahead, per axis
+    spacing = dr.select(step != 0, dr.abs(dr.rcp(res * d)), dr.inf)
     weight = mi.UnpolarizedSpectrum(1.0)
     scattered = mi.Bool(False)
     t_hit = mi.Float(dr.inf)
     while going:
         # the next tentative collision: an optical depth tau spent cell by cell from t
         tau = -dr.log(1.0 - sampler.next_1d(going))
-        t, cell, bound, collide = _walk(grid, o, d, step, t, t_end, tau, cell, going)
+        t, cell, cross, bound, collide = _walk(grid, step, spacing, t, t_end, tau, cell, cross, going)
         going &= collide
         sigma_s, sigma_t = _coefficients(medium, ray, t, collide)
         sigma_n = bound - sigma_t
