@@ -332,3 +332,20 @@ def test_spectral_mis_without_the_carried_ratios_is_caught(monkeypatch):
     print(f"spectral MIS without carried ratios: max |z| {result.max_abs_z:.1f}, "
           f"relative difference {result.rel_diff.round(4)}")
     assert result.max_abs_z > Z_BOUND
+
+
+def test_the_majorant_grid_follows_the_medium_s_data():
+    """Kept between renders of a scene, rebuilt when its sigma_t data is set anew (a stale grid
+    below the new densities would bias every estimate): doubled data, doubled bounds."""
+    from mitsuba_lab.plugins.integrators.common import majorants
+
+    scene = mi.load_dict(media_scenes.smoke())
+    integrator = make_integrator("lab_mis", {"majorants": "grid"})
+    grid = majorants.of_integrator(integrator, scene)
+    assert majorants.of_integrator(integrator, scene) is grid
+    params = mi.traverse(scene)
+    key = next(k for k in params.keys() if k.endswith("sigma_t.data"))
+    params[key] = params[key] * 2.0
+    params.update()
+    rebuilt = majorants.of_integrator(integrator, scene)
+    assert rebuilt is not grid and np.allclose(rebuilt.bounds, 2.0 * grid.bounds, rtol=1e-6)

@@ -116,6 +116,7 @@ class MajorantGrid:
         self.to_local = mi.ScalarTransform4f(_to_local(medium).tolist())
         self.medium = medium
         self.pointer = mi.MediumPtr(medium)
+        self.version = _version(medium)
 
     @property
     def nbytes(self) -> int:
@@ -151,14 +152,22 @@ class MajorantGrid:
         return cls(hetero[0], resolution) if hetero else None
 
 
+def _version(medium) -> tuple:
+    """What a grid was built from: the sigma_t data's Dr.Jit variable (a new one whenever the
+    data is set, e.g. through ``mi.traverse``) and the scale."""
+    params = mi.traverse(medium)
+    return params["sigma_t.data"].array.index, float(params["scale"])
+
+
 def of_integrator(integrator, scene: mi.Scene) -> "MajorantGrid | None":
     """The majorant grid of ``scene`` for a path tracer with ``majorants = grid`` (built on the
-    first render of the scene and kept on the integrator for the next), else None; a ValueError
-    of one line, naming the plugin, where the scene's media cannot have one."""
+    first render of the scene and kept on the integrator for the next, until the medium's
+    sigma_t data or scale change), else None; a ValueError of one line, naming the plugin, where
+    the scene's media cannot have one."""
     if integrator.majorants != "grid":
         return None
     kept = getattr(integrator, "_majorant_grid", (None, None))
-    if kept[0] is not scene:
+    if kept[0] is not scene or (kept[1] is not None and kept[1].version != _version(kept[1].medium)):
         try:
             kept = (scene, MajorantGrid.of(scene, integrator.majorant_resolution))
         except ValueError as e:
