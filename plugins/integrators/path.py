@@ -425,8 +425,8 @@ class LabNEEIntegrator(LabPathIntegrator):
     Parameters: ``max_depth`` (default -1, unbounded), ``rr_depth`` (5), ``hide_emitters``
     (false), ``count_rays`` (true); see ``LabPathIntegrator``. In media ``medium_sampling``
     (``distance``, the default: NEE at free-flight collisions; ``equiangular``; or ``mis``, the two
-    light samples weighted by the balance heuristic) and ``transmittance``. Estimator:
-    ``nee.NEE``.
+    light samples weighted by the balance heuristic), ``transmittance``, ``majorants``,
+    ``majorant_resolution`` and ``spectral_mis`` (true). Estimator: ``nee.NEE``.
 
     .. code-block:: python
 
