@@ -60,6 +60,7 @@ PATH_TRACER = (
 #: rays estimate transmittance (``integrators/common/media.py``); no effect on a scene without media.
 MEDIUM_SAMPLINGS = ("distance", "equiangular", "mis")
 TRANSMITTANCES = ("ratio", "delta")
+MAJORANTS = ("global", "grid")
 
 
 def _media(sampling_default: str) -> tuple[Param, ...]:
@@ -73,6 +74,19 @@ def _media(sampling_default: str) -> tuple[Param, ...]:
               "shadow rays' transmittance in heterogeneous media: ratio (ratio tracking) or delta (delta "
               "tracking, 0 or 1); exact (Beer-Lambert) in homogeneous media either way",
               choices=TRANSMITTANCES),
+        Param("majorants", str, "global",
+              "the bounds that delta and ratio tracking propose collisions against in a heterogeneous "
+              "medium: global (one per medium, Mitsuba's: scale x the grid's maximum) or grid (a coarse "
+              "grid of local bounds, built once per scene from the sigma_t gridvolume and walked cell by "
+              "cell; 4 bytes a cell; one heterogeneous medium per scene, its one-channel sigma_t grid "
+              "scaled and translated, not rotated); homogeneous media need none", choices=MAJORANTS),
+        Param("majorant_resolution", int, 16,
+              "majorant grid cells along each axis (at most the sigma_t grid's own resolution there)",
+              **_int_at_least(1)),
+        Param("spectral_mis", bool, True,
+              "with chromatic extinction, weight the distances sampled with the path's channel by "
+              "one-sample MIS over all channels' densities (volpathmis); false: divide by the sampling "
+              "channel's density alone (volpath). No effect in grey media"),
     )
 
 

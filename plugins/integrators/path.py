@@ -28,7 +28,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.param_docs import documented
-from mitsuba_lab.plugins.integrators.common import direct, media, spawn
+from mitsuba_lab.plugins.integrators.common import direct, majorants, media, spawn
 from mitsuba_lab.plugins.integrators.common.counters import RayCounters
 from mitsuba_lab.plugins.integrators.estimator import PathEstimator
 from mitsuba_lab.plugins.integrators.mis import MIS
@@ -97,16 +97,11 @@ class LabPathIntegrator(mi.SamplingIntegrator):
     plugin's docstring. ``max_depth`` counts segments: 1 = only emitters seen directly, 2 =
     direct lighting, 0 = nothing (black). ``count_rays`` costs one atomic add per sample.
 
-    Participating media (homogeneous and heterogeneous, any phase function, behind ``null``
-    boundaries, inside dielectrics, around the sensor) are rendered as Mitsuba's ``volpath``
-    renders them: free flights sampled by delta tracking against each medium's majorant
-    (analytic in homogeneous media), the albedo at each scattering event, ``max_depth``
-    counting medium vertices but not null boundaries; shadow rays carry the transmittance
-    through media and null boundaries (exact in homogeneous media, ratio or delta tracking in
-    heterogeneous ones: ``transmittance``). Distances are sampled with one colour channel's
-    coefficients (the path's, picked uniformly in RGB; the hero wavelength in spectral
-    variants), every channel weighted by its own transmittance. Not in polarized variants
-    (refused in one line). lab_nee and lab_mis also declare ``medium_sampling``.
+    Participating media (any phase function, behind ``null`` boundaries, inside dielectrics,
+    around the sensor) as ``volpath`` renders them (``common.media``): free flights by delta
+    tracking, max_depth counting medium vertices, not null boundaries; not in polarized
+    variants. lab_nee and lab_mis declare the medium parameters (``params._media``):
+    ``medium_sampling``, ``transmittance``, ``majorants`` and ``spectral_mis``.
     """
     #: The estimator class (weights, own parameters, what it knows about scenes).
     ESTIMATOR: type[PathEstimator] = PathEstimator
@@ -123,8 +118,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         self.hide_emitters = values["hide_emitters"]
         self.count_rays = values["count_rays"]
         # (declared by the path tracers that sample emitters: lab_nee, lab_mis)
-        self.medium_sampling = values.get("medium_sampling", "distance")
-        self.tracking_kind = values.get("transmittance", "ratio")
+        for name, attribute, default in media.SETTINGS:      # lab_naive: the defaults
+            setattr(self, attribute, values.get(name, default))
         self.estimator = self.ESTIMATOR(values)
         self.counters = RayCounters()
         self._plan = None                      # (scene, KernelPlan) while render() runs
@@ -151,6 +146,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             raise ValueError(f"{self.ESTIMATOR.plugin_name}: participating media in the polarized variant "
                              f"'{variant}' are not supported yet: use {variant.replace('_polarized', '')} "
                              f"or Mitsuba's volpath")
+        if traits.media:
+            majorants.of_integrator(self, scene)     # majorants = grid: built once per scene, or refused
         bind_film_layout(scene, sensor)           # samplers that order pixels learn the film's shape
         self._plan = (scene, KernelPlan.of(traits, self.estimator))
         try:
@@ -180,6 +177,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         # mis), and whether NEE at free-flight collisions is a technique beside it (mis)
         equiangular_on = has_media and emitter_sampling and self.medium_sampling != "distance"
         nee_in_media = self.medium_sampling != "equiangular"
+        spectral = has_media and self.spectral_mis and not mi.is_monochromatic   # (media.free_flight)
         tracking = self.tracking_kind
         estimator = self.estimator
         n_L = estimator.emitter_samples
@@ -206,8 +204,10 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             medium = mi.MediumPtr(medium) if medium is not None else dr.zeros(mi.MediumPtr)
             channel = media.sampling_channel(sampler, active)
             phase_ctx = mi.PhaseFunctionContext(sampler)
+            grid = majorants.of_integrator(self, scene)
         # the previous vertex's equi-angular state, for emitter hits' weights
         prev_ea = media.Equiangular() if equiangular_on else mi.Bool(False)
+        ratios = mi.UnpolarizedSpectrum(1.0) if spectral else mi.Bool(False)   # spectral MIS's r_c
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
         if dr.hint(self.hide_emitters and emitter_hits, mode="scalar"):
             # Mitsuba's meaning: camera rays pass through area emitters to what lies behind them
@@ -229,9 +229,11 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                                 & (depth + 1 < self.max_depth))
                     L += media.equiangular_scatter(scene, sampler, phase_ctx, medium, segment, ray.wavelengths,
                                                    beta, channel, estimator.equiangular_weight, n_L,
-                                                   nee_in_media, ea_lanes, floor, tracking)
+                                                   nee_in_media, ea_lanes, floor, tracking, grid,
+                                                   ratios if spectral else None)
                     n_shadow += dr.select(ea_lanes, 1, 0)
-                mei, scattered, w_flight = media.free_flight(medium, ray, si.t, sampler, channel, in_medium)
+                mei, scattered, w_flight, ratios_next = media.free_flight(
+                    medium, ray, si.t, sampler, channel, in_medium, grid, ratios if spectral else None)
                 beta[in_medium] *= w_flight
                 on_surface = active & ~scattered
 
@@ -265,8 +267,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                 it[scattered] = mei
                 ea_here = None
                 if dr.hint(equiangular_on, mode="scalar"):
-                    ea_here = media.Equiangular(segment, media.distance_pdf(medium, mei.t, mei.sigma_t, channel),
-                                                scattered & ea_lanes)
+                    p_d = media.distance_pdf(medium, mei.t, mei.sigma_t, channel, ratios if spectral else None)
+                    ea_here = media.Equiangular(segment, p_d, scattered & ea_lanes)
                 if dr.hint(emitter_sampling, mode="scalar"):
                     in_medium_nee = scattered & mei.medium.use_emitter_sampling()
                     if dr.hint(equiangular_on and not nee_in_media, mode="scalar"):
@@ -275,7 +277,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                                            | in_medium_nee)
                     L = media.emitter_sampling(scene, sampler, bsdf_ctx, phase_ctx, it, si, bsdf, mei, phase,
                                                scattered, medium, channel, beta, L, estimator.sample_weight,
-                                               n_L, active_em, floor, tracking, ea_here, nee_in_media)
+                                               n_L, active_em, floor, tracking, ea_here, nee_in_media, grid)
                     n_shadow += dr.select(active_em, n_L, 0)
                 # null boundaries are crossed whatever the depth; real vertices scatter below max_depth
                 bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), surface)
@@ -299,6 +301,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                                                   mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Delta))
                 medium[surface & si.is_medium_transition()] = si.target_medium(ray.d)
                 depth[real] += 1
+                if dr.hint(spectral, mode="scalar"):
+                    ratios = ratios_next
             else:
                 active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
 
@@ -360,8 +364,8 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         (equal to ``params.resolve(plugin_name, given)``; for file metadata and messages)."""
         values = {"max_depth": UNBOUNDED if self.max_depth == DEPTH_UNBOUNDED else self.max_depth,
                   "rr_depth": self.rr_depth, "hide_emitters": self.hide_emitters,
-                  "count_rays": self.count_rays, "medium_sampling": self.medium_sampling,
-                  "transmittance": self.tracking_kind, **self.estimator.settings()}
+                  "count_rays": self.count_rays, **{name: getattr(self, a) for name, a, _ in media.SETTINGS},
+                  **self.estimator.settings()}
         return {p.name: values[p.name] for p in self.PARAMETERS}
 
     def to_string(self):
@@ -412,8 +416,8 @@ class LabNEEIntegrator(LabPathIntegrator):
     Parameters: ``max_depth`` (default -1, unbounded), ``rr_depth`` (5), ``hide_emitters``
     (false), ``count_rays`` (true); see ``LabPathIntegrator``. In media ``medium_sampling``
     (``distance``, the default: NEE at free-flight collisions; ``equiangular``; or ``mis``, the two
-    light samples weighted by the balance heuristic) and ``transmittance``. Estimator:
-    ``nee.NEE``.
+    light samples weighted by the balance heuristic), ``transmittance``, ``majorants``,
+    ``majorant_resolution`` and ``spectral_mis`` (true). Estimator: ``nee.NEE``.
 
     .. code-block:: python
 
@@ -443,14 +447,16 @@ class LabMISIntegrator(LabPathIntegrator):
     two estimators, Veach's cautionary example, kept for study. The kernel holds
     ``emitter_samples`` copies of the emitter-sampling code.
 
-    In a homogeneous medium, ``medium_sampling = mis`` (the default) adds a third technique for
-    the light scattered along each ray segment: a light point y sampled from the segment's
-    origin and a distance t with density proportional to 1 / |x(t) - y|^2 (equi-angular
-    sampling, Kulla and Fajardo 2012), which finds the light of point and spot lights in thin
-    media far better than free flights do. The three techniques (free flight + emitter sample,
-    free flight + phase sample, equi-angular) are weighted by the same heuristic over their
-    densities per unit distance and solid angle (``mis_weight.mis_weight_many``); ``distance``
-    and ``equiangular`` keep one of the two light samples.
+    In a homogeneous medium, ``medium_sampling = mis`` adds a third technique for the light
+    scattered along each ray segment: a light point y sampled from the segment's origin and a
+    distance t with density proportional to 1 / |x(t) - y|^2 (equi-angular sampling, Kulla and
+    Fajardo 2012). The three techniques (free flight + emitter sample, free flight + phase
+    sample, equi-angular) are weighted by the heuristic over their densities per unit distance
+    and solid angle (``mis_weight.mis_weight_many``). In chromatic media ``spectral_mis``
+    samples distances with one channel's coefficients and weights by the mean of every
+    channel's density (one-sample MIS over the channels, as ``volpathmis``, Miller et al. 2019);
+    in heterogeneous media ``majorants = grid`` tracks against local bounds of a coarse grid
+    walked cell by cell (``common.majorants``, as pbrt-v4's majorant grid) instead of one bound.
 
     .. code-block:: python
 

@@ -17,8 +17,8 @@ from mitsuba_lab.plugins.params import declared, resolve
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis", "lab_photon", "lab_bdpt", "lab_vcm", "lab_pssmlt")
 LAB_SAMPLERS = ("lab_independent", "lab_stratified", "lab_halton", "lab_sobol", "lab_zsobol")
-MIS_VALID = ("beta, count_rays, emitter_samples, heuristic, hide_emitters, max_depth, medium_sampling, rr_depth, "
-             "transmittance")
+MIS_VALID = ("beta, count_rays, emitter_samples, heuristic, hide_emitters, majorant_resolution, majorants, max_depth, "
+             "medium_sampling, rr_depth, spectral_mis, transmittance")
 
 
 def load_error(d: dict) -> str:
@@ -126,7 +126,8 @@ def test_unknown_name_without_a_close_match():
     with pytest.raises(ValueError) as err:
         resolve("lab_nee", {"heuristic": "power"})
     assert str(err.value) == ("lab_nee: unknown parameter 'heuristic'; valid parameters: count_rays, "
-                              "hide_emitters, max_depth, medium_sampling, rr_depth, transmittance")
+                              "hide_emitters, majorant_resolution, majorants, max_depth, medium_sampling, rr_depth, "
+                              "spectral_mis, transmittance")
     with pytest.raises(ValueError) as err:
         resolve("lab_zsobol", {"widht": 4, "zzz": 1})
     assert str(err.value) == ("lab_zsobol: unknown parameters 'widht', 'zzz'; valid parameters: sample_count, "
@@ -154,16 +155,17 @@ def test_mitsuba_base_parameters_and_nested_objects_are_left_to_mitsuba():
 # resolve, declared, settings()
 # ---------------------------------------------------------------------------
 PATH_DEFAULTS = {"max_depth": -1, "rr_depth": 5, "hide_emitters": False, "count_rays": True}
+MEDIA_DEFAULTS = {"majorants": "global", "majorant_resolution": 16, "spectral_mis": True}
 DEFAULTS = {
     "lab_naive": PATH_DEFAULTS,
-    "lab_nee": {**PATH_DEFAULTS, "medium_sampling": "distance", "transmittance": "ratio"},
+    "lab_nee": {**PATH_DEFAULTS, "medium_sampling": "distance", "transmittance": "ratio", **MEDIA_DEFAULTS},
     "lab_mis": {**PATH_DEFAULTS, "heuristic": "power", "beta": 2.0, "emitter_samples": 1, "medium_sampling": "mis",
-                "transmittance": "ratio"},
+                "transmittance": "ratio", **MEDIA_DEFAULTS},
     "lab_photon": {"photons_per_pass": 100_000, "passes": 16, "alpha": 2.0 / 3.0, "radius": 0.0,
                    "max_depth": -1, "rr_depth": 5, "direct": "nee", "max_records": 1 << 21,
                    "hide_emitters": False, "aim": 0.5, "aim_at": "specular"},
     "lab_pssmlt": {**PATH_DEFAULTS, "heuristic": "power", "beta": 2.0, "emitter_samples": 1, "medium_sampling": "mis",
-                   "transmittance": "ratio", "chains": 8192, "bootstrap": 100_000, "large_step": 0.3,
+                   "transmittance": "ratio", **MEDIA_DEFAULTS, "chains": 8192, "bootstrap": 100_000, "large_step": 0.3,
                    "small_step": "normal", "sigma": 0.01},
     "lab_independent": {"sample_count": 4, "seed": 0},
     "lab_stratified": {"sample_count": 4, "seed": 0, "jitter": True},

@@ -29,7 +29,14 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators.common import spawn
+from mitsuba_lab.plugins.integrators.common import majorants, spawn
+
+
+#: The medium parameters (``params._media``) as the path tracers hold them: (name, attribute,
+#: value where the plugin does not declare it: lab_naive's free flights, as Mitsuba's volpath).
+SETTINGS = (("medium_sampling", "medium_sampling", "distance"), ("transmittance", "tracking_kind", "ratio"),
+            ("majorants", "majorants", "global"), ("majorant_resolution", "majorant_resolution", 16),
+            ("spectral_mis", "spectral_mis", False))
 
 
 def sampling_channel(sampler: mi.Sampler, active) -> mi.UInt32:
@@ -50,18 +57,51 @@ def channel_value(spectrum, channel):
 
 
 def _tracked_weight(medium, m, ray_maxt, channel, active):
-    """T / p_c for one step of tracking from the ray's origin: T the transmittance over the
-    step and p_c the density of the step's outcome in the sampling channel (sigma_bar_c T_c at
-    a tentative collision, T_c past ``ray_maxt``). Per channel, exact against the majorant."""
+    """(T / p_c, p / p_c) for one step of tracking from the ray's origin: T the transmittance
+    over the step and p the density of the step's outcome per channel (sigma_bar T at a
+    tentative collision, T past ``ray_maxt``), p_c the sampling channel's. Per channel, exact
+    against the majorant."""
     end = dr.zeros(mi.SurfaceInteraction3f)
     end.t = ray_maxt
     tr, pdf = medium.transmittance_eval_pdf(m, end, active)
     pdf_c = channel_value(pdf, channel)
-    return dr.select(active & (pdf_c > 0), tr / pdf_c, 0.0)
+    ok = active & (pdf_c > 0)
+    return dr.select(ok, tr / pdf_c, 0.0), dr.select(ok, pdf / pdf_c, 1.0)
+
+
+def free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler, channel, active, grid=None,
+                ratios=None):
+    """``global_free_flight``, or where ``grid`` (a ``majorants.MajorantGrid``) is given, in the
+    lanes whose medium is the grid's, delta tracking against the grid's local bounds
+    (``majorants.free_flight``; its weights are ``global_free_flight``'s with a majorant that is
+    one number for every channel, so every channel has the same density). Returns (mei,
+    scattered, weight, ratios).
+
+    ``ratios`` (spectral MIS, after Miller et al. 2019 and ``volpathmis``): None, or per channel
+    r_c = P_c / P_s normalised to mean 1, P_c the density with which channel c's coefficients
+    would have sampled the path's distances so far and P_s the sampling channel's. The path's
+    weight is then f / mean_c(P_c) (one-sample MIS over a uniformly chosen channel, balance
+    heuristic) instead of f / P_s: with q_c = p_c / p_s this flight's density ratios, the weight
+    is divided by mean(r q) and r becomes r q / mean(r q)."""
+    if grid is None:
+        mei, scattered, weight, q = global_free_flight(medium, ray, t_max, sampler, channel, active)
+    else:
+        on_grid = active & (medium == grid.pointer)
+        mei, scattered, weight, q = global_free_flight(medium, ray, t_max, sampler, channel, active & ~on_grid)
+        mei_g, scattered_g, weight_g = majorants.free_flight(grid, ray, t_max, sampler, on_grid)
+        mei[on_grid] = mei_g
+        scattered, weight = scattered | scattered_g, dr.select(on_grid, weight_g, weight)
+    if ratios is not None:
+        rq = ratios * q
+        mean = dr.mean(rq)
+        ok = active & (mean > 0)
+        weight = dr.select(ok, weight / mean, dr.select(active, 0.0, weight))
+        ratios = dr.select(ok, rq / mean, ratios)
+    return mei, scattered, weight, ratios
 
 
 @dr.syntax
-def free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler, channel, active):
+def global_free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler, channel, active):
     """Delta tracking along ``ray`` inside ``medium`` up to distance ``t_max`` (the next surface).
 
     Returns (mei, scattered, weight): ``scattered`` where a real collision was found before
@@ -74,13 +114,16 @@ def free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler,
     ray = mi.Ray3f(ray)
     ray.maxt = dr.select(active, t_max, 0.0)
     weight = mi.UnpolarizedSpectrum(1.0)
+    q = mi.UnpolarizedSpectrum(1.0)           # per channel, the steps' densities over the sampling channel's
     mei = dr.zeros(mi.MediumInteraction3f)
     scattered = mi.Bool(False)
     tracking = mi.Bool(active)
     while tracking:
         m = medium.sample_interaction(ray, sampler.next_1d(tracking), channel, tracking)
         collided = tracking & m.is_valid()
-        weight[tracking] *= _tracked_weight(medium, m, ray.maxt, channel, tracking)
+        w_step, q_step = _tracked_weight(medium, m, ray.maxt, channel, tracking)
+        weight[tracking] *= w_step
+        q[tracking] *= q_step
         p_null = dr.mean(dr.select(m.combined_extinction > 0, m.sigma_n / m.combined_extinction, 0.0))
         null = collided & (sampler.next_1d(collided) < p_null)
         real = collided & ~null
@@ -92,12 +135,24 @@ def free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler,
         ray.o[null] = m.p
         ray.maxt[null] = ray.maxt - m.t
         tracking = null & (dr.max(mi.unpolarized_spectrum(weight)) > 0)
-    return mei, scattered, weight
+    return mei, scattered, weight, q
+
+
+def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampler, channel, active,
+                          tracking_kind: str = "ratio", grid=None):
+    """``global_segment_transmittance``, or in the lanes whose medium is ``grid``'s, ratio or
+    delta tracking against the grid's local bounds (``majorants.track``)."""
+    if grid is None:
+        return global_segment_transmittance(medium, ray, sampler, channel, active, tracking_kind)
+    on_grid = active & (medium == grid.pointer)
+    T = global_segment_transmittance(medium, ray, sampler, channel, active & ~on_grid, tracking_kind)
+    _, _, T_grid = majorants.track(grid, ray, ray.maxt, sampler, on_grid, tracking_kind)
+    return dr.select(on_grid, T_grid, T)
 
 
 @dr.syntax
-def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampler, channel, active,
-                          tracking_kind: str = "ratio"):
+def global_segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampler, channel, active,
+                                 tracking_kind: str = "ratio"):
     """T over ``ray`` (from its origin to ``ray.maxt``) inside ``medium``: Beer-Lambert in a
     homogeneous medium. In a heterogeneous one, ``ratio`` tracking: per channel the product of
     T / p_c over the steps and of sigma_n at each tentative collision (= 1 - sigma_t / sigma_bar
@@ -117,7 +172,7 @@ def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampl
         T[exact] *= tr
         ratio = tracking & ~exact
         collided = ratio & m.is_valid()
-        T[ratio] *= _tracked_weight(medium, m, ray.maxt, channel, ratio)
+        T[ratio] *= _tracked_weight(medium, m, ray.maxt, channel, ratio)[0]
         if dr.hint(tracking_kind == "delta", mode="scalar"):
             p_null = dr.mean(dr.select(m.combined_extinction > 0, m.sigma_n / m.combined_extinction, 0.0))
             null = collided & (sampler.next_1d(collided) < p_null)
@@ -134,12 +189,12 @@ def segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: mi.Sampl
 
 @dr.syntax
 def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, target: mi.Point3f,
-                  sampler: mi.Sampler, channel, floor: float, active, tracking_kind: str = "ratio"):
+                  sampler: mi.Sampler, channel, floor: float, active, tracking_kind: str = "ratio", grid=None):
     """T from the vertex ``it`` (inside ``medium``, which a surface vertex has already switched
     to the side facing ``target``) to the point ``target``: through media, and through the
     surfaces between whose BSDFs let light pass unscattered (``null`` boundaries, a mask's clear
     part: ``eval_null_transmission``); every other surface blocks it. Rays start and stop at
-    the lab's offsets (``spawn``). ``tracking_kind``: ``segment_transmittance``'s."""
+    the lab's offsets (``spawn``). ``tracking_kind``, ``grid``: ``segment_transmittance``'s."""
     ray = spawn.spawn_ray_to(it, target, floor)
     medium = mi.MediumPtr(medium)
     T = mi.UnpolarizedSpectrum(1.0)
@@ -150,7 +205,7 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
         segment = mi.Ray3f(ray)
         segment.maxt = dr.select(crossing, si.t, ray.maxt)
         inside = going & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
-        T[inside] *= segment_transmittance(medium, segment, sampler, channel, inside, tracking_kind)
+        T[inside] *= segment_transmittance(medium, segment, sampler, channel, inside, tracking_kind, grid)
         bsdf = si.bsdf(ray)
         T[crossing] *= bsdf.eval_null_transmission(si, crossing)
         medium[crossing & si.is_medium_transition()] = si.target_medium(ray.d)
@@ -162,7 +217,7 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
 
 def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, scattered, medium, channel,
                      beta, L, sample_weight, n_L: int, active, floor: float, tracking_kind: str = "ratio",
-                     equiangular=None, nee: bool = True):
+                     equiangular=None, nee: bool = True, grid=None):
     """Next-event estimation at a vertex of a path in a scene with media: the surface ``si``
     (its ``bsdf``) or, where ``scattered``, the medium point ``mei`` (its ``phase`` function);
     ``it`` is the vertex as an ``Interaction3f``, ``medium`` the medium the path arrived in.
@@ -181,7 +236,7 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
         sampled = active & (ds.pdf != 0)
         # a surface at a medium boundary sends the shadow ray into the medium on its side
         start = dr.select(~scattered & si.is_medium_transition(), si.target_medium(ds.d), medium)
-        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled, tracking_kind)
+        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled, tracking_kind, grid)
         f_bsdf, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), sampled & ~scattered)
         f_phase, pdf_phase = phase.eval_pdf(phase_ctx, mei, ds.d, sampled & scattered)
         f = dr.select(scattered, f_phase, f_bsdf)
@@ -262,11 +317,15 @@ def equiangular_density(scene, segment: Segment, it: mi.Interaction3f, ds: mi.Di
     return dr.select(finite & dr.isfinite(p), p, 0.0)
 
 
-def distance_pdf(medium, segment_t, mei_sigma_t, channel):
+def distance_pdf(medium, segment_t, mei_sigma_t, channel, ratios=None):
     """p_d(t) = sigma_t,c exp(-sigma_t,c t): the density of a free flight's collision at distance
-    t in a homogeneous medium, in the sampling channel c."""
-    sigma = channel_value(mei_sigma_t, channel)
-    return sigma * dr.exp(-sigma * segment_t)
+    t in a homogeneous medium, in the sampling channel c; with spectral MIS's ``ratios`` r (of
+    the path before this flight, ``free_flight``) the mean over the channels weighted by r,
+    which is what the path's density mean_c(P_c p_c(t)) is to mean_c(P_c)."""
+    if ratios is None:
+        sigma = channel_value(mei_sigma_t, channel)
+        return sigma * dr.exp(-sigma * segment_t)
+    return dr.mean(ratios * mei_sigma_t * dr.exp(-mei_sigma_t * segment_t)) / dr.mean(ratios)
 
 
 class Equiangular:
@@ -295,7 +354,7 @@ class Equiangular:
 
 def equiangular_scatter(scene, sampler, phase_ctx, medium, segment: Segment, wavelengths, beta, channel,
                         equiangular_weight, n_L: int, nee: bool, active, floor: float,
-                        tracking_kind: str = "ratio"):
+                        tracking_kind: str = "ratio", grid=None, ratios=None):
     """One equi-angular sample of the direct light scattered towards the segment's origin along
     ``segment`` (inside the homogeneous ``medium``): a light point y sampled from the origin,
     a distance t towards it (``equiangular_sample``), and
@@ -304,7 +363,7 @@ def equiangular_scatter(scene, sampler, phase_ctx, medium, segment: Segment, wav
 
     p_y the density of y per unit solid angle at x(t), w_E = ``equiangular_weight(Densities)``
     against NEE at a free flight's collision (``nee``: n_L samples) and phase-function sampling,
-    both with the collision's density p_d(t). Returns the contribution (0 for
+    both with the collision's density p_d(t) (``distance_pdf``, with ``ratios``). Returns the contribution (0 for
     emitters at infinity, which have no point to aim at)."""
     from mitsuba_lab.plugins.integrators.common.direct import spectrum_or_zero
     from mitsuba_lab.plugins.integrators.estimator import Densities
@@ -331,8 +390,8 @@ def equiangular_scatter(scene, sampler, phase_ctx, medium, segment: Segment, wav
     pdf_y = dr.select(ds.delta, ds.pdf, ds.pdf * cos_o / dr.square(dist_o) * dr.square(ds.dist) / cos_t)
     phase = medium.phase_function()
     f, pdf_phase = phase.eval_pdf(phase_ctx, mei, ds.d, ok)
-    T_light = transmittance(scene, medium, it, ds.p, sampler, channel, floor, ok, tracking_kind)
-    p_d = distance_pdf(medium, t, sigma_t, channel)
+    T_light = transmittance(scene, medium, it, ds.p, sampler, channel, floor, ok, tracking_kind, grid)
+    p_d = distance_pdf(medium, t, sigma_t, channel, ratios)
     pdf_nee = dr.select(ds.delta, ds.pdf, scene.pdf_emitter_direction(it, ds, ok & ~ds.delta))
     p_e = pdf_t * pdf_y
     w = equiangular_weight(Densities(bsdf=p_d * pdf_phase, emitter=p_d * n_L * pdf_nee if nee else 0.0 * p_d,
