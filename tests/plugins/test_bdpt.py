@@ -342,12 +342,18 @@ def test_a_textured_light_seen_directly_agrees_with_mitsuba_path(tmp_path):
     assert_agrees(renders(scene, bdpt(), 16, SEEDS_LAB), path_stack(scene, 64), "lab_bdpt, textured light")
 
 
+#: Samples (and so passes: one set of wavelengths each) per spectral render.
+SPECTRAL_SPP = 8
+
+
 def test_spectral_variant_agrees_with_mitsuba_path(tmp_path):
     """The spectral variant: each pass draws one set of wavelengths from the sensor, emits every
     light subpath at those and traces every camera ray at those, so connections and splats see
     one spectrum; the Cornell box (an RGB light: a D65-based spectrum) and the textured light.
     (A spectrum's sRGB may be out of gamut: negative channels are allowed, negative luminance
-    is not.)"""
+    is not.) SPECTRAL_SPP = 8 passes a render: `path`'s 64-spp reference holds most of the
+    variance, so the image x 1.03 / x 0.97 still fails (max |z| 8.40 / 8.69 on the box, 5.03 /
+    6.99 under the textured light; at 16 spp 9.01 / 9.62 and 6.01 / 9.54), at half the cost."""
     import mitsuba_lab
 
     try:
@@ -356,8 +362,8 @@ def test_spectral_variant_agrees_with_mitsuba_path(tmp_path):
                   "textured light": mi.load_string(textured_light_scene(str(tmp_path)), res=RES)}
         for name, scene in scenes.items():
             integrator = bdpt()
-            lab = renders(scene, integrator, 16, SEEDS_LAB)
-            assert integrator.bdpt_stats()["passes"] == 16            # one set of wavelengths per pass
+            lab = renders(scene, integrator, SPECTRAL_SPP, SEEDS_LAB)
+            assert integrator.bdpt_stats()["passes"] == SPECTRAL_SPP  # one set of wavelengths per pass
             assert pixel_problem(lab, True) == ""
             result = z_scores(lab, path_stack(name if name.endswith(".xml") else scene, 64))
             assert result.max_abs_z <= Z_BOUND, f"{name}: max |z| {result.max_abs_z:.2f}, {result.rel_diff}"
