@@ -8,8 +8,8 @@ Statistical checks: z-scores of 8x8 block means and image means (tests/agreement
 renders a side with disjoint fixed seeds; under agreement each z is about standard normal and
 the bound is |z| <= 5 (at most ~50 z's per comparison: a false failure has probability < 3e-5
 per comparison). Power: the deliberately wrong weight (t = 1 strategy x 1.03) fails the same
-test against a 256-spp reference (measured: max |z| 8.53; 12.5 against 1024 spp; the connection
-weight x 1.03: 6.2).
+test, lab_bdpt at 32 spp against a 256-spp reference (measured: max |z| 8.36; 8.53 at 64 spp;
+12.5 at 64 against 1024 spp; the connection weight x 1.03: 6.2).
 
 Scenes left out of the agreement tests, by design: near_delta_glossy (a GGX 1e-4 lobe: the
 reference's variance is not estimable from 16 renders, as in test_stiff), closed_box_albedo_099
@@ -190,11 +190,12 @@ def test_light_tracing_alone_agrees_with_ptracer():
     assert_agrees(lab, ref, "lab_bdpt strategies=light against ptracer")
 
 
-#: The power test's reference: `path` at 256 spp a seed (16 seeds, 32 x 32). At 1024 spp the
-#: wrong weight below measured max |z| 12.5; at 256 it measures 8.53 (the reference's variance
-#: is ~0.6x the lab's at 1024 spp, 2.5x at 256), still past Z_BOUND by 3.5 standard deviations
-#: of a noncentral z, for a quarter of the reference's cost.
-POWER_REF_SPP = 256
+#: The power test's sizes: `path` at 256 spp a seed (16 seeds, 32 x 32) and lab_bdpt at 32. With
+#: lab 64 / reference 1024 spp the wrong weight below measured max |z| 12.5; 64 / 256: 8.53 (the
+#: reference's variance is ~0.6x the lab's at 1024 spp, 2.5x at 256); 32 / 256: 8.36, still past
+#: Z_BOUND by 3.4 standard deviations of a noncentral z, at a quarter of the reference's cost
+#: and half the lab's.
+POWER_REF_SPP, POWER_LAB_SPP = 256, 32
 
 
 @pytest.fixture(scope="module")
@@ -205,19 +206,19 @@ def cornell_reference():
 
 def test_a_wrong_weight_is_caught(cornell_reference, monkeypatch):
     """Power of the agreement test: the t = 1 weight multiplied by 1.03 fails it (max |z| past
-    Z_BOUND: 8.53 against the 256-spp reference, 12.5 against a 1024-spp one)."""
+    Z_BOUND: 8.36 at POWER_LAB_SPP against the POWER_REF_SPP reference; 12.5 at 64 against 1024)."""
     from mitsuba_lab.plugins.integrators.bdpt import integrator
     from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights
 
     scene, ref = cornell_reference
-    assert_agrees(renders(scene, bdpt(), 64, SEEDS_LAB), ref, "lab_bdpt on the Cornell box, 64 spp")
+    assert_agrees(renders(scene, bdpt(), POWER_LAB_SPP, SEEDS_LAB), ref, "lab_bdpt on the Cornell box, 32 spp")
 
     class Perturbed(BdptWeights):
         def light_to_camera(self, *args, **kwargs):
             return 1.03 * super().light_to_camera(*args, **kwargs)
 
     monkeypatch.setattr(integrator, "BdptWeights", Perturbed)
-    wrong = renders(scene, bdpt(), 64, SEEDS_LAB)
+    wrong = renders(scene, bdpt(), POWER_LAB_SPP, SEEDS_LAB)
     z = z_scores(wrong, ref).max_abs_z
     print(f"t = 1 weight x 1.03: max |z| {z:.2f}")
     assert z > Z_BOUND
