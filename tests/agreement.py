@@ -54,6 +54,41 @@ def renders(scene, integrator, spp, seeds):
     return np.stack([render(scene, integrator, spp=spp, seed=s)[0] for s in seeds])
 
 
+#: Reference stacks already rendered in this process (numpy only, no Mitsuba object), by
+#: (variant, scene key, integrator, parameters, spp, seeds): see ``cached_renders``.
+_STACKS: dict = {}
+
+
+def cached_renders(scene_key, scene, integrator: str, params: dict, spp: int, seeds) -> np.ndarray:
+    """``renders(scene, make_integrator(integrator, params), spp, seeds)``, rendered once per
+    process for each (variant, ``scene_key``, integrator, params, spp, seeds) and shared by every
+    test (and test file) that asks again: with fixed seeds a render is deterministic, so a second
+    render of the same key is the same stack, and only time. ``scene_key`` must name the scene
+    exactly (file and every load parameter); ``scene`` may be a callable that loads it, called
+    only when the key is new. The stack is returned read-only."""
+    import mitsuba as mi
+
+    from mitsuba_lab.scene import make_integrator
+
+    key = (mi.variant(), scene_key, integrator, tuple(sorted(params.items())), spp, tuple(seeds))
+    if key not in _STACKS:
+        the_scene = scene() if callable(scene) else scene
+        stack = renders(the_scene, make_integrator(integrator, dict(params)), spp, seeds)
+        stack.flags.writeable = False
+        _STACKS[key] = stack
+    return _STACKS[key]
+
+
+def path_reference(name: str, res: int, spp: int = 64, max_depth: int = 8, seeds=None, **params) -> np.ndarray:
+    """Mitsuba's `path` on scenes/``name`` loaded at ``res``: ``spp`` x ``seeds`` (default
+    SEEDS_REF), through ``cached_renders`` (the same reference in test_bdpt, test_vcm, test_aim,
+    test_vcm_choices is rendered once per run)."""
+    from mitsuba_lab.scene import load_scene
+
+    return cached_renders(("file", name, res), lambda: load_scene(scene_path(name), res=res), "path",
+                          {"max_depth": max_depth, **params}, spp, SEEDS_REF if seeds is None else seeds)
+
+
 def z_scores(stack_a: np.ndarray, stack_b: np.ndarray) -> Agreement:
     def stats(stack, reducer):
         values = np.stack([reducer(img) for img in stack])

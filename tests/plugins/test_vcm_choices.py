@@ -29,7 +29,7 @@ def test_one_connection_per_camera_vertex_agrees_with_mitsuba_path(name, monkeyp
     from mitsuba_lab.plugins.integrators.bdpt import camera_subpath
 
     scene = load_scene(scene_path(name), res=RES)
-    ref = path_stack(scene)
+    ref = path_stack(name)
     assert_agrees(renders(scene, vcm(mode="bpt", connections="one"), 16, SEEDS_LAB), ref,
                   f"one connection per camera vertex on {name}")
     if name != "cornell_box.xml":      # (the caustic's light subpaths hold about one vertex: n is 1)
@@ -45,7 +45,7 @@ def test_the_pilots_own_choice_agrees_with_mitsuba_path():
     """Mode bpt on the Cornell box, each seed's pilot choosing for itself."""
     scene = load_scene(scene_path("cornell_box.xml"), res=RES)
     integrator = vcm(mode="bpt", light_paths=0.25, pilot=True)
-    assert_agrees(renders(scene, integrator, 64, SEEDS_LAB), path_stack(scene), "the pilot's own choice")
+    assert_agrees(renders(scene, integrator, 64, SEEDS_LAB), path_stack("cornell_box.xml"), "the pilot's own choice")
     assert integrator.bdpt_stats()["pilot_s"] > 0
 
 
@@ -65,18 +65,31 @@ def test_path_tracing_chosen_is_lab_mis_with_the_pilots_iterations(monkeypatch):
     assert stats["chose_path_tracing"] and stats["light_subpaths"] == 0
 
 
+def pilot_choice(scene, integrator, seed, spp):
+    """(choice, scores) of the pilot that ``integrator.render(scene, seed=seed, spp=spp)`` runs
+    first, without the render of ``spp`` iterations that follows it: with ``pilot_costs = counted``
+    (the default) the choice depends on the pilot's renders only, so it is the render's, and the
+    render's statistics are the choice's (test_path_tracing_chosen_is_lab_mis_..., test_the_chosen_
+    light_subpaths_render_lab_vcm_at_them)."""
+    assert integrator.values["pilot_costs"] == "counted"
+    integrator.first_radius = integrator.values["radius"]      # (what render() sets before its pilot)
+    pilot = integrator.pilot
+    choice, _, _, scores = pilot.run(scene, scene.sensors()[0], seed, spp, pilot.companion(), pilot.path_tracer())
+    return choice, scores
+
+
 @pytest.mark.parametrize("name, spp, path_tracing", [("veach_mis.xml", 2048, True), ("caustic.xml", 512, False)])
 def test_the_pilot_chooses_path_tracing_where_it_is_more_efficient(name, spp, path_tracing):
     """experiments/vcm.toml's `vcm_auto` at 64x64 (at 32x32 an iteration takes about as long as
     the timer's noise), on 3 seeds: path tracing on Veach's plates at 2048 iterations (no
     technique but emitter hits and NEE lowers its variance there), every technique on the caustic
-    scene at 512 (light tracing and merging carry its caustic)."""
+    scene at 512 (light tracing and merging carry its caustic). The pilot's choice only
+    (``pilot_choice``): the 2048 or 512 iterations a render then makes are not needed to know it."""
     scene = load_scene(scene_path(name), res=64)
     integrator = vcm(**AUTO)
     for seed in range(3):
-        render(scene, integrator, spp=spp, seed=seed)
-        stats = integrator.bdpt_stats()
-        assert stats["chose_path_tracing"] == path_tracing, (name, seed, stats["pilot_scores"])
+        choice, scores = pilot_choice(scene, integrator, seed, spp)
+        assert (choice is None) == path_tracing, (name, seed, scores)
 
 
 def test_auto_is_the_experiments_vcm_auto():
@@ -206,9 +219,8 @@ def test_the_pilot_finds_where_more_light_subpaths_lower_the_variance():
             assert (share < 0.2) if low else (share > 0.5), (name, seed, v)
     scene = load_scene(scene_path("cornell_box.xml"), res=64)
     for seed in range(3):
-        render(scene, integrator, spp=512, seed=seed)
-        stats = integrator.bdpt_stats()
-        assert stats["light_paths_chosen"] == 0 and stats["chose_path_tracing"], ("cornell_box", seed, stats["pilot_scores"])
+        choice, scores = pilot_choice(scene, integrator, seed, 512)
+        assert choice is None, ("cornell_box", seed, scores)
 
 
 def test_pilot_and_connections_refusals_are_one_line():
