@@ -13,10 +13,10 @@ probability T_c. The throughput is weighted per channel as the path family weigh
 at the flight and sigma_s at a collision. A surface whose BSDF samples its null lobe (a ``null``
 boundary, a mask's clear part) is passed without a vertex (Mitsuba's ``volpath`` counting of
 ``max_depth``), with probability P_null (the null lobe's sampling probability, 1 for ``null``),
-and the medium is tracked across medium transitions. Light subpaths start in the medium of the
-emitter's position: the medium behind the first medium transition the emitted ray meets
-(``origin_medium``; Mitsuba's emitters carry no medium of their own). The camera subpath
-starts in the sensor's medium.
+and the medium is tracked across medium transitions. Light subpaths start in the emitter's
+medium where the scene gives it one (``<ref id="fog"/>`` inside the emitter), else in the medium
+behind the first medium transition the emitted ray meets (``origin_medium``: an area light or a
+point light in a null-bounded fog names none). The camera subpath starts in the sensor's medium.
 
 **Densities.** A vertex x_i reached from x_{i-1} has the area density
 
@@ -206,7 +206,9 @@ def trace_light(tracer, st, block, vertices, store_lanes):
     aux_rng = mi.PCG32(count)
     aux_rng.seed(mi.sample_tea_64(index, mi.UInt32((tracer.channel_key ^ _AUX_KEY) & 0xFFFFFFFF)), index)
     aux = RngSampler(aux_rng)
-    medium = origin_medium(scene, ray, floor, dr.full(mi.Bool, True, count))
+    declared = emitter.get_medium()          # an emitter's own medium, where the scene names one
+    medium = dr.select(declared != None, declared,  # noqa: E711 (Dr.Jit pointer test)
+                       origin_medium(scene, ray, floor, dr.full(mi.Bool, True, count) & (declared == None)))  # noqa: E711
     phase_ctx = mi.PhaseFunctionContext(None, mi.TransportMode.Importance)
     tracing = Technique.LIGHT in w.techniques and tracer.reaches_sensor
 
