@@ -91,3 +91,15 @@ def test_the_planner_runs_lab_bdpt_on_homogeneous_media_only():
     assert not applies and "heterogeneous" in reason
     with pytest.raises(ValueError, match="heterogeneous"):
         make_integrator("lab_bdpt", {}).render(mi.load_dict(media_scenes.smoke()), spp=1)
+
+
+@pytest.mark.parametrize("name", ["dense_albedo_0999", "fog_cornell_1e-4", "fog_cornell_1e4", "thin_1e-4"])
+def test_stiff_media_give_finite_non_negative_pixels(name):
+    """scenes/stiff/media/ at 16x16, unbounded depth: a dense medium of albedo 0.999 (long walks on
+    both subpaths), the Cornell box in fog at scales 1e-4 and 1e4, an extinction of 1e-4."""
+    from agreement import pixel_problem
+
+    scene = mi.load_file(f"scenes/stiff/media/{name}.xml", res=16)
+    images = renders(scene, make_integrator("lab_bdpt", {"max_depth": -1}), 4, range(2))
+    assert pixel_problem(images, False) == ""
+    assert images.mean() > 0
