@@ -80,8 +80,8 @@ def test_a_medium_density_without_sigma_t_is_caught(monkeypatch):
 
 
 def test_the_planner_runs_lab_bdpt_on_homogeneous_media_only():
-    """Homogeneous media: lab_bdpt applies; heterogeneous smoke: refused in one line; lab_vcm
-    still leaves media out (it ignores them)."""
+    """Homogeneous media: lab_bdpt applies; heterogeneous smoke: refused in one line (and so is
+    hide_emitters with media); lab_vcm still leaves media out (it ignores them)."""
     fog = SceneTraits.from_scene(mi.load_dict(fog_box()))
     assert strategy_applicability(fog, "lab_bdpt", {}) == (True, "")
     applies, reason = strategy_applicability(fog, "lab_vcm", {})
@@ -91,6 +91,8 @@ def test_the_planner_runs_lab_bdpt_on_homogeneous_media_only():
     assert not applies and "heterogeneous" in reason
     with pytest.raises(ValueError, match="heterogeneous"):
         make_integrator("lab_bdpt", {}).render(mi.load_dict(media_scenes.smoke()), spp=1)
+    with pytest.raises(ValueError, match="hide_emitters is not supported in scenes with participating media"):
+        make_integrator("lab_bdpt", {"hide_emitters": True}).render(mi.load_dict(fog_box()), spp=1)
 
 
 @pytest.mark.parametrize("name", ["dense_albedo_0999", "fog_cornell_1e-4", "fog_cornell_1e4", "thin_1e-4"])
