@@ -64,6 +64,7 @@ class CameraPass:
     sensor_delta: bool = False           # the sensor's direction is a delta (orthographic): no t = 1
     media: bool = False                  # the scene has (homogeneous) media: ``media_paths``' loops
     channel_key: int = 0                 # in media: the key of each light subpath's sampling channel
+    sensor_medium: object = None         # in media: the sensor's medium (the camera subpaths start in it)
 
 
 def sensor_constants(sensor: mi.Sensor, plugin: str = "lab_bdpt") -> tuple[float, tuple]:

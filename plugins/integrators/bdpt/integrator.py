@@ -188,7 +188,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                                     self.max_depth, v["rr_depth"], v["hide_emitters"], floor,
                                     traits.hittable_emitters, only, count,
                                     passes.grid(vertices, stored, plan, stats), passes.connect_share,
-                                    passes.connect_one, counters, direction_is_delta(sensor), media, light_seed)
+                                    passes.connect_one, counters, direction_is_delta(sensor), media, light_seed,
+                                    sensor.get_medium() if media else None)
             start = time.perf_counter()
             try:
                 if u is None:
@@ -286,7 +287,9 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                              f"its sample(): its light subpaths are traced per pass by its own render(); "
                              f"render the scene with {name} directly")
         if self._pass.media:
-            L, valid = trace_camera(scene, self._pass, sampler, mi.Ray3f(ray), medium, active)
+            # (the spectral driver's passes, ``spectral.render_pass``, give no medium: the sensor's)
+            start = self._pass.sensor_medium if medium is None else medium
+            L, valid = trace_camera(scene, self._pass, sampler, mi.Ray3f(ray), start, active)
         else:
             L, valid = trace_camera_subpaths(scene, self._pass, sampler, mi.Ray3f(ray), active)
         return L, valid, []
