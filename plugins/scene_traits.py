@@ -156,6 +156,21 @@ def _shape_name(shape, index: int) -> str:
     return f"{bsdf.class_name() if bsdf is not None else shape.class_name()} on shape {index}"
 
 
+def _media(scene: mi.Scene) -> list:
+    """Every medium attached to a shape (inside or outside) or a sensor."""
+    found = []
+    for shape in scene.shapes():
+        found += [m for m in (shape.interior_medium(), shape.exterior_medium()) if m is not None]
+    found += [m for m in (getattr(s, "get_medium", lambda: None)() for s in scene.sensors()) if m is not None]
+    return found
+
+
+def _homogeneous(medium) -> bool:
+    """The medium's coefficients are constant (Mitsuba's ``is_homogeneous``)."""
+    flag = medium.is_homogeneous()
+    return bool(flag[0]) if hasattr(flag, "__len__") else bool(flag)
+
+
 @dataclass(frozen=True)
 class SceneTraits:
     """What a scene contains, read from the loaded scene without rendering (cheap:
@@ -182,6 +197,7 @@ class SceneTraits:
     sensor_kinds: tuple[str, ...] = ()  # plugin class of each sensor (PerspectiveCamera, ThinLensCamera, ..)
     delta_bsdf: bool = False           # some BSDF has a delta lobe (mirror, glass, null, plastic's)
     tangent_bsdf: bool = True          # some BSDF depends on tangents (anisotropy, normal/bump maps)
+    heterogeneous_media: bool = False  # some medium is not homogeneous (a grid volume)
 
     @staticmethod
     def from_scene(scene: mi.Scene) -> "SceneTraits":
@@ -214,7 +230,8 @@ class SceneTraits:
                                              if bsdf_mixes_delta_and_smooth(s)),
                            sensor_kinds=tuple(sensor.class_name() for sensor in scene.sensors()),
                            delta_bsdf=any(bsdf_has_delta_component(s) for s in shapes),
-                           tangent_bsdf=any(bsdf_uses_tangents(s) for s in shapes))
+                           tangent_bsdf=any(bsdf_uses_tangents(s) for s in shapes),
+                           heterogeneous_media=any(not _homogeneous(m) for m in _media(scene)))
 
     # -- Derived facts ----------------------------------------------------------------
     @property
@@ -257,6 +274,7 @@ class SceneTraits:
         if not self.emits_light:
             notes.append("no emitter emits light: every image is black")
         if self.media and media:
-            notes.append("the scene has participating media, which lab_photon, lab_bdpt, lab_vcm and "
-                         "Mitsuba's path ignore: render it with lab_mis (lab_nee, lab_naive) or Mitsuba's volpath")
+            notes.append("the scene has participating media, which lab_photon, lab_vcm and Mitsuba's path "
+                         "ignore (lab_bdpt: homogeneous ones only): render it with lab_mis (lab_nee, lab_naive), "
+                         "lab_bdpt or Mitsuba's volpath")
         return notes

@@ -26,9 +26,14 @@ SUBSETS = [("hit",), ("nee",), ("light",), ("connect",), ("hit", "nee"), ("light
            ("hit", "light"), ("nee", "connect"), ("hit", "nee", "light")]
 
 
-def random_paths(k, seed, n=N, spread=1.0):
+def random_paths(k, seed, n=N, spread=1.0, media=False):
     """Per-vertex geometry of n random paths x_0 .. x_k (arrays indexed [vertex, path]);
-    ``spread`` < 1 narrows the log-ranges (float32 cannot hold a power of 1e-10 densities)."""
+    ``spread`` < 1 narrows the log-ranges (float32 cannot hold a power of 1e-10 densities).
+
+    ``media``: interior vertices are medium vertices with probability 0.4 (never a delta lobe;
+    their g = sigma_t, 1e-3 .. 1e3, stands for both cosines), and every segment has a
+    transmittance T in 1e-4 .. 1 (the probability with which distance sampling passes it in
+    the path's channel, ``g["T"]``), in both directions the same."""
     rng = np.random.default_rng(seed)
 
     def _logu(rng, lo, hi, shape):
@@ -47,6 +52,15 @@ def random_paths(k, seed, n=N, spread=1.0):
         "light_paths": 1.0 + 99.0 * rng.random(),
     }
     g["delta"][k] = False                                # the sensor is never a delta vertex
+    if media:
+        in_medium = rng.random((k + 1, n)) < 0.4
+        in_medium[0] = in_medium[k] = False
+        sigma_t = _logu(rng, 1e-3, 1e3, (k + 1, n))
+        g["cos_l"] = np.where(in_medium, sigma_t, g["cos_l"])
+        g["cos_c"] = np.where(in_medium, sigma_t, g["cos_c"])
+        g["delta"] = g["delta"] & ~in_medium
+        g["medium"], g["sigma_t"] = in_medium, sigma_t
+        g["T"] = _logu(rng, 1e-4, 1.0, (k, n))
     inf = g["infinite"]
     g["d2"][0] = np.where(inf, 1.0, g["d2"][0])          # x_0 at infinity: no distance, no cosine
     g["cos_c"][0] = np.where(inf, 1.0, g["cos_c"][0])
@@ -61,12 +75,13 @@ def area_densities(g):
     """(p_light, p_camera) of every vertex, the brute force's input."""
     k = g["d2"].shape[0]
     p_light, p_camera = np.empty((k + 1, N)), np.empty((k + 1, N))
+    T = g.get("T", np.ones((k, N)))                      # (media: p_A = p_W g T / d^2)
     p_light[0] = g["pos"]
     for i in range(1, k + 1):
-        p_light[i] = g["to_cam"][i - 1] * g["cos_l"][i] / g["d2"][i - 1]
+        p_light[i] = g["to_cam"][i - 1] * g["cos_l"][i] * T[i - 1] / g["d2"][i - 1]
     p_camera[k] = 1.0
     for i in range(k):
-        p_camera[i] = g["to_light"][i + 1] * g["cos_c"][i] / g["d2"][i]
+        p_camera[i] = g["to_light"][i + 1] * g["cos_c"][i] * T[i] / g["d2"][i]
     return p_light, p_camera
 
 
@@ -75,11 +90,16 @@ def recursive_weights(g, mis, wrong=None):
     (``wrong``: a deliberate mistake, to show the test's power)."""
     k = g["d2"].shape[0]
     d2, cl, cc, fw, rv, delta = g["d2"], g["cos_l"], g["cos_c"], g["to_cam"], g["to_light"], g["delta"]
+    # media: each segment's T goes to after_hit and, on a connecting segment, with its cosines
+    tr = g.get("T")
+    T = np.ones((k, N)) if tr is None else tr
     pdf_emit = g["pos"] * fw[0]
     light = {}
     state = mis.start_light(pdf_emit, g["nee"], cc[0], delta[0])
     for i in range(1, k):
-        state = mis.after_hit(state, d2[i - 1], cl[i])
+        cos_in = np.where(g["medium"][i], 1.0, cl[i]) if wrong == "sigma_t" else cl[i]
+        seg = None if tr is None or wrong == "transmittance" else tr[i - 1]
+        state = mis.after_hit(state, d2[i - 1], cos_in, seg)
         light[i] = state
         cos_out = 1.0 if wrong == "cosine" else cc[i]
         pdf_rev = fw[i] if wrong == "swap" else rv[i]
@@ -87,7 +107,7 @@ def recursive_weights(g, mis, wrong=None):
     camera = {}
     state = mis.start_camera(rv[k], delta[k])            # (delta[k]: an orthographic sensor)
     for i in range(k - 1, -1, -1):
-        state = mis.after_hit(state, d2[i], cc[i])
+        state = mis.after_hit(state, d2[i], cc[i], None if tr is None else tr[i])
         camera[i] = state
         if i > 0:                          # (x_i lies k - i segments from the sensor)
             state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i], depth=k - i)
@@ -97,15 +117,15 @@ def recursive_weights(g, mis, wrong=None):
         if s == 0:
             w[s] = mis.hit(camera[0], g["nee"], pdf_emit, g["pos"])
         elif t == 1 and s == 1:
-            w[s] = mis.emitter_to_camera(rv[1], cc[0], d2[0], g["pos"], delta[0])
+            w[s] = mis.emitter_to_camera(rv[1], cc[0] * T[0], d2[0], g["pos"], delta[0])
         elif s == 1:
-            w[s] = mis.nee(camera[1], g["nee"], pdf_emit, cc[0], cl[1], d2[0], rv[1], fw[1], delta[0],
-                           depth=k - 1)
+            w[s] = mis.nee(camera[1], g["nee"], pdf_emit, cc[0] * T[0], cl[1] * T[0], d2[0], rv[1], fw[1],
+                           delta[0], depth=k - 1)
         elif t == 1:
-            w[s] = mis.light_to_camera(light[k - 1], rv[k], cc[k - 1], d2[k - 1], rv[k - 1])
+            w[s] = mis.light_to_camera(light[k - 1], rv[k], cc[k - 1] * T[k - 1], d2[k - 1], rv[k - 1])
         else:
             w[s] = mis.connect(light[s - 1], camera[s], fw[s - 1], rv[s - 1], rv[s], fw[s],
-                               cc[s - 1], cl[s], d2[s - 1], depth=k - s)
+                               cc[s - 1] * T[s - 1], cl[s] * T[s - 1], d2[s - 1], depth=k - s)
     return np.where(feasible(delta), w, 0.0)    # the integrator never runs an infeasible one
 
 
@@ -463,4 +483,51 @@ def test_a_caustic_merge_rule_applied_wrongly_is_caught(monkeypatch, mistake):
                                       area, 2, caustic_merges=caustic)
             err = max(err, _max_rel(recursive_weights_with_merging(g, mis), ref))
     print(f"{mistake}: max relative error {err:.2e}")
+    assert err > 1e3 * RTOL
+
+
+# -- Participating media (lab_bdpt's media_paths) ---------------------------------------------
+@pytest.mark.parametrize("beta", [1.0, 2.0])
+def test_medium_vertices_equal_brute_force_and_sum_to_one(beta):
+    """Paths with medium vertices (g = sigma_t for both cosines, no delta lobe) and a
+    transmittance on every segment: the recursion, given T in after_hit and with the cosines of
+    each connecting segment, equals the brute force over p_A = p_W g T / d^2, and the weights
+    of all strategies sum to 1."""
+    worst, mediums = 0.0, 0
+    for k in range(1, 8):
+        g = random_paths(k, seed=9100 + 10 * k + int(beta), media=True)
+        mediums += int(g["medium"].sum())
+        mis = BdptWeights("power", beta, light_paths=g["light_paths"])
+        with np.errstate(all="ignore"):
+            got, ref = recursive_weights(g, mis), _reference(g, beta)
+        worst = max(worst, _max_rel(got, ref))
+        buildable = feasible(g["delta"]).any(axis=0)
+        np.testing.assert_allclose(got.sum(axis=0)[buildable], 1.0, rtol=RTOL)
+    print(f"beta={beta}: {mediums} medium vertices, max relative error recursion vs brute force {worst:.2e}")
+    assert worst < RTOL and mediums > 10000
+
+
+@pytest.mark.parametrize("subset", [("light",), ("hit", "nee"), ("nee", "connect")])
+def test_medium_vertices_in_restricted_strategies(subset):
+    worst = 0.0
+    for k in range(1, 8):
+        g = random_paths(k, seed=9500 + k, media=True)
+        mis = BdptWeights("power", 2.0, strategies=subset, light_paths=g["light_paths"])
+        with np.errstate(all="ignore"):
+            got, ref = recursive_weights(g, mis), _reference(g, 2.0, subset)
+        worst = max(worst, _max_rel(got, ref))
+    print(f"{'+'.join(subset)} with media: max relative error {worst:.2e}")
+    assert worst < RTOL
+
+
+@pytest.mark.parametrize("wrong", ["sigma_t", "transmittance"])
+def test_a_wrong_medium_density_is_caught(wrong):
+    """Power: a medium vertex's forward density without its sigma_t (p_A = p_W T / d^2), or the
+    segment's transmittance left out of the forward density, misses the brute force by orders of
+    magnitude more than RTOL."""
+    g = random_paths(4, seed=13, media=True)
+    mis = BdptWeights("power", 2.0, light_paths=g["light_paths"])
+    with np.errstate(all="ignore"):
+        err = _max_rel(recursive_weights(g, mis, wrong=wrong), _reference(g, 2.0))
+    print(f"{wrong} left out: max relative error {err:.2e}")
     assert err > 1e3 * RTOL

@@ -11,6 +11,8 @@
   splatted on the way (``splats``: the film block and its edge correction), and the storage of
   connectable vertices (``vertices``); ``render_light_tracing`` renders light tracing alone.
 * ``camera_subpath``: camera subpaths and the s = 0, s = 1 and s, t >= 2 strategies.
+* ``media_paths``: both subpaths and every strategy in scenes with homogeneous media (compiled
+  only for those: the loops above stay surface-only).
 * ``integrator``: passes sized to ``max_vertices``, the two images, the plugin; ``passes``: what
   a plugin built on it (lab_vcm) sets for each pass; ``estimator``: what lab_bdpt can render,
   without a variant;

@@ -62,6 +62,9 @@ class CameraPass:
     connect_one: bool = False            # lab_vcm: one connection per camera vertex (``connect_to_one_light_vertex``)
     counters: object = None              # ``counters.RayCounters`` when counting rays (count_rays), else None
     sensor_delta: bool = False           # the sensor's direction is a delta (orthographic): no t = 1
+    media: bool = False                  # the scene has (homogeneous) media: ``media_paths``' loops
+    channel_key: int = 0                 # in media: the key of each light subpath's sampling channel
+    sensor_medium: object = None         # in media: the sensor's medium (the camera subpaths start in it)
 
 
 def sensor_constants(sensor: mi.Sensor, plugin: str = "lab_bdpt") -> tuple[float, tuple]:

@@ -23,6 +23,7 @@ from .camera_subpath import CameraPass, sensor_constants, trace_camera_subpaths
 from .endpoints import direction_is_delta
 from .estimator import Bidirectional
 from .light_subpath import LightTracer, check_variant
+from .media_paths import trace_camera
 from .passes import PassPlan, Passes, pass_seed
 from .techniques import Strategy, Technique
 from .vertices import NONE, LightVertices, vertex_bytes
@@ -80,7 +81,11 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     RGB, mono and spectral variants (spectral: one set of wavelengths per pass, drawn from the
     sensor, so a pass is one sample per pixel; ``spectral.py``). Refused in one line:
     polarized variants, other sensors, ``render(develop=False)``, ``samples_per_pass`` (``params.REFUSED_BASE_PARAMETERS``).
-    Participating media are ignored (one warning). Light-subpath seeds come from the
+    Homogeneous participating media: both subpaths scatter in them (free flights in one colour
+    channel per sample, the phase function at medium vertices, null boundaries passed without a
+    vertex), every strategy's connecting segment carries its transmittance, and the MIS weights
+    use the distance-sampling densities (``media_paths``); heterogeneous media and
+    ``hide_emitters`` with media are refused in one line. Light-subpath seeds come from the
     render's seed; each pass has its own.
 
     Statistics of the last render: ``bdpt_stats()``.
@@ -145,6 +150,11 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         tracer = LightTracer(scene, sensor, light_depth, v["rr_depth"], None, floor, only, v["hide_emitters"], aim,
                              self.ESTIMATOR.plugin_name)
         tracer.counters = counters = self.counters if v["count_rays"] else None
+        # media: scattered in by both subpaths where the plugin renders them (lab_vcm ignores them)
+        media = bool(traits.media and self.ESTIMATOR.RENDERS_MEDIA)
+        if media and v["hide_emitters"]:
+            raise self.error("hide_emitters is not supported in scenes with participating media yet")
+        tracer.media = media
         inv_area, axis = sensor_constants(sensor, self.ESTIMATOR.plugin_name)
         passes = self.passes
         self.stats = stats = passes.stats_class()
@@ -168,8 +178,9 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             if u is not None:
                 tracer.pass_spectrum = spectral.sensor_spectrum(sensor, u)
             light_seed = pass_seed(seed if passes.light_seed is None else passes.light_seed, index)
+            tracer.channel_key = light_seed
             light = self._light_pass(tracer, film, count, crop_px / count, light_seed, stats,
-                                     traits.tangent_bsdf, plan.camera_lanes)
+                                     traits.tangent_bsdf, plan.camera_lanes, media)
             if light is None:                          # did not fit: fewer light subpaths
                 continue
             block, vertices, last, stored = light
@@ -177,7 +188,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                                     self.max_depth, v["rr_depth"], v["hide_emitters"], floor,
                                     traits.hittable_emitters, only, count,
                                     passes.grid(vertices, stored, plan, stats), passes.connect_share,
-                                    passes.connect_one, counters, direction_is_delta(sensor))
+                                    passes.connect_one, counters, direction_is_delta(sensor), media, light_seed,
+                                    sensor.get_medium() if media else None)
             start = time.perf_counter()
             try:
                 if u is None:
@@ -225,7 +237,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         return passes.equip(weights, plan, self.connectable_per_path)
 
     def _light_pass(self, tracer, film, count: int, sample_scale: float, seed: int, stats, tangents: bool,
-                    camera_lanes: int):
+                    camera_lanes: int, media: bool = False):
         """Trace ``count`` light subpaths: (splat block, vertices, last slots, stored vertices), or
         None when they needed more than ``max_vertices`` (``vertices_per_path`` is updated; the
         caller retries with fewer). Without merging only the first ``camera_lanes`` subpaths, the
@@ -238,7 +250,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         while True:
             start = time.perf_counter()
             block = splats.new_block(film)
-            vertices = LightVertices(capacity, tangents, tracer.weights.merging, tracer.weights.caustic)
+            vertices = LightVertices(capacity, tangents, tracer.weights.merging, tracer.weights.caustic, media)
             reached, stores, last = tracer.trace(count, light_seed, block, sample_scale, vertices,
                                                  None if tracer.weights.merging else camera_lanes)
             dr.eval(block.tensor(), *vertices.arrays(), last, reached, stores)
@@ -246,7 +258,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             stats.light_s += time.perf_counter() - start
             n = int(stores[0])
             stats.peak_vertex_bytes = max(stats.peak_vertex_bytes,
-                                          capacity * vertex_bytes(tangents))
+                                          capacity * vertex_bytes(tangents, media))
             if n <= capacity:
                 break
             stats.retraces += 1
@@ -274,7 +286,12 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             raise self.error(f"cannot be nested inside another integrator (such as aov or moment) that calls "
                              f"its sample(): its light subpaths are traced per pass by its own render(); "
                              f"render the scene with {name} directly")
-        L, valid = trace_camera_subpaths(scene, self._pass, sampler, mi.Ray3f(ray), active)
+        if self._pass.media:
+            # (the spectral driver's passes, ``spectral.render_pass``, give no medium: the sensor's)
+            start = self._pass.sensor_medium if medium is None else medium
+            L, valid = trace_camera(scene, self._pass, sampler, mi.Ray3f(ray), start, active)
+        else:
+            L, valid = trace_camera_subpaths(scene, self._pass, sampler, mi.Ray3f(ray), active)
         return L, valid, []
 
     # -- Reporting --------------------------------------------------------------------

@@ -175,13 +175,24 @@ class Recursion:
         dvcm = select(delta, 0.0 * pdf_cam_W, self._m(self.light_paths / pdf_cam_W))
         return SubpathMis(dvcm, 0.0 * pdf_cam_W, 1.0, 0.0 * pdf_cam_W)
 
-    def after_hit(self, state: SubpathMis, dist2, cos_in) -> SubpathMis:
+    def after_hit(self, state: SubpathMis, dist2, cos_in, transmittance=None) -> SubpathMis:
         """State at a new vertex: ``dist2`` the squared segment length, ``cos_in`` |cos| at the new
-        vertex (both 1 on a segment to or from an infinite emitter)."""
+        vertex (both 1 on a segment to or from an infinite emitter).
+
+        In participating media (``transmittance`` given) the new vertex's forward density is
+        p_W g T / d^2: ``cos_in`` is then g, |cos| at a surface vertex and sigma_t at a medium
+        vertex (the density of a collision there per unit length), and ``transmittance`` T the
+        probability with which the sampling passed the segment (the free flights' escape
+        probabilities, and a mask's null-lobe probability, in the path's sampling channel). T
+        enters ``dvcm`` (1 / p_A) only: ``dvc`` and ``dvm`` hold ratios of a vertex's reverse
+        density to the next vertex's forward density, which cross the same segment and share
+        its T (it cancels); the T of a connection's own segment is passed with its cosines."""
         inv_cos = self._m(1.0 / cos_in)
         pending = self._pending_after_hit(state.pending, inv_cos)
-        return SubpathMis(state.dvcm * self._m(dist2) * inv_cos, state.dvc * inv_cos, state.first,
-                          state.dvm * inv_cos, state.merges, pending)
+        dvcm = state.dvcm * self._m(dist2) * inv_cos
+        if transmittance is not None:
+            dvcm = dvcm * self._m(1.0 / transmittance)
+        return SubpathMis(dvcm, state.dvc * inv_cos, state.first, state.dvm * inv_cos, state.merges, pending)
 
     def _scatter(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta, start_kind, merges=1.0):
         """Shared by both sides; only the kind of the subpath's first ratio differs (``merges``:

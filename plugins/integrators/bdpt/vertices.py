@@ -52,10 +52,11 @@ TANGENTS = {"sh_s": 0, "dp_du": 3, "dp_dv": 6}
 TANGENT_WIDTH = 16
 
 
-def vertex_bytes(tangents: bool = False) -> int:
-    """Bytes per stored vertex (``tangents``: with the tangent record; merging's iteration and
-    dvm have their places in every record)."""
-    return 4 * (POINT_WIDTH + RECORD_WIDTH + 1 + TANGENT_WIDTH * tangents)
+def vertex_bytes(tangents: bool = False, media: bool = False) -> int:
+    """Bytes per stored vertex (``tangents``: with the tangent record; ``media``: with the two
+    medium pointers of a scene with media; merging's iteration and dvm have their places in
+    every record)."""
+    return 4 * (POINT_WIDTH + RECORD_WIDTH + 1 + TANGENT_WIDTH * tangents + 2 * media)
 
 
 def bits(value) -> mi.Float:
@@ -96,8 +97,10 @@ class LightVertices:
     pointer and, with ``tangents``, a tangent record, each record in one flat array so that a
     vertex is read in a few packet loads (Dr.Jit gathers power-of-two runs of floats at once)."""
 
-    def __init__(self, capacity: int, tangents: bool = False, merging: bool = False, caustic: bool = False):
+    def __init__(self, capacity: int, tangents: bool = False, merging: bool = False, caustic: bool = False,
+                 media: bool = False):
         self.capacity = capacity
+        self.media = media
         self.merging = merging
         self.caustic = caustic and merging
         self.tangents = tangents
@@ -106,12 +109,17 @@ class LightVertices:
         self.records = dr.empty(mi.Float, RECORD_WIDTH * size)
         self.bsdf = dr.empty(mi.BSDFPtr, size)
         self.frames = dr.empty(mi.Float, TANGENT_WIDTH * size) if tangents else None
+        # in scenes with media (``media_paths``): the medium a vertex was reached in, and the one
+        # beyond it (across a medium transition; else the same); a medium vertex has normal 0
+        self.medium_in = dr.empty(mi.MediumPtr, size) if media else None
+        self.medium_beyond = dr.empty(mi.MediumPtr, size) if media else None
 
     def arrays(self) -> tuple:
-        return tuple(a for a in (self.points, self.records, self.bsdf, self.frames) if a is not None)
+        return tuple(a for a in (self.points, self.records, self.bsdf, self.frames, self.medium_in,
+                                 self.medium_beyond) if a is not None)
 
     def store(self, slot, si: mi.SurfaceInteraction3f, wi_world, beta, mis: SubpathMis, depth, prev, active,
-              iteration=0):
+              iteration=0, bsdf=None):
         """Scatter one vertex per active lane to ``slot`` (``wi_world``: the direction it was
         reached from, in world space: converting ``si.wi`` would need the tangent frame)."""
         write(self.points, [*si.p, *si.n, bits(depth), bits(iteration)], POINT_WIDTH, slot, active)
@@ -120,7 +128,7 @@ class LightVertices:
             dvm = dr.select(mis.merges > 0, dvm, NO_MERGE)
         write(self.records, [*si.sh_frame.n, *si.uv, *wi_world, mi.Float(mis.dvcm), mi.Float(mis.dvc),
                              mi.Float(dvm), bits(prev), *channels_of(beta)], RECORD_WIDTH, slot, active)
-        dr.scatter(self.bsdf, si.bsdf(), slot, active)
+        dr.scatter(self.bsdf, si.bsdf() if bsdf is None else bsdf, slot, active)
         if self.tangents:
             write(self.frames, [*si.sh_frame.s, *si.dp_du, *si.dp_dv], TANGENT_WIDTH, slot, active)
 
@@ -156,3 +164,15 @@ class LightVertices:
                          merges)
         return (si, dr.gather(mi.BSDFPtr, self.bsdf, slot, active), spectrum_at(record, RECORD["beta"]), mis,
                 depth, unbits(record[RECORD["prev"]]))
+
+    def store_media(self, slot, medium_in, medium_beyond, active):
+        """The media of the vertices at ``slot`` (scenes with media)."""
+        dr.scatter(self.medium_in, medium_in, slot, active)
+        dr.scatter(self.medium_beyond, medium_beyond, slot, active)
+
+    def load_media(self, slot, active):
+        """(medium reached in, medium beyond, direction reached from in world space) of the vertices
+        at ``slot`` (a medium vertex has no frame to hold that direction locally)."""
+        record = read(self.records, RECORD_WIDTH, slot, active)
+        return (dr.gather(mi.MediumPtr, self.medium_in, slot, active),
+                dr.gather(mi.MediumPtr, self.medium_beyond, slot, active), vector(record, RECORD["wi"]))

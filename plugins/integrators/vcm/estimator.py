@@ -26,6 +26,8 @@ def merges_first(params: dict) -> bool:
 class VertexMerging(Bidirectional):
     """lab_vcm's estimator: the techniques of its ``mode`` (``MODES``) under one MIS."""
     plugin_name = "lab_vcm"
+    #: lab_vcm ignores participating media (lab_bdpt's media loops have no merging yet)
+    RENDERS_MEDIA = False
     PARAMETERS = declarations.LAB_VCM
     OWN_PARAMETERS = ("mode", "radius", "alpha", "light_paths", "kernel", "merge_first", "merge_vertices", "connections", "pilot", "light_paths_max", "heuristic", "beta",
                       "max_vertices")

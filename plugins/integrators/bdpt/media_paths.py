@@ -1,0 +1,571 @@
+"""lab_bdpt in homogeneous participating media: both subpaths scatter in media, every strategy
+carries the transmittance of its connecting segment, and the MIS weights see the densities of
+distance sampling.
+
+Compiled only for scenes with media (``LightTracer.media``, ``CameraPass.media``); scenes
+without keep the surface-only loops of ``light_subpath`` and ``camera_subpath`` unchanged.
+
+**Subpaths.** A ray in a medium takes a free flight (``homogeneous_flight``: the analytic
+inversion in the path's sampling channel c, as ``common.media.free_flight`` does in a
+homogeneous medium): it collides at distance t with density sigma_t,c T_c(t), making a medium
+vertex whose phase function stands in for the BSDF, or reaches the next surface with
+probability T_c. The throughput is weighted per channel as the path family weights it, T / p_c
+at the flight and sigma_s at a collision. A surface whose BSDF samples its null lobe (a ``null``
+boundary, a mask's clear part) is passed without a vertex (Mitsuba's ``volpath`` counting of
+``max_depth``), with probability P_null (the null lobe's sampling probability, 1 for ``null``),
+and the medium is tracked across medium transitions. Light subpaths start in the emitter's
+medium where the scene gives it one (``<ref id="fog"/>`` inside the emitter), else in the medium
+behind the first medium transition the emitted ray meets (``origin_medium``: an area light or a
+point light in a null-bounded fog names none). The camera subpath starts in the sensor's medium.
+
+**Densities.** A vertex x_i reached from x_{i-1} has the area density
+
+    p_A(x_i) = p_W(x_{i-1} -> x_i) g(x_i) T_c(x_{i-1}, x_i) / |x_i - x_{i-1}|^2,
+
+g = |cos| at a surface vertex and g = sigma_t,c at a medium vertex (no cosine there), T_c the
+probability of passing the segment in channel c (the product of the flights' escape
+probabilities T_c and of the P_null of the boundaries passed on the way); the reverse density
+likewise with the other end's p_W. In Georgiev's recursion (``recursion.py``) a vertex's
+reverse density and the next vertex's forward density cross the same segment, so T_c cancels in
+``dvc`` and ``dvm`` and enters only ``dvcm`` (``Recursion.after_hit``'s ``transmittance``) and
+the connecting segment of each strategy (passed with its cosines: ``g T_c`` at both ends of a
+connection, at the camera vertex and the emitter of NEE, at a light vertex and the emitter
+point joined to the sensor). Emitter sampling's density of x_0 has no T_c (no flight samples it).
+
+**One channel per sample.** The sampling channel c is drawn per light subpath (uniform over
+RGB's three; the hero wavelength in spectral variants; the only one in mono) by a hash of the
+pass's light seed and the light lane, and the camera lanes paired with that light subpath use
+the same c (``path_channel``). Given c every strategy samples with c's densities and every MIS
+weight above is computed with them, so the weights sum to 1 over the strategies of each path for
+each c, and each strategy's estimate, weighted per channel T / p_c, is unbiased for all channels
+given c: the estimator is unbiased with c random. A connection's contribution carries the whole
+spectrum's T (exact: Beer-Lambert in homogeneous media through null boundaries,
+``common.media.transmittance``), its weight only T_c.
+
+Heterogeneous media are refused (``estimator.Bidirectional.unsupported``); so is
+``hide_emitters`` with media.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from mitsuba_lab.plugins.integrators.common import media, spawn
+from mitsuba_lab.plugins.integrators.common.adjoint import adjoint_correction, transported
+from mitsuba_lab.plugins.integrators.common.counters import tally
+from mitsuba_lab.plugins.integrators.common.direct import spectrum_or_zero
+from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
+
+from . import splats
+from .endpoints import nee_density
+from .techniques import Technique
+from .vertices import NONE
+from .weights import SubpathMis
+
+#: A key mixed into the light seed for the sampling channel's hash, and one for the light side's
+#: second random stream (the transmittance's draws, unused in homogeneous media).
+_CHANNEL_KEY = 0x2545F491
+_AUX_KEY = 0x68E31DA4
+
+
+def path_channel(lane, key) -> mi.UInt32:
+    """The sampling channel of light subpath ``lane`` (and of the camera lanes paired with it):
+    uniform over the three in RGB, the hero wavelength (0) in spectral and mono variants."""
+    if not mi.is_rgb:
+        return dr.zeros(mi.UInt32, dr.width(lane))
+    u = mi.sample_tea_float32(mi.UInt32(lane), dr.opaque(mi.UInt32, (key ^ _CHANNEL_KEY) & 0xFFFFFFFF))
+    return mi.UInt32(dr.minimum(mi.UInt32(3.0 * u), 2))
+
+
+class RngSampler:
+    """A ``PCG32`` with the ``next_1d`` / ``next_2d`` of a Mitsuba sampler (for
+    ``common.media.transmittance`` on the light side, which has no sampler)."""
+    DRJIT_STRUCT = {"rng": mi.PCG32}
+
+    def __init__(self, rng=None):
+        self.rng = mi.PCG32() if rng is None else rng
+
+    def next_1d(self, active=True):
+        return self.rng.next_float32(active)
+
+    def next_2d(self, active=True):
+        return mi.Point2f(self.rng.next_float32(active), self.rng.next_float32(active))
+
+
+def homogeneous_flight(medium, ray: mi.Ray3f, t_max, u, channel, active):
+    """A free flight along ``ray`` in the homogeneous ``medium`` up to ``t_max`` (the next
+    surface): (mei, scattered, weight, T_c). ``weight`` multiplies the throughput: T / p_c per
+    channel, times sigma_s at a collision (``common.media.free_flight``'s weights with no null
+    collisions), p_c the density of the outcome in the sampling channel c: sigma_t,c T_c(t) at a
+    collision at t, T_c(t_max) past the surface. ``T_c`` is the transmittance in c up to the
+    outcome, the segment's factor of the next vertex's p_A (whose sigma_t,c is its g)."""
+    r = mi.Ray3f(ray)
+    r.maxt = dr.select(active, t_max, 0.0)
+    m = medium.sample_interaction(r, u, channel, active)
+    end = dr.zeros(mi.SurfaceInteraction3f)
+    end.t = r.maxt
+    tr, pdf = medium.transmittance_eval_pdf(m, end, active)
+    pdf_c = media.channel_value(pdf, channel)
+    ok = active & (pdf_c > 0)
+    weight = dr.select(ok, tr / pdf_c, 0.0)
+    scattered = ok & m.is_valid()
+    weight[scattered] *= m.sigma_s
+    return m, scattered, mi.UnpolarizedSpectrum(weight), dr.select(ok, media.channel_value(tr, channel), 0.0)
+
+
+@dr.syntax
+def origin_medium(scene: mi.Scene, ray: mi.Ray3f, floor: float, active) -> mi.MediumPtr:
+    """The medium at ``ray``'s origin: behind the first medium transition the ray meets (other
+    surfaces are passed), none where it meets none."""
+    ray = mi.Ray3f(ray)
+    found = dr.zeros(mi.MediumPtr, dr.width(ray.o))
+    going = mi.Bool(active)
+    while going:
+        si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=going)
+        hit = going & si.is_valid()
+        transition = hit & si.is_medium_transition()
+        found[transition] = si.target_medium(-ray.d)
+        going = hit & ~transition
+        ray[going] = spawn.spawn_ray(si, ray.d, floor)
+    return found
+
+
+def sigma_t_channel(medium, mei, channel, active):
+    """sigma_t of ``medium`` at ``mei``'s point in the sampling channel."""
+    _, _, sigma_t = medium.get_scattering_coefficients(mei, active)
+    return media.channel_value(sigma_t, channel)
+
+
+def phase_reverse_pdf(phase, ctx, mei, wo, active):
+    """The phase function's density of ``mei.wi`` given the direction ``wo`` (world): the
+    direction back along a subpath, as the other side samples it."""
+    rev = mi.MediumInteraction3f(mei)
+    rev.wi = wo
+    rev.sh_frame = mi.Frame3f(wo)
+    return phase.eval_pdf(ctx, rev, mei.wi, active)[1]
+
+
+def medium_vertex(mei, wavelengths) -> mi.SurfaceInteraction3f:
+    """A medium vertex as a SurfaceInteraction3f for the shared code (its position, time and
+    wavelengths; normal 0, so rays leave it without an offset)."""
+    v = dr.zeros(mi.SurfaceInteraction3f)
+    v.p, v.t, v.time, v.wavelengths = mei.p, mei.t, mei.time, wavelengths
+    v.wi = mei.wi
+    return v
+
+
+class Sides:
+    """The media on the two sides of a subpath vertex: ``medium`` on the side it was reached
+    from (the only one at a medium vertex, where ``scattered``), ``beyond`` on the other (a
+    medium transition's other side; else the same)."""
+    DRJIT_STRUCT = {"n": mi.Vector3f, "arrival": mi.Float, "scattered": mi.Bool, "medium": mi.MediumPtr,
+                    "beyond": mi.MediumPtr}
+
+    def __init__(self, n=None, arrival=None, scattered=None, medium=None, beyond=None):
+        self.n, self.arrival, self.scattered, self.medium, self.beyond = n, arrival, scattered, medium, beyond
+
+    def toward(self, d):
+        """The medium a ray leaving the vertex along ``d`` travels in (``arrival``: the cosine of
+        the direction the vertex was reached along, the incoming ray's)."""
+        return dr.select(self.scattered | (dr.dot(self.n, d) * self.arrival < 0), self.medium, self.beyond)
+
+
+def vertex_eval(ctx, ctx_rev, phase_ctx, si, bsdf, mei, phase, scattered, wo_world, active):
+    """(f, p_W forward, p_W reverse) at a subpath vertex towards ``wo_world``: its BSDF's
+    (cosine included) at a surface, its phase function's where ``scattered``; ``ctx``: the
+    subpath's transport mode, ``ctx_rev`` the other side's."""
+    on_surface = active & ~scattered
+    wo = si.to_local(wo_world)
+    f_s, pdf_s = bsdf.eval_pdf(ctx, si, wo, on_surface)
+    si_rev = mi.SurfaceInteraction3f(si)
+    si_rev.wi = wo
+    rev_s = bsdf.pdf(ctx_rev, si_rev, si.wi, on_surface)
+    in_medium = active & scattered
+    f_p, pdf_p = phase.eval_pdf(phase_ctx, mei, wo_world, in_medium)
+    rev_p = phase_reverse_pdf(phase, phase_ctx, mei, wo_world, in_medium)
+    return (dr.select(scattered, mi.Spectrum(f_p), f_s), dr.select(scattered, pdf_p, pdf_s),
+            dr.select(scattered, rev_p, rev_s))
+
+
+# ------------------------------------------------------------------------------------------
+# Light subpaths
+# ------------------------------------------------------------------------------------------
+@dr.syntax
+def trace_light(tracer, st, block, vertices, store_lanes):
+    """The light subpaths of ``LightTracer.trace`` in a scene with media, from the emitted
+    ``st`` (its state after x_0 is sampled): the s = 1, t = 1 splat, then x_1, x_2, .. with
+    their t = 1 splats and stored vertices. Returns what ``trace`` returns."""
+    from .light_subpath import carried, float_or_zero, sensor_pdf, strategy_mask
+
+    scene, sensor, table, w = tracer.scene, tracer.sensor, tracer.table, st.w
+    floor, only = tracer.floor, tracer.only
+    count, index, rng, ray = st.count, st.index, st.rng, mi.Ray3f(st.ray)
+    emitter, ps, pmf, delta, infinite, on_surface = st.emitter, st.ps, st.pmf, st.delta, st.infinite, st.on_surface
+    scale, cos_emit, pdf_pos, ds_0 = st.scale, st.cos_emit, st.pdf_pos, st.ds_0
+    channel = path_channel(index, tracer.channel_key)
+    aux_rng = mi.PCG32(count)
+    aux_rng.seed(mi.sample_tea_64(index, mi.UInt32((tracer.channel_key ^ _AUX_KEY) & 0xFFFFFFFF)), index)
+    aux = RngSampler(aux_rng)
+    declared = emitter.get_medium()          # an emitter's own medium, where the scene names one
+    medium = dr.select(declared != None, declared,  # noqa: E711 (Dr.Jit pointer test)
+                       origin_medium(scene, ray, floor, dr.full(mi.Bool, True, count) & (declared == None)))  # noqa: E711
+    phase_ctx = mi.PhaseFunctionContext(None, mi.TransportMode.Importance)
+    tracing = Technique.LIGHT in w.techniques and tracer.reaches_sensor
+
+    # ---------------- s = 1, t = 1: the emitter point seen directly, through the media ----------------
+    u0 = mi.Point2f(rng.next_float32(), rng.next_float32())
+    if dr.hint(tracing, mode="scalar"):
+        si0 = mi.SurfaceInteraction3f(ps, ray.wavelengths)
+        active0 = on_surface & (pmf > 0) & strategy_mask(only, 1, 1)
+        ds0, we0 = sensor.sample_direction(si0, u0, active0)
+        active0 &= ds0.pdf > 0
+        tally(tracer.counters, "sensor", active0)
+        si0.wi = si0.to_local(ds0.d)
+        cos0 = mi.Frame3f.cos_theta(si0.wi)
+        active0 &= cos0 > 0
+        T0 = media.transmittance(scene, medium, si0, ds0.p, aux, channel, floor, active0)
+        active0 &= dr.max(T0) > 0
+        le0 = emitter.eval(si0, active0)
+        w0 = w.emitter_to_camera(sensor_pdf(ds0, we0), cos0 * media.channel_value(T0, channel), dr.square(ds0.dist),
+                                 pdf_pos, st.delta_pos)
+        value0 = le0 * cos0 * st.pos_weight * st.sel_weight * we0 * mi.Spectrum(T0) * float_or_zero(w0) * scale
+        splats.splat(block, ds0.uv, si0.wavelengths, value0, active0)
+
+    # ---------------- x_1, x_2, ..: the light subpath ----------------
+    beta = mi.Spectrum(st.ray_weight) * st.sel_weight
+    beta_max0 = dr.max(mi.unpolarized_spectrum(beta))
+    max_depth = dr.opaque(mi.UInt32, tracer.max_depth if tracer.max_depth > 0 else 0xFFFFFFFF)
+    rr_depth = dr.opaque(mi.UInt32, tracer.rr_depth)
+    ctx = mi.BSDFContext(mi.TransportMode.Importance)
+    storing = vertices is not None and bool(w.techniques & (Technique.CONNECT | Technique.MERGE))
+    camera_segments = 1 if w.merging else 2
+    stores = dr.zeros(mi.UInt32, 1)
+    capacity = dr.opaque(mi.UInt32, vertices.capacity if storing else 0)
+    last = dr.full(mi.UInt32, NONE, count)
+    dvcm, dvc, first = mi.Float(0), mi.Float(0), mi.Float(1)
+    dvm = mi.Float(0) if w.merging else 0.0
+    depth = mi.UInt32(0)
+    vertices_reached = mi.UInt32(0)
+    seg = mi.Float(1.0)                       # T_c of the segment since the last vertex
+    prev_p = mi.Point3f(ps.p)
+    d_0 = mi.Vector3f(ray.d)                  # the emitted direction (null boundaries keep it)
+    active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_depth > 1)
+    while dr.hint(active, max_iterations=-1, label="lab_bdpt light subpath in media"):
+        si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
+        tally(tracer.counters, "light", active)
+        in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+        mei, scattered, w_flight, p_flight = homogeneous_flight(medium, ray, si.t, rng.next_float32(), channel,
+                                                                in_medium)
+        beta[in_medium] *= w_flight
+        seg[in_medium] *= p_flight
+        surface = active & ~scattered & si.is_valid()
+        bsdf = si.bsdf()
+        u_lobe, u_dir = rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32())
+        bs, bsdf_weight = bsdf.sample(ctx, si, u_lobe, u_dir, surface)
+        passing = surface & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
+        vertex = scattered | (surface & ~passing)
+        vertices_reached += dr.select(vertex, 1, 0)
+
+        # ---------- the vertex x_depth: a surface point or a medium point ----------
+        v = mi.SurfaceInteraction3f(si)
+        v[scattered] = medium_vertex(mei, ray.wavelengths)
+        phase = mei.medium.phase_function()
+        phase[~scattered] = dr.zeros(mi.PhaseFunctionPtr)
+        sigma_c = media.channel_value(mei.sigma_t, channel)
+        g_in = dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, ray.d)))
+        dist2 = dr.squared_norm(v.p - prev_p)
+        start_here = vertex & (depth == 0)
+        # x_0's emitter-sampling density, from x_1 (no transmittance: emitter sampling picks it)
+        ds_0.d = dr.select(infinite, -d_0, dr.normalize(ds_0.p - v.p))
+        ds_0.dist = dr.select(infinite, dr.inf, dr.norm(ds_0.p - v.p))
+        pdf_nee = dr.select(delta, pmf, nee_density(scene, v, ds_0, infinite, start_here & ~delta))
+        pdf_dir_0 = table.emission(emitter, cos_emit, pdf_nee, start_here, ds_0.p, d_0)[1]
+        start = w.start_light(pdf_pos * pdf_dir_0, pdf_nee, cos_emit, delta)
+        dvcm = dr.select(start_here, start.dvcm, dvcm)
+        dvc = dr.select(start_here, start.dvc, dvc)
+        dist2 = dr.select(start_here & infinite, 1.0, dist2)    # x_0 is a direction: no distance
+        depth[vertex] += 1
+        mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dist2, g_in, seg)
+        smooth = scattered | (vertex & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
+        splat_on = smooth & strategy_mask(only, depth + 1, 1)
+        # the medium on the far side of a surface vertex (a medium transition's other side)
+        beyond = dr.select(surface & si.is_medium_transition(), si.target_medium(ray.d), medium)
+
+        # ---------- store x_depth for connections with camera vertices ----------
+        if dr.hint(storing, mode="scalar"):
+            store = smooth & (depth + camera_segments <= max_depth)
+            if dr.hint(store_lanes is not None and store_lanes < count, mode="scalar"):
+                store &= index < dr.opaque(mi.UInt32, store_lanes)
+            slot = dr.scatter_inc(stores, mi.UInt32(0), store)
+            kept = store & (slot < capacity)
+            vertices.store(slot, v, -ray.d, beta, mis, depth, last, kept, tracer.weights.lane_iteration(index),
+                           bsdf=dr.select(scattered, dr.zeros(mi.BSDFPtr), bsdf))
+            vertices.store_media(slot, medium, beyond, kept)
+            last = dr.select(kept, slot, last)
+
+        # ---------- t = 1: join x_depth to the sensor, through the media ----------
+        u_sensor = mi.Point2f(rng.next_float32(), rng.next_float32())
+        if dr.hint(tracing, mode="scalar"):
+            ds, we = sensor.sample_direction(v, u_sensor, splat_on)
+            connect = splat_on & (ds.pdf > 0)
+            tally(tracer.counters, "sensor", connect)
+            sides = Sides(si.n, dr.dot(si.n, ray.d), scattered, medium, beyond)
+            T = media.transmittance(scene, sides.toward(ds.d), v, ds.p, aux, channel, floor, connect)
+            connect &= dr.max(T) > 0
+            f_surface, rev_surface = transported(bsdf, si, si.to_local(ds.d), connect & ~scattered)
+            f_phase, _ = phase.eval_pdf(phase_ctx, mei, ds.d, connect & scattered)
+            rev_phase = phase_reverse_pdf(phase, phase_ctx, mei, ds.d, connect & scattered)
+            f_cam = dr.select(scattered, mi.Spectrum(f_phase), f_surface)
+            g_cam = dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, ds.d)))
+            w_cam = w.light_to_camera(mis, sensor_pdf(ds, we), g_cam * media.channel_value(T, channel),
+                                      dr.square(ds.dist), dr.select(scattered, rev_phase, rev_surface))
+            value = beta * f_cam * we * mi.Spectrum(T) * float_or_zero(w_cam) * scale
+            splats.splat(block, ds.uv, v.wavelengths, value, connect)
+
+        # ---------- the next direction: adjoint BSDF sampling, or the phase function ----------
+        going = vertex & (depth + 1 < max_depth)
+        wo_phase, phase_weight, phase_pdf = phase.sample(phase_ctx, mei, u_lobe, u_dir, going & scattered)
+        rev_phase = phase_reverse_pdf(phase, phase_ctx, mei, wo_phase, going & scattered)
+        wo_world = dr.select(scattered, wo_phase, si.to_world(bs.wo))
+        delta_lobe = ~scattered & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        sent, rev_surface = transported(bsdf, si, bs.wo, going & ~scattered & ~delta_lobe)
+        smooth_weight = sent / dr.maximum(bs.pdf, 1e-30)
+        surface_weight = dr.select(delta_lobe, bsdf_weight * adjoint_correction(si, -ray.d, bs.wo),
+                                   dr.select(bs.pdf > 0, smooth_weight, 0.0))
+        beta[going] *= dr.select(scattered, mi.Spectrum(phase_weight), surface_weight)
+        scattered_mis = w.scatter_light(mis, dr.select(scattered, phase_pdf, bs.pdf),
+                                        dr.select(scattered, rev_phase, rev_surface),
+                                        dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, wo_world))), delta_lobe)
+        dvcm = dr.select(vertex, float_or_zero(scattered_mis.dvcm), dvcm)
+        dvc = dr.select(vertex, float_or_zero(scattered_mis.dvc), dvc)
+        first = dr.select(vertex, mi.Float(scattered_mis.first), first)
+        dvm = carried(w.merging, dr.select(vertex, scattered_mis.dvm, dvm), dvm)
+        prev_p[vertex] = v.p
+        seg[vertex] = 1.0
+        # ---------- a null boundary: passed, no vertex ----------
+        seg[passing] *= bs.pdf
+        beta[passing] *= bsdf_weight
+        direction = dr.select(passing, ray.d, wo_world)
+        medium[surface & si.is_medium_transition()] = si.target_medium(direction)
+        ray = spawn.spawn_ray(v, direction, floor)
+
+        active = going | passing
+        beta_max = dr.max(mi.unpolarized_spectrum(beta))
+        active &= (beta_max > 0) & dr.isfinite(beta_max)
+        beta, survives = russian_roulette(beta, rng.next_float32(), vertex & (depth >= rr_depth), start=beta_max0)
+        active &= survives
+    reached = dr.zeros(mi.UInt32, 1)
+    dr.scatter_reduce(dr.ReduceOp.Add, reached, vertices_reached, 0, mode=dr.ReduceMode.Local)
+    return reached, stores, last
+
+
+# ------------------------------------------------------------------------------------------
+# Camera subpaths
+# ------------------------------------------------------------------------------------------
+def connection(scene, cp, x, si, bsdf, mei, phase, scattered, sides, beta, mis: SubpathMis, depth, slot, on,
+               sampler, channel, phase_ctx):
+    """(weighted contribution, previous slot) of the connection from camera vertex ``x`` (``si``
+    at a surface, ``mei`` where ``scattered``; ``depth`` segments from the sensor) to the light
+    vertex at ``slot``, through the media between them."""
+    from .light_subpath import float_or_zero, strategy_mask
+
+    w, floor = cp.weights, cp.offset_floor
+    ctx = mi.BSDFContext(mi.TransportMode.Radiance)
+    ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
+    max_depth = dr.opaque(mi.UInt32, cp.max_depth)
+    y, bsdf_y, beta_y, mis_y, depth_y, prev = cp.vertices.load(slot, si.wavelengths, on)
+    medium_y, _, wi_y = cp.vertices.load_media(slot, on)
+    y_in_medium = on & (y.n.x == 0) & (y.n.y == 0) & (y.n.z == 0)
+    use = on & (depth_y + 1 + depth <= max_depth) & strategy_mask(cp.only, depth_y + 1, depth + 1)
+    d = y.p - x.p
+    dist2 = dr.squared_norm(d)
+    d = d * dr.rsqrt(dist2)
+    # the camera vertex
+    f_x, pdf_x_fwd, pdf_x_rev = vertex_eval(ctx, ctx_imp, phase_ctx, si, bsdf, mei, phase, scattered, d, use)
+    g_x = dr.select(scattered, media.channel_value(mei.sigma_t, channel), dr.abs(dr.dot(si.n, d)))
+    # the light vertex: its adjoint BSDF, or its medium's phase function
+    wo_y = y.to_local(-d)
+    f_ys, pdf_y_rev_s = transported(bsdf_y, y, wo_y, use & ~y_in_medium)
+    pdf_y_fwd_s = bsdf_y.pdf(ctx_imp, y, wo_y, use & ~y_in_medium)
+    mei_y = dr.zeros(mi.MediumInteraction3f)
+    mei_y.p, mei_y.wi, mei_y.sh_frame, mei_y.wavelengths = y.p, wi_y, mi.Frame3f(wi_y), si.wavelengths
+    mei_y.medium, mei_y.t = medium_y, mi.Float(1.0)
+    phase_y = medium_y.phase_function()
+    at_y = use & y_in_medium
+    f_yp, pdf_y_fwd_p = phase_y.eval_pdf(phase_ctx, mei_y, -d, at_y)
+    pdf_y_rev_p = phase_reverse_pdf(phase_y, phase_ctx, mei_y, -d, at_y)
+    f_y = dr.select(y_in_medium, mi.Spectrum(f_yp), f_ys)
+    g_y = dr.select(y_in_medium, sigma_t_channel(medium_y, mei_y, channel, at_y), dr.abs(dr.dot(y.n, d)))
+    value = spectrum_or_zero(beta * f_x * f_y * beta_y / dist2)
+    use &= dr.max(mi.unpolarized_spectrum(value)) > 0
+    tally(cp.counters, "connection", use)
+    T = media.transmittance(scene, sides.toward(d), x, y.p, sampler, channel, floor, use)
+    T_c = media.channel_value(T, channel)
+    weight = w.connect(mis_y, mis, dr.select(y_in_medium, pdf_y_fwd_p, pdf_y_fwd_s),
+                       dr.select(y_in_medium, pdf_y_rev_p, pdf_y_rev_s), pdf_x_fwd, pdf_x_rev,
+                       g_y * T_c, g_x * T_c, dist2, depth)
+    value = spectrum_or_zero(value * mi.Spectrum(T) * float_or_zero(weight))
+    return dr.select(use, value, 0.0), prev
+
+
+@dr.syntax
+def connect_to_light_subpath(scene, cp, x, si, bsdf, mei, phase, scattered, sides, beta, mis, depth, head,
+                             active, sampler, channel, phase_ctx):
+    """The s >= 2 strategies at camera vertex ``x``: its connections to every stored vertex of
+    its light subpath (the list ending at ``head``)."""
+    L = dr.zeros(mi.Spectrum, dr.width(head))
+    slot = dr.select(active, head, NONE)
+    while dr.hint(slot != NONE, max_iterations=-1, label="lab_bdpt connections in media"):
+        on = slot != NONE
+        value, prev = connection(scene, cp, x, si, bsdf, mei, phase, scattered, sides, beta, mis, depth,
+                                 slot, on, sampler, channel, phase_ctx)
+        L += value
+        slot = dr.select(on, prev, NONE)
+    return L
+
+
+@dr.syntax
+def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium, active):
+    """(L, valid) of the camera subpaths in a scene with media (``camera_subpath.
+    trace_camera_subpaths``'s strategies, t >= 2), starting in the sensor's ``medium``."""
+    from dataclasses import replace
+
+    from .light_subpath import float_or_zero, reverse_pdf, strategy_mask
+
+    lanes = dr.width(ray)
+    lane = dr.arange(mi.UInt32, lanes)
+    cp = replace(cp, weights=cp.weights.at_lanes(lane))
+    w, table, floor = cp.weights, cp.table, cp.offset_floor
+    ctx = mi.BSDFContext(mi.TransportMode.Radiance)
+    ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
+    phase_ctx = mi.PhaseFunctionContext(sampler)
+    max_depth = dr.opaque(mi.UInt32, cp.max_depth)
+    rr_depth = dr.opaque(mi.UInt32, cp.rr_depth)
+    emitter_hits = cp.emitter_hits and Technique.HIT in w.techniques
+
+    if dr.hint(cp.light_count < lanes, mode="scalar"):
+        lane = lane % dr.opaque(mi.UInt32, cp.light_count)
+    head = dr.gather(mi.UInt32, cp.last, lane)
+    channel = path_channel(lane, cp.channel_key)       # the light subpath's channel
+    medium = mi.MediumPtr(medium) if medium is not None else dr.zeros(mi.MediumPtr, lanes)
+    medium = dr.select(dr.full(mi.Bool, True, lanes), medium, medium)
+    active = mi.Bool(active) & dr.full(mi.Bool, True, lanes)
+    cos_cam = dr.dot(ray.d, mi.Vector3f(*cp.axis))
+    start = w.start_camera(dr.opaque(mi.Float, cp.inv_image_area) / (cos_cam * dr.square(cos_cam)), cp.sensor_delta)
+    dvcm, dvc, first = mi.Float(start.dvcm), mi.Float(start.dvc), mi.Float(start.first)
+    L = mi.Spectrum(0)
+    beta = mi.Spectrum(1)
+    eta = mi.Float(1)
+    depth = mi.UInt32(0)
+    prev_it = dr.zeros(mi.Interaction3f)
+    prev_it.p = ray.o
+    valid_ray = active & (scene.environment() is not None)
+    prev_p = mi.Point3f(ray.o)
+    seg = mi.Float(1.0)
+    pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
+    tally(cp.counters, "camera", active)
+
+    if dr.hint(not w.techniques & (Technique.HIT | Technique.NEE | Technique.CONNECT), mode="scalar"):
+        return mi.Spectrum(0), valid_ray | (active & pi.is_valid())
+
+    while dr.hint(active, max_iterations=-1, label="lab_bdpt camera subpath in media"):
+        si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
+        in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+        mei, scattered, w_flight, p_flight = homogeneous_flight(medium, ray, si.t, sampler.next_1d(), channel,
+                                                                in_medium)
+        beta[in_medium] *= w_flight
+        seg[in_medium] *= p_flight
+        arrived = active & ~scattered
+        escaped = arrived & ~si.is_valid()
+        surface = arrived & si.is_valid()
+        here = depth + 1                          # segments from the sensor to this vertex
+        bsdf = si.bsdf(ray)
+        bs, bsdf_weight = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), surface)
+        passing = surface & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
+        vertex = scattered | (surface & ~passing)
+        v = mi.SurfaceInteraction3f(si)
+        v[scattered] = medium_vertex(mei, ray.wavelengths)
+        phase = mei.medium.phase_function()
+        phase[~scattered] = dr.zeros(mi.PhaseFunctionPtr)
+        sigma_c = media.channel_value(mei.sigma_t, channel)
+        g_in = dr.select(scattered, sigma_c, dr.select(escaped, 1.0, dr.abs(dr.dot(si.n, ray.d))))
+        mis = w.after_hit(SubpathMis(dvcm, dvc, first), dr.select(escaped, 1.0, dr.squared_norm(v.p - prev_p)),
+                          g_in, seg)
+
+        # ---------------- s = 0: the camera subpath reaches an emitter ----------------
+        if dr.hint(emitter_hits, mode="scalar"):
+            emitter = si.emitter(scene)
+            hit = arrived & (emitter != None) & strategy_mask(cp.only, 0, here + 1)  # noqa: E711
+            infinite = table.at_infinity(emitter, hit)
+            ds = mi.DirectionSample3f(scene, si=si, ref=prev_it)
+            pdf_nee = nee_density(scene, prev_it, ds, infinite, hit & ((here > 1) | ~infinite))
+            cos_light = dr.select(infinite, 1.0, dr.abs(dr.dot(si.n, ray.d)))
+            pdf_pos, pdf_dir, _ = table.emission(emitter, cos_light, pdf_nee, hit, si.p, -ray.d)
+            w_hit = w.hit(mis, pdf_nee, pdf_pos * pdf_dir, dr.select(infinite, 0.0, pdf_pos))
+            L += beta * float_or_zero(w_hit) * emitter.eval(si, hit)
+
+        smooth = scattered | (vertex & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
+        going = vertex & (here < max_depth)
+        beyond = dr.select(surface & si.is_medium_transition(), si.target_medium(ray.d), medium)
+        sides = Sides(si.n, dr.dot(si.n, ray.d), scattered, medium, beyond)
+
+        # ---------------- s = 1: next-event estimation, through the media ----------------
+        nee_on = smooth & going & strategy_mask(cp.only, 1, here + 1) & (Technique.NEE in w.techniques)
+        ds, em_weight = scene.sample_emitter_direction(v, sampler.next_2d(), False, nee_on)
+        tally(cp.counters, "shadow", nee_on)
+        nee_on &= ds.pdf > 0
+        T = media.transmittance(scene, sides.toward(ds.d), v, ds.p, sampler, channel, floor, nee_on)
+        T_c = media.channel_value(T, channel)
+        f, pdf_fwd, pdf_rev = vertex_eval(ctx, ctx_imp, phase_ctx, si, bsdf, mei, phase, scattered, ds.d, nee_on)
+        infinite = table.at_infinity(ds.emitter, nee_on)
+        dist2 = dr.select(infinite, 1.0, dr.square(ds.dist))
+        cos_light = dr.select(ds.delta | infinite, 1.0, dr.abs(dr.dot(ds.n, ds.d)))
+        pdf_nee = dr.select(ds.delta, ds.pdf, ds.pdf * cos_light / dist2)
+        pdf_pos, pdf_dir, delta = table.emission(ds.emitter, cos_light, pdf_nee, nee_on, ds.p, -ds.d)
+        g_cam = dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, ds.d)))
+        w_nee = w.nee(mis, pdf_nee, pdf_pos * pdf_dir, cos_light * T_c, g_cam * T_c, dist2, pdf_fwd, pdf_rev,
+                      delta, here)
+        L += dr.select(nee_on, spectrum_or_zero(beta * f * em_weight * mi.Spectrum(T) * float_or_zero(w_nee)), 0.0)
+
+        # ---------------- s >= 2: connections to the light subpath ----------------
+        if dr.hint(Technique.CONNECT in w.techniques, mode="scalar"):
+            L += connect_to_light_subpath(scene, cp, v, si, bsdf, mei, phase, scattered, sides, beta, mis, here,
+                                          head, smooth & (here + 2 <= max_depth), sampler, channel, phase_ctx)
+
+        # ---------------- the next direction: the BSDF sample, or the phase function ----------------
+        wo_phase, phase_weight, phase_pdf = phase.sample(phase_ctx, mei, sampler.next_1d(), sampler.next_2d(),
+                                                         going & scattered)
+        rev_phase = phase_reverse_pdf(phase, phase_ctx, mei, wo_phase, going & scattered)
+        wo_world = dr.select(scattered, wo_phase, si.to_world(bs.wo))
+        rev_surface = reverse_pdf(bsdf, ctx_imp, si, bs.wo, going & ~scattered)
+        delta_lobe = ~scattered & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        scattered_mis = w.scatter_camera(mis, dr.select(scattered, phase_pdf, bs.pdf),
+                                         dr.select(scattered, rev_phase, rev_surface),
+                                         dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, wo_world))),
+                                         delta_lobe, here)
+        dvcm = dr.select(vertex, float_or_zero(scattered_mis.dvcm), dvcm)
+        dvc = dr.select(vertex, float_or_zero(scattered_mis.dvc), dvc)
+        first = dr.select(vertex, mi.Float(scattered_mis.first), first)
+        beta[going] *= dr.select(scattered, mi.Spectrum(phase_weight), bsdf_weight)
+        eta[going & ~scattered] *= bs.eta
+        valid_ray |= vertex
+        prev_it[vertex] = v
+        prev_p[vertex] = v.p
+        seg[vertex] = 1.0
+        depth[vertex] = here
+        # ---------------- a null boundary: passed, no vertex ----------------
+        seg[passing] *= bs.pdf
+        beta[passing] *= bsdf_weight
+        direction = dr.select(passing, ray.d, wo_world)
+        medium[surface & si.is_medium_transition()] = si.target_medium(direction)
+        ray = spawn.spawn_ray(v, direction, floor)
+
+        active_next = going | passing
+        beta_max = dr.max(mi.unpolarized_spectrum(beta))
+        active_next &= (beta_max != 0) & dr.isfinite(beta_max)
+        beta, survives = russian_roulette(beta, sampler.next_1d(), vertex & (depth >= rr_depth), eta=eta)
+        active_next &= survives
+        pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
+        tally(cp.counters, "extension", active_next)
+        active = active_next
+    return L, valid_ray
