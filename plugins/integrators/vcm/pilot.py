@@ -9,6 +9,7 @@ is on.
 """
 from __future__ import annotations
 
+import math
 import time
 from collections import Counter
 
@@ -19,8 +20,9 @@ import numpy as np
 from mitsuba_lab.plugins.integrators.bdpt.passes import pass_seed
 from mitsuba_lab.plugins.integrators.common.support import render_arguments
 
-from .selection import (EVERY_OVER_PATH_PLAN, PATH_TRACING_SIZE, PILOT_RENDERS, PilotCosts, PilotPlan, choose,
-                        every_seconds, light_path_ratios, pilot_iterations, pilot_variances, seconds, share_budget)
+from .selection import (EVERY_OVER_PATH_PLAN, PATH_TRACING_SIZE, PILOT_MIN_ITERATIONS, PILOT_RENDERS, PilotCosts,
+                        PilotPlan, choose, every_seconds, light_path_ratios, pilot_iterations, pilot_variances, seconds,
+                        share_budget)
 
 #: The pilot renders' seeds: the render's seed with this mixed in, then one per render; the
 #: light seed of the renders that share camera seeds mixes in one more.
@@ -102,6 +104,8 @@ class Pilot:
             probe_counts = camera.ray_counts(reset=False)
             path_iteration = seconds(probe_counts, "path_tracing", values)
             iterations = self.size(plan, spp, path_iteration, None, pass_iterations)
+            if not iterations and self.first_fits(spp, path_iteration, pass_iterations):
+                iterations = PILOT_MIN_ITERATIONS      # (the plan checked after every technique's first)
         images = {"every": [], "shared": [], "camera": []}
         large, camera_times = [], []
         every_work = Counter()
@@ -118,7 +122,8 @@ class Pilot:
                     camera_times.append(secs)
             if r == 0:
                 # every technique's own cost per iteration: the plan checked against it
-                every_iteration = (seconds(every_work, "light", values) + seconds(every_work, "camera", values)) / iterations
+                every_iteration = (seconds(every_work, "light", values)
+                                   + seconds(every_work, "camera", values)) / iterations
                 if not self.size(plan, spp, path_iteration, every_iteration, pass_iterations) >= iterations:
                     iterations = 0
                     break
@@ -187,6 +192,16 @@ class Pilot:
         budget = share_budget(share, spp * path) - path            # (less the probe's iteration)
         return plan.iterations(spp, budget, EVERY_OVER_PATH_PLAN * path if every is None else every, path,
                                per_pass, pass_iterations)
+
+    def first_fits(self, spp: int, path: float, pass_iterations: float) -> bool:
+        """Whether the pilot's first renders of ``PILOT_MIN_ITERATIONS`` (every technique's,
+        priced at ``EVERY_OVER_PATH_PLAN`` x path tracing's ``path``, and path tracing's with its
+        seed) fit within the share: where the whole pilot only fits at every technique's own cost
+        per iteration, they count it, and the pilot stops after them if the rest would not fit."""
+        k = PILOT_MIN_ITERATIONS
+        first = (1e-9 * self.plugin.values["cost_pass"] * math.ceil(k / max(pass_iterations, 1.0))
+                 + k * (EVERY_OVER_PATH_PLAN + 1.0) * path)
+        return first <= share_budget(self.plugin.values["pilot_share"], spp * path) - path
 
     def render(self, scene, sensor, seed, spp, develop, evaluate):
         sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
