@@ -8,7 +8,9 @@
 * ``pilot``: the render is every technique's or path tracing's alone, with the pilot's path
   tracing averaged in when chosen; the pilot's own choice agrees with ``path``; it picks path
   tracing on Veach's plates and every technique on the caustic scene; light that path tracing's
-  pilot misses counts as error.
+  pilot misses counts as error. Its counted work is at most ``pilot_share`` (1/8) of the whole
+  render's: no pilot where it would be more, or a pilot that stops after its first pair of renders
+  once every technique's own counts show the rest would pass it.
 """
 import numpy as np
 import pytest
@@ -239,6 +241,25 @@ def test_the_pilot_is_at_most_its_share_of_the_render():
     assert stats["pilot_iterations"] >= selection.PILOT_MIN_ITERATIONS and stats["chose_path_tracing"]
     assert 0.0 < stats["pilot_share"] <= 1 / 8
     assert stats["pilot_share"] == stats["pilot_counted_s"] / (stats["pilot_counted_s"] + stats["render_counted_s"])
+
+
+def test_a_pilot_that_would_pass_its_share_stops_after_its_first_pair():
+    """The Cornell box at 16x16 and 2048 spp: priced at EVERY_OVER_PATH_PLAN x path tracing the
+    whole pilot does not fit in 1/8, its first pair of renders does (a pass, 71 ms counted, is 117
+    iterations of path tracing there); counted, every technique's 10.7x path tracing still leaves
+    the whole pilot over its share (it needs about 5900 spp), so it stops: every technique chosen,
+    no scores, and what it did cost (one every-technique render, path tracing's counted iteration
+    and first render) within the share of spp iterations of path tracing."""
+    scene = load_scene(scene_path("cornell_box.xml"), res=16)
+    integrator = vcm(**AUTO)
+    integrator.first_radius = AUTO["radius"]      # (what render() sets before its pilot)
+    pilot = integrator.pilot
+    every, camera = pilot.companion(), pilot.path_tracer()
+    assert pilot.run(scene, scene.sensors()[0], 5, 2048, every, camera) == (1.0, None, 0, {})
+    assert pilot.iterations == 0 and pilot.every_all["passes"] == 1
+    path_iteration = selection.seconds(pilot.path_all, "path_tracing", integrator.values) / (1 + 4)
+    print(f"stopped: {pilot.counted_s:.4f} counted s, budget {selection.share_budget(1 / 8, 2048 * path_iteration):.4f}")
+    assert 0 < pilot.counted_s <= selection.share_budget(1 / 8, 2048 * path_iteration)
 
 
 def test_the_pilots_size_follows_its_share():
