@@ -214,8 +214,9 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     after its first pilot render. Where even its fewest iterations (``selection.PILOT_MIN_ITERATIONS``
     per render: fewer chose wrongly on sds) would pass the share there is no pilot, and the render
     is every technique at ``light_paths``, as without one: on the Cornell box at 64x64 the smallest
-    pilot is planned at the counted work of about 390 iterations of path tracing, so at the
-    default share of 1/8 it starts at about 2700 spp (``experiments/results/2026-11-28-vcm-pilot.md``); ``pilot_share = 1`` sizes it
+    pilot costs the counted work of about 276 iterations of path tracing, so at the default
+    share of 1/8 it starts at about 1930 spp (2048 spp: 4 iterations per pilot render, 0.12 of
+    the counted work), and at 1024 spp it stops after its first pair of renders (0.005) (``experiments/results/2026-11-28-vcm-pilot.md``); ``pilot_share = 1`` sizes it
     without a bound (max(4, spp / 128) iterations per render). ``aim``'s default depends on the mode: 0.9 in vcm,
     lab_bdpt's 0.5 in bpt and lt, 0 in bpm and ppm, where merging carries the direct light too
     and only the unaimed share of the light subpaths would bring it (a noisier, heavier-tailed
