@@ -21,6 +21,14 @@ defaults in ``params.LAB_VCM`` are one run of it (see its docstring there); the 
 shared, so single timings are noisy and only the order of magnitude matters to the pilot.
 
     .venv/bin/python benchmarks/bench_pilot_costs.py [--rounds 3] [--res 48] [--spp 8] [--quick]
+
+``--shares`` measures something else, without a clock: the pilot's share of the render's counted
+work (``pilot_share``'s bound) and its choice, with lab_vcm's defaults (and ``--pilot-share``),
+over ``--share-res`` x ``--share-spp`` on ``--share-scenes``; with ``--predict``, the pilot alone
+(``Pilot.run``) and the render's counted cost predicted from 8 iterations of the chosen estimator
+(spp x its counted seconds per iteration, plus its passes), for sizes whose render would be long.
+
+    .venv/bin/python benchmarks/bench_pilot_costs.py --shares [--pilot-share 0.125] [--predict]
 """
 from __future__ import annotations
 
@@ -76,6 +84,54 @@ def fit(rows, kinds):
     return dict(zip(kinds, costs)), a @ costs / t
 
 
+def shares(scenes, resolutions, spps, share: float, predict: bool, depth: int, seed: int = 1) -> None:
+    """Print, per scene, film size and spp: the pilot's iterations per render, its counted seconds,
+    the render's, the pilot's share of their sum and the choice."""
+    from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
+    from mitsuba_lab.plugins.integrators.vcm import selection
+
+    print(f"pilot_share {share:g}, max_depth {depth}, seed {seed}; counted seconds (cost_* x counts), no clock")
+    print("| scene | film | spp | pilot iterations / render | pilot (counted s) | render (counted s) | pilot share "
+          "| choice |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name in scenes:
+        for res in resolutions:
+            scene = load_scene(os.path.join(ROOT, "scenes", name), res=res)
+            sensor = scene.sensors()[0]
+            for spp in spps:
+                integrator = make_integrator("lab_vcm", {"count_rays": True, "max_depth": depth,
+                                                         "pilot_share": share})
+                values, note = integrator.values, ""
+                if not predict:
+                    mi.render(scene, integrator=integrator, spp=spp, seed=seed)
+                    stats = integrator.bdpt_stats()
+                    choice = (None if stats["chose_path_tracing"]
+                              else stats["light_paths_chosen"] / values["light_paths"])
+                    pilot, render = stats["pilot_counted_s"], stats["render_counted_s"]
+                    iterations = stats["pilot_iterations"]
+                else:
+                    integrator.first_radius = values["radius"] or pixel_footprint(scene, sensor)
+                    pilot_ = integrator.pilot
+                    choice = pilot_.run(scene, sensor, seed, spp, pilot_.companion(), pilot_.path_tracer())[0]
+                    pilot, iterations, note = pilot_.counted_s, pilot_.iterations, " (predicted)"
+                    if choice is None:
+                        lab_mis = make_integrator("lab_mis", {"count_rays": True, "max_depth": depth})
+                        lab_mis.ray_counts()
+                        mi.render(scene, integrator=lab_mis, spp=8, seed=seed)
+                        render = selection.seconds(lab_mis.ray_counts(), "path_tracing", values) * spp / 8
+                    else:
+                        every = pilot_.companion(choice)
+                        mi.render(scene, integrator=every, spp=8, seed=seed)
+                        work = every.work_counts()
+                        per_iteration = (selection.seconds(work, "light", values)
+                                         + selection.seconds(work, "camera", values)) / 8
+                        passes = -(-spp // every.pass_iterations(res * res))
+                        render = spp * per_iteration + passes * 1e-9 * values["cost_pass"]
+                chosen = "path tracing" if choice is None else f"every technique, {choice * values['light_paths']:g}"
+                print(f"| {name} | {res}x{res} | {spp} | {iterations} | {pilot:.3f} | {render:.3f}{note} | "
+                      f"{pilot / (pilot + render):.3f} | {chosen} |", flush=True)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rounds", type=int, default=3, help="alternating timed rounds (default: 3)")
@@ -84,7 +140,18 @@ def main(argv=None) -> int:
     parser.add_argument("--max-depth", type=int, default=8, help="max_depth (default: 8)")
     parser.add_argument("--radius", type=float, default=0.03, help="lab_vcm's first radius (default: 0.03)")
     parser.add_argument("--quick", action="store_true", help="smoke run: 16x16, 2 spp, 1 round, the Cornell box")
+    parser.add_argument("--shares", action="store_true", help="the pilot's counted share of the render instead")
+    parser.add_argument("--pilot-share", type=float, default=0.125, help="with --shares: pilot_share (default 1/8)")
+    parser.add_argument("--predict", action="store_true", help="with --shares: the render's counted cost predicted")
+    parser.add_argument("--share-scenes", default="cornell_box.xml,caustic.xml", help="with --shares (comma-separated)")
+    parser.add_argument("--share-res", default="16,32,64", help="with --shares: film sizes (comma-separated)")
+    parser.add_argument("--share-spp", default="4,16,64,256", help="with --shares: spp (comma-separated)")
     args = parser.parse_args(argv)
+    if args.shares:
+        print(versions())
+        shares(args.share_scenes.split(","), [int(r) for r in args.share_res.split(",")],
+               [int(n) for n in args.share_spp.split(",")], args.pilot_share, args.predict, args.max_depth)
+        return 0
     scenes = SCENES
     if args.quick:
         args.res, args.spp, args.rounds, scenes = 16, 2, 1, SCENES[:1]

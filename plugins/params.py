@@ -251,9 +251,13 @@ LAB_VCM = (
           "VCM); false leaves the light arriving there to light tracing, NEE and connections, and that merge "
           "out of every MIS sum (ppm always merges there)"),
     Param("pilot", bool, True, "efficiency-aware choice for the whole image (modes vcm and bpt; on by default in "
-          "mode vcm only): a pilot (1/8 of the iterations in all) estimates relative variance x cost per iteration "
-          "(pilot_costs) with every technique and with path tracing alone, and the render uses the lower (path "
-          "tracing alone: mode pt, lab_mis's estimator)"),
+          "mode vcm only): a pilot (at most pilot_share of the counted work) estimates relative variance x cost per "
+          "iteration (pilot_costs) with every technique and with path tracing alone, and the render uses the lower "
+          "(path tracing alone: mode pt, lab_mis's estimator)"),
+    Param("pilot_share", float, 0.125, "with pilot: the most the pilot's counted work (cost_* x its counts) may be of "
+          "the whole render's; where its fewest iterations would cost more, no pilot: every technique at light_paths; "
+          "1 = no bound (pilot renders of max(4, spp / 128) iterations)",
+          check=lambda v: 0.0 < v <= 1.0, expected="a number in (0, 1]"),
     Param("light_paths_max", float, VCM_LIGHT_PATHS_MAX, "with pilot: the most light subpaths per camera subpath the "
           "pilot may choose, powers of two times light_paths up to it, by their relative variance x cost; 0 = "
           "light_paths only", check=lambda v: v == 0.0 or 1.0 / 64 <= v <= 64,

@@ -43,11 +43,13 @@ def test_the_pilot_table_lists_each_seeds_choice_beside_its_time():
 
 def tiny_config(cache) -> dict:
     """Two seeds of the 16x16 Cornell box at 16 spp: lab_vcm with a pilot choosing one or two light
-    subpaths (or path tracing), and lab_bdpt."""
+    subpaths (or path tracing), unbounded (``pilot_share`` 1: at 16 spp the default share affords
+    no pilot), and lab_bdpt."""
     return {"experiment": {"spp": [16], "repetitions": 2, "max_depth": 4, "metrics": []},
             "reference": {"spp": 64, "chunks": 4, "cache": str(cache)},
             "scenes": {"cornell": {"path": CORNELL, "resolution": 16}},
-            "strategies": {"auto": {"type": "lab_vcm", "light_paths": 1, "light_paths_max": 2, "pilot": True},
+            "strategies": {"auto": {"type": "lab_vcm", "light_paths": 1, "light_paths_max": 2, "pilot": True,
+                                    "pilot_share": 1.0},
                            "bdpt": {"type": "lab_bdpt"}}}
 
 

@@ -8,7 +8,9 @@
 * ``pilot``: the render is every technique's or path tracing's alone, with the pilot's path
   tracing averaged in when chosen; the pilot's own choice agrees with ``path``; it picks path
   tracing on Veach's plates and every technique on the caustic scene; light that path tracing's
-  pilot misses counts as error.
+  pilot misses counts as error. Its counted work is at most ``pilot_share`` (1/8) of the whole
+  render's: no pilot where it would be more, or a pilot that stops after its first pair of renders
+  once every technique's own counts show the rest would pass it.
 """
 import numpy as np
 import pytest
@@ -22,6 +24,10 @@ pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tie
 
 #: experiments/vcm.toml's vcm_auto: one setting for every scene, the pilot choosing.
 AUTO = {"radius": 0.022, "light_paths": 1, "light_paths_max": 16, "aim": 0.9, "pilot": True}
+#: The tests of what the pilot chooses run it unbounded (pilot renders of max(4, spp / 128)
+#: iterations, as before ``pilot_share``): at their sizes the default share (1/8 of the counted
+#: work) affords no pilot, and lab_vcm would render every technique unpiloted.
+UNBOUNDED = {"pilot_share": 1.0}
 
 
 @pytest.mark.parametrize("name", ["cornell_box.xml", "caustic.xml"])
@@ -44,7 +50,7 @@ def test_one_connection_per_camera_vertex_agrees_with_mitsuba_path(name, monkeyp
 def test_the_pilots_own_choice_agrees_with_mitsuba_path():
     """Mode bpt on the Cornell box, each seed's pilot choosing for itself."""
     scene = load_scene(scene_path("cornell_box.xml"), res=RES)
-    integrator = vcm(mode="bpt", light_paths=0.25, pilot=True)
+    integrator = vcm(mode="bpt", light_paths=0.25, pilot=True, **UNBOUNDED)
     assert_agrees(renders(scene, integrator, 64, SEEDS_LAB), path_stack("cornell_box.xml"), "the pilot's own choice")
     assert integrator.bdpt_stats()["pilot_s"] > 0
 
@@ -86,7 +92,7 @@ def test_the_pilot_chooses_path_tracing_where_it_is_more_efficient(name, spp, pa
     scene at 512 (light tracing and merging carry its caustic). The pilot's choice only
     (``pilot_choice``): the 2048 or 512 iterations a render then makes are not needed to know it."""
     scene = load_scene(scene_path(name), res=64)
-    integrator = vcm(**AUTO)
+    integrator = vcm(**AUTO, **UNBOUNDED)
     for seed in range(3):
         choice, scores = pilot_choice(scene, integrator, seed, spp)
         assert (choice is None) == path_tracing, (name, seed, scores)
@@ -209,7 +215,7 @@ def test_the_pilot_finds_where_more_light_subpaths_lower_the_variance():
     chooses path tracing alone."""
     for name, low in (("stiff/light_in_glass.xml", True), ("caustic.xml", False)):
         scene = load_scene(scene_path(name), res=64)
-        integrator = vcm(**AUTO)
+        integrator = vcm(**AUTO, **UNBOUNDED)
         integrator.first_radius = AUTO["radius"]      # (what render() sets before its pilot)
         pilot = integrator.pilot
         for seed in range(3):
@@ -223,12 +229,75 @@ def test_the_pilot_finds_where_more_light_subpaths_lower_the_variance():
         assert choice is None, ("cornell_box", seed, scores)
 
 
+def test_the_pilot_is_at_most_its_share_of_the_render():
+    """``pilot_share`` (1/8 by default) bounds the pilot's counted work (its renders' counts x the
+    ``cost_*`` parameters: no clock) by that share of the whole render's. The Cornell box at 16x16
+    with `vcm_auto`'s settings: at 64 spp even the fewest pilot iterations would pass the share, so
+    there is no pilot (no pilot render at all) and the image is lab_vcm's without one, every
+    technique at light_paths; at 8192 spp a pilot of 6 iterations per render fits (path tracing
+    costs 0.61 ms per iteration there, every technique 6.5 ms and a pass 71 ms), chooses path
+    tracing, as the unbounded one does at 512 spp on 64x64, and costs at most 1/8 of the whole."""
+    scene = load_scene(scene_path("cornell_box.xml"), res=16)
+    integrator = vcm(**AUTO, count_rays=True)
+    image = render(scene, integrator, spp=64, seed=5)
+    stats = integrator.bdpt_stats()
+    assert stats["pilot_iterations"] == 0 and stats["pilot_counted_s"] == 0.0 and stats["pilot_scores"] == {}
+    assert stats["light_paths_chosen"] == 1.0 and not stats["chose_path_tracing"] and stats["pilot_share"] == 0.0
+    unpiloted = render(scene, vcm(**{k: v for k, v in AUTO.items() if k not in ("pilot", "light_paths_max")}),
+                       spp=64, seed=5)
+    np.testing.assert_allclose(image, unpiloted, rtol=1e-6, atol=1e-7)      # (float atomics in the splats)
+    render(scene, integrator, spp=8192, seed=5)
+    stats = integrator.bdpt_stats()
+    print(f"8192 spp: {stats['pilot_iterations']} iterations per pilot render, pilot {stats['pilot_counted_s']:.3f} "
+          f"counted s, render {stats['render_counted_s']:.3f}, share {stats['pilot_share']:.3f}")
+    assert stats["pilot_iterations"] >= selection.PILOT_MIN_ITERATIONS and stats["chose_path_tracing"]
+    assert 0.0 < stats["pilot_share"] <= 1 / 8
+    assert stats["pilot_share"] == stats["pilot_counted_s"] / (stats["pilot_counted_s"] + stats["render_counted_s"])
+
+
+def test_a_pilot_that_would_pass_its_share_stops_after_its_first_pair():
+    """The Cornell box at 16x16 and 2048 spp: priced at EVERY_OVER_PATH_PLAN x path tracing the
+    whole pilot does not fit in 1/8, its first pair of renders does (a pass, 71 ms counted, is 117
+    iterations of path tracing there); counted, every technique's 10.7x path tracing still leaves
+    the whole pilot over its share (it needs about 5900 spp), so it stops: every technique chosen,
+    no scores, and what it did cost (one every-technique render, path tracing's counted iteration
+    and first render) within the share of spp iterations of path tracing."""
+    scene = load_scene(scene_path("cornell_box.xml"), res=16)
+    integrator = vcm(**AUTO)
+    integrator.first_radius = AUTO["radius"]      # (what render() sets before its pilot)
+    pilot = integrator.pilot
+    every, camera = pilot.companion(), pilot.path_tracer()
+    assert pilot.run(scene, scene.sensors()[0], 5, 2048, every, camera) == (1.0, None, 0, {})
+    assert pilot.iterations == 0 and pilot.every_all["passes"] == 1
+    path_iteration = selection.seconds(pilot.path_all, "path_tracing", integrator.values) / (1 + 4)
+    print(f"stopped: {pilot.counted_s:.4f} counted s, budget {selection.share_budget(1 / 8, 2048 * path_iteration):.4f}")
+    assert 0 < pilot.counted_s <= selection.share_budget(1 / 8, 2048 * path_iteration)
+
+
+def test_the_pilots_size_follows_its_share():
+    """``PilotPlan``: the counted seconds of a pilot of k iterations per render (every technique's
+    renders, their passes, path tracing's paired renders and its longer one), the most k within a
+    budget, and that budget: share / (1 - share) of the render's cost."""
+    plan = selection.PilotPlan(every=5, path=4)
+    # 5 renders x (a pass + 4 x 2 s) + (4 + PATH_TRACING_SIZE) x 4 x 0.5 s
+    assert plan.seconds(4, 2.0, 0.5, 1.0, 64) == 5 * 1.0 + 20 * 2.0 + (4 + selection.PATH_TRACING_SIZE) * 4 * 0.5
+    assert plan.seconds(4, 2.0, 0.5, 1.0, 2) == 10 * 1.0 + 20 * 2.0 + 32 * 0.5      # (two passes a render)
+    assert selection.PilotPlan(every=4, path=4, extra_every=2).seconds(4, 2.0, 0.0, 1.0, 64) == 6 + 18 * 2.0
+    assert selection.share_budget(0.125, 7.0) == 1.0 and selection.share_budget(1.0, 7.0) == float("inf")
+    assert plan.iterations(1 << 20, float("inf"), 2.0, 0.5, 1.0, 64) == selection.pilot_iterations(1 << 20) == 8192
+    assert plan.iterations(512, plan.seconds(4, 2.0, 0.5, 1.0, 64), 2.0, 0.5, 1.0, 64) == 4
+    assert plan.iterations(512, plan.seconds(4, 2.0, 0.5, 1.0, 64) - 1e-9, 2.0, 0.5, 1.0, 64) == 0
+    assert plan.iterations(4096, plan.seconds(7, 2.0, 0.5, 1.0, 64), 2.0, 0.5, 1.0, 64) == 7
+    assert plan.iterations(256, 1e9, 2.0, 0.5, 1.0, 64) == 4         # (at most max(4, spp / 128))
+
+
 def test_pilot_and_connections_refusals_are_one_line():
     for params, match in (({"mode": "ppm", "pilot": True}, "pilot .* not mode 'ppm'"),
                           ({"connections": "two"}, "parameter 'connections' must be one of all, one"),
                           ({"mode": "bpm", "connections": "one"}, "mode 'bpm' makes no connections"),
                           ({"pilot": False, "light_paths_max": 4}, "light_paths_max .* needs pilot = true"),
                           ({"pilot": True, "light_paths": 4, "light_paths_max": 2}, "below light_paths = 4"),
-                          ({"pilot": True, "light_paths_max": 100}, "light_paths_max")):
+                          ({"pilot": True, "light_paths_max": 100}, "light_paths_max"),
+                          ({"pilot_share": 0.0}, "pilot_share")):
         with pytest.raises(Exception, match=match):
             make_integrator("lab_vcm", params)

@@ -66,6 +66,10 @@ class VcmStats(BdptStats):
     light_paths_chosen: float = 0.0   # pilot: the light subpaths per camera subpath chosen (0: none)
     pilot_scores: dict = field(default_factory=dict)   # pilot: relative variance x s per iteration
     pilot_costs: str = ""             # pilot: how it priced an iteration (counted or measured work)
+    pilot_iterations: int = 0         # pilot: iterations per pilot render (0: none, the share too small)
+    pilot_counted_s: float = 0.0      # pilot: its counted work (cost_* x counts), seconds
+    render_counted_s: float | None = None   # pilot: the render's after it (None: not counted, count_rays off)
+    pilot_share: float | None = None  # pilot: pilot_counted_s over pilot + render (None: not counted)
 
 
 class VcmPasses(Passes):
@@ -180,8 +184,10 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     per pass). Statistics of the
     last render (``bdpt_stats()``): light, grid and camera time, the radii; with ``pilot`` the
     pilot's time, whether it chose path tracing alone, the light subpaths it chose, each
-    choice's score (relative variance x seconds per iteration) and ``pilot_costs``; with counted
-    costs the pilot's counts are in ``pilot.work`` (every technique's and path tracing's).
+    choice's score (relative variance x seconds per iteration) and ``pilot_costs``, its iterations
+    per render (0: no pilot), its counted seconds and the render's after it (with ``count_rays``)
+    and its share of their sum; with counted costs the pilot's counts are in ``pilot.work`` (every
+    technique's and path tracing's).
 
     Modes: ``bpm`` is bidirectional photon mapping (emitter hits and merging at every camera
     vertex that merges, with MIS among them); ``ppm`` is progressive photon mapping (merging at
@@ -198,10 +204,20 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     caustics skip most merging. ``connections = one`` picks one of the n vertices a camera
     vertex may connect to uniformly and counts it n times (unbiased). The pilot (on by default
     in mode vcm; ``pilot.py``, ``selection.py``) makes a few short renders with every technique
-    and with path tracing alone (their sizes: ``selection.pilot_iterations``), path tracing's
-    averaged into the image when chosen, which it is only when it wins by a margin
-    (``selection.PATH_TRACING_MARGIN``); the ``cost_*`` defaults were fitted by
-    ``benchmarks/bench_pilot_costs.py``. ``aim``'s default depends on the mode: 0.9 in vcm,
+    and with path tracing alone, path tracing's averaged into the image when chosen, which it is
+    only when it wins by a margin (``selection.PATH_TRACING_MARGIN``). Its counted work (its
+    renders' counts times the ``cost_*`` parameters, fitted by ``benchmarks/bench_pilot_costs.py``)
+    is at most ``pilot_share`` of the whole render's: it sizes its renders from path tracing's
+    counted cost per iteration (one iteration rendered first; the render costs at least spp of
+    them) and, before it has rendered every technique, prices an iteration of it at
+    ``selection.EVERY_OVER_PATH_PLAN`` times that, checked against every technique's own counts
+    after its first pilot render. Where even its fewest iterations (``selection.PILOT_MIN_ITERATIONS``
+    per render: fewer chose wrongly on sds) would pass the share there is no pilot, and the render
+    is every technique at ``light_paths``, as without one: on the Cornell box at 64x64 the smallest
+    pilot costs the counted work of about 276 iterations of path tracing, so at the default
+    share of 1/8 it starts at about 1930 spp (2048 spp: 4 iterations per pilot render, 0.12 of
+    the counted work), and at 1024 spp it stops after its first pair of renders (0.005) (``experiments/results/2026-11-28-vcm-pilot.md``); ``pilot_share = 1`` sizes it
+    without a bound (max(4, spp / 128) iterations per render). ``aim``'s default depends on the mode: 0.9 in vcm,
     lab_bdpt's 0.5 in bpt and lt, 0 in bpm and ppm, where merging carries the direct light too
     and only the unaimed share of the light subpaths would bring it (a noisier, heavier-tailed
     image away from the aimed shapes, not a biased one); aiming changes nothing where no shape

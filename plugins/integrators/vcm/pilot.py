@@ -9,6 +9,7 @@ is on.
 """
 from __future__ import annotations
 
+import math
 import time
 from collections import Counter
 
@@ -19,7 +20,9 @@ import numpy as np
 from mitsuba_lab.plugins.integrators.bdpt.passes import pass_seed
 from mitsuba_lab.plugins.integrators.common.support import render_arguments
 
-from .selection import PATH_TRACING_SIZE, PILOT_RENDERS, PilotCosts, choose, light_path_ratios, pilot_iterations, pilot_variances
+from .selection import (EVERY_OVER_PATH_PLAN, PATH_TRACING_SIZE, PILOT_MIN_ITERATIONS, PILOT_RENDERS, PilotCosts,
+                        PilotPlan, choose, every_seconds, light_path_ratios, pilot_iterations, pilot_variances, seconds,
+                        share_budget)
 
 #: The pilot renders' seeds: the render's seed with this mixed in, then one per render; the
 #: light seed of the renders that share camera seeds mixes in one more.
@@ -53,6 +56,8 @@ class Pilot:
         self.plugin = plugin
         self.variances = self.costs = None
         self.work = {}
+        self.every_all, self.path_all = Counter(), {}
+        self.counted_s, self.iterations = 0.0, 0
 
     def companion(self, ratio: float = 1.0):
         """lab_vcm with every technique of this one, without the pilot, at ``ratio`` x its
@@ -75,28 +80,64 @@ class Pilot:
         """(the choice: a multiple of light_paths, or None for path tracing alone; path tracing's
         pilot image, the mean of its iterations; their number; each choice's relative variance x
         seconds per iteration), from pilot renders of both (``selection``): priced by the work
-        they count (``pilot_costs = counted``) or by their times (``measured``)."""
-        iterations = pilot_iterations(spp)
-        ratios = light_path_ratios(self.plugin.values["light_paths"], self.plugin.values["light_paths_max"])
-        counted = self.plugin.values["pilot_costs"] == "counted"
+        they count (``pilot_costs = counted``) or by their times (``measured``). The pilot is sized
+        so that its counted work is at most ``pilot_share`` of the whole render's (``size``); where
+        even its fewest iterations would cost more, it renders every technique unpiloted: (1.0,
+        None, 0, {}), ``iterations`` 0."""
+        values = self.plugin.values
+        ratios = light_path_ratios(values["light_paths"], values["light_paths_max"])
+        counted = values["pilot_costs"] == "counted"
         channels = 1 if mi.is_monochromatic else 3
         base = seed ^ SALT
+        film = sensor.film()
+        pass_iterations = every.pass_iterations(int(film.size()[0]) * int(film.size()[1]))
+        plan = PilotPlan(every=PILOT_RENDERS + (len(ratios) > 1), path=PILOT_RENDERS, extra_every=0 if counted else 2)
+        self.every_all, self.path_all = Counter(), {}
+        self.counted_s, self.iterations = 0.0, 0
+        camera.ray_counts()                     # (path tracing's rays from here on)
+        probe = None
+        iterations = self.size(plan, spp, None, None, pass_iterations)
+        if iterations:
+            # path tracing's cost per iteration, from one iteration (its image joins path tracing's)
+            probe, _ = timed(camera, scene, sensor, pass_seed(base, PILOT_RENDERS + 2), 1)
+            probe = np.array(probe)[..., :channels]
+            probe_counts = camera.ray_counts(reset=False)
+            path_iteration = seconds(probe_counts, "path_tracing", values)
+            iterations = self.size(plan, spp, path_iteration, None, pass_iterations)
+            if not iterations and self.first_fits(spp, path_iteration, pass_iterations):
+                iterations = PILOT_MIN_ITERATIONS      # (the plan checked after every technique's first)
         images = {"every": [], "shared": [], "camera": []}
         large, camera_times = [], []
         every_work = Counter()
-        camera.ray_counts()                     # (path tracing's rays from here on)
-        for r in range(PILOT_RENDERS):
+        for r in range(PILOT_RENDERS if iterations else 0):
             for name, integrator in (("every", every), ("camera", camera)):
-                image, seconds = timed(integrator, scene, sensor, pass_seed(base, r + 1), iterations)
+                image, secs = timed(integrator, scene, sensor, pass_seed(base, r + 1), iterations)
                 images[name].append(np.array(image)[..., :channels])
                 if name == "every":
                     large.append(pass_times(every))
-                    every_work.update(every.work_counts())
+                    work = every.work_counts()
+                    every_work.update(work)
+                    self.every_all.update(work)
                 else:
-                    camera_times.append(seconds)
+                    camera_times.append(secs)
+            if r == 0:
+                # every technique's own cost per iteration: the plan checked against it
+                every_iteration = (seconds(every_work, "light", values)
+                                   + seconds(every_work, "camera", values)) / iterations
+                if not self.size(plan, spp, path_iteration, every_iteration, pass_iterations) >= iterations:
+                    iterations = 0
+                    break
+        if not iterations:
+            self.path_all = camera.ray_counts(reset=False)
+            self.counted_s = every_seconds(self.every_all, values) + seconds(self.path_all, "path_tracing", values)
+            self.variances = self.costs = None
+            self.work = {}
+            return 1.0, None, 0, {}
+        self.iterations = iterations
         if len(ratios) > 1:       # render 0's camera seed, a light seed of its own
             every.passes.light_seed = pass_seed(base ^ LIGHT_SALT, 1)
             image, _ = timed(every, scene, sensor, pass_seed(base, 1), iterations)
+            self.every_all.update(every.work_counts())
             images["shared"].append(np.array(image)[..., :channels])
             every.passes.light_seed = None
         if not counted:
@@ -106,14 +147,16 @@ class Pilot:
             # 1.1 s, not ~20 ms, and every iteration looked costless)
             for _ in range(2):
                 timed(every, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), 1)
+                self.every_all.update(every.work_counts())
         longer = PATH_TRACING_SIZE * iterations
         image, camera_long = timed(camera, scene, sensor, pass_seed(base, PILOT_RENDERS + 1), longer)
-        film = sensor.film()
-        pass_iterations = every.pass_iterations(int(film.size()[0]) * int(film.size()[1]))
+        self.path_all = camera.ray_counts(reset=False)
+        self.counted_s = every_seconds(self.every_all, values) + seconds(self.path_all, "path_tracing", values)
         if counted:
-            path_work = camera.ray_counts(reset=False)
+            # (the probe's iteration is left out of path tracing's cost per iteration)
+            path_work = {k: v - probe_counts.get(k, 0) for k, v in self.path_all.items()}
             costs = PilotCosts.from_counts(every_work, PILOT_RENDERS * iterations, pass_iterations, path_work,
-                                           PILOT_RENDERS * iterations + longer, self.plugin.values)
+                                           PILOT_RENDERS * iterations + longer, values)
             self.work = {"every": dict(every_work), "path tracing": path_work}
         else:
             costs = PilotCosts.from_sizes(pass_times(every), tuple(np.median(np.array(large), axis=0)),
@@ -124,11 +167,41 @@ class Pilot:
         variances = pilot_variances(np.array(images["every"]), np.array(images["shared"]) if images["shared"] else None,
                                     camera_images, iterations, np.array(image)[..., :channels], longer)
         choice, scores = choose(variances, costs, ratios)
-        # (path tracing's images, the longer one included, are this render's estimator if chosen)
-        camera_spp = PILOT_RENDERS * iterations + longer
-        pilot_image = (camera_images.sum(axis=0) * iterations + np.array(image)[..., :channels] * longer) / camera_spp
+        # (path tracing's images, the longer one and the probe included, are this render's
+        # estimator if chosen)
+        camera_spp = PILOT_RENDERS * iterations + longer + 1
+        pilot_image = (camera_images.sum(axis=0) * iterations + np.array(image)[..., :channels] * longer
+                       + probe) / camera_spp
         self.variances, self.costs = variances, costs
         return choice, pilot_image, camera_spp, scores
+
+    def size(self, plan: PilotPlan, spp: int, path: float | None, every: float | None, pass_iterations: float) -> int:
+        """Iterations per pilot render within ``pilot_share`` of the render (0: no pilot). The
+        render costs at least ``spp`` x path tracing's counted seconds per iteration (``path``;
+        every technique's cost more), so the pilot may cost share / (1 - share) of that
+        (``selection.share_budget``). Before anything is rendered (``path`` None) the pilot's
+        iterations are priced at path tracing's, whatever they cost: no pilot where even that
+        passes the share; before every technique has rendered (``every`` None), it is priced at
+        ``EVERY_OVER_PATH_PLAN`` x path tracing."""
+        share = self.plugin.values["pilot_share"]
+        if share >= 1.0:
+            return pilot_iterations(spp)
+        per_pass = 1e-9 * self.plugin.values["cost_pass"]
+        if path is None:        # (unit costs: the pilot's iterations against the render's)
+            return plan.iterations(spp, share_budget(share, spp), 1.0, 1.0, 0.0, pass_iterations)
+        budget = share_budget(share, spp * path) - path            # (less the probe's iteration)
+        return plan.iterations(spp, budget, EVERY_OVER_PATH_PLAN * path if every is None else every, path,
+                               per_pass, pass_iterations)
+
+    def first_fits(self, spp: int, path: float, pass_iterations: float) -> bool:
+        """Whether the pilot's first renders of ``PILOT_MIN_ITERATIONS`` (every technique's,
+        priced at ``EVERY_OVER_PATH_PLAN`` x path tracing's ``path``, and path tracing's with its
+        seed) fit within the share: where the whole pilot only fits at every technique's own cost
+        per iteration, they count it, and the pilot stops after them if the rest would not fit."""
+        k = PILOT_MIN_ITERATIONS
+        first = (1e-9 * self.plugin.values["cost_pass"] * math.ceil(k / max(pass_iterations, 1.0))
+                 + k * (EVERY_OVER_PATH_PLAN + 1.0) * path)
+        return first <= share_budget(self.plugin.values["pilot_share"], spp * path) - path
 
     def render(self, scene, sensor, seed, spp, develop, evaluate):
         sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
@@ -136,10 +209,13 @@ class Pilot:
         camera, every = self.path_tracer(), self.companion()
         choice, pilot_image, pilot_spp, scores = self.run(scene, sensor, seed, spp, every, camera)
         pilot_s = time.perf_counter() - start
-        chosen = None
+        chosen, values = None, self.plugin.values
         if choice is None:
-            image, seconds = timed(camera, scene, sensor, seed, spp, develop, evaluate)
-            self.plugin.stats = self.plugin.passes.stats_class(passes=1, camera_s=seconds)
+            before = camera.ray_counts(reset=False)
+            image, secs = timed(camera, scene, sensor, seed, spp, develop, evaluate)
+            self.plugin.stats = self.plugin.passes.stats_class(passes=1, camera_s=secs)
+            render_counts = {k: v - before.get(k, 0) for k, v in camera.ray_counts(reset=False).items()}
+            render_s = seconds(render_counts, "path_tracing", values)
             # the pilot's path tracing is this render's estimator: its iterations count too
             out = np.array(image)
             channels = pilot_image.shape[-1]
@@ -147,16 +223,25 @@ class Pilot:
             image = mi.TensorXf(out)
         elif choice == 1.0:
             image = self.plugin.render_every(scene, sensor, seed, spp, develop, evaluate)
+            work = self.plugin.work_counts()
+            render_s = every_seconds(work, values) if work else None
         else:
             chosen = self.companion(choice)
             image = chosen.render(scene, sensor, seed, spp, develop, evaluate)
             self.plugin.stats = chosen.stats
+            render_s = every_seconds(chosen.work_counts(), values)
         for integrator in (camera, every, chosen):    # (the pilot's rays are this render's cost too)
-            if integrator is not None and self.plugin.values["count_rays"]:
+            if integrator is not None and values["count_rays"]:
                 self.plugin.counters.add_counts(integrator.ray_counts())
-        self.plugin.stats.pilot_s, self.plugin.stats.chose_path_tracing = pilot_s, choice is None
-        self.plugin.stats.pilot_costs = self.plugin.values["pilot_costs"]
-        self.plugin.stats.light_paths_chosen = 0.0 if choice is None else self.plugin.values["light_paths"] * choice
-        self.plugin.stats.pilot_scores = {("path tracing" if r is None else self.plugin.values["light_paths"] * r): float(v)
-                                   for r, v in scores.items()}
+        stats = self.plugin.stats
+        stats.pilot_s = pilot_s
+        stats.chose_path_tracing = choice is None
+        stats.pilot_costs = values["pilot_costs"]
+        stats.light_paths_chosen = 0.0 if choice is None else values["light_paths"] * choice
+        stats.pilot_scores = {("path tracing" if r is None else values["light_paths"] * r): float(v)
+                              for r, v in scores.items()}
+        stats.pilot_iterations = self.iterations
+        stats.pilot_counted_s = self.counted_s
+        stats.render_counted_s = render_s
+        stats.pilot_share = None if render_s is None else self.counted_s / (self.counted_s + render_s)
         return image

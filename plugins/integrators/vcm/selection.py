@@ -8,9 +8,18 @@ the image (light seen through glass) more light subpaths per camera subpath pay 
 Efficiency-aware MIS (Grittmann, Yazici, Georgiev & Slusallek 2022) picks techniques from their
 measured variance and cost; this is its coarsest form, one choice for the whole image:
 
+* the pilot's size: its counted work (``PilotPlan.seconds``) at most ``pilot_share`` of the whole
+  render's, which costs at least spp iterations of path tracing (``share_budget``), so it first
+  renders one iteration of path tracing to count its cost, prices every technique's iterations at
+  ``EVERY_OVER_PATH_PLAN`` times it until its first render of them has counted their own, and
+  renders the most iterations per render up to ``pilot_iterations`` that fit
+  (``PilotPlan.iterations``); none at all where ``PILOT_MIN_ITERATIONS`` would not fit (then the
+  render is every technique at ``light_paths``). The choice rests on ``PILOT_RENDERS`` independent
+  renders of each kind of at least ``PILOT_MIN_ITERATIONS`` iterations (16 or more independent
+  iterations of each, spread over every pixel of the image);
 * the pilot renders the scene ``PILOT_RENDERS`` times with every technique at ``light_paths`` and
   as many times with path tracing alone (lab_mis, the estimator of lab_vcm's mode pt in a
-  lighter kernel), ``pilot_iterations`` iterations each, render i of both with the same seed;
+  lighter kernel), the iterations each that its size allows, render i of both with the same seed;
   with ``light_paths_max``, one more with every technique that shares the camera seed of its
   first but not its light seed; and one of path tracing with ``PATH_TRACING_SIZE`` times
   the iterations and a seed of its own;
@@ -38,8 +47,8 @@ measured variance and cost; this is its coarsest form, one choice for the whole 
   (path tracing's must be lower by ``PATH_TRACING_MARGIN``).
 
 Whichever is chosen renders one of lab_vcm's estimators unchanged, unbiased or consistent as that
-one is. Path tracing's pilot renders are the same estimator as the render when it is chosen, so
-their iterations are averaged in; every technique's, whose merging radius restarts at r_1, are
+one is. Path tracing's pilot renders (and its one-iteration count) are the same estimator as the
+render when it is chosen, so their iterations are averaged in; every technique's, whose merging radius restarts at r_1, are
 not used in the image.
 """
 from __future__ import annotations
@@ -77,10 +86,54 @@ WORK_COSTS = {
 }
 
 
+#: Every technique's counted cost per iteration over path tracing's that the pilot assumes when it
+#: sizes itself before it has rendered every technique (measured: 10.4-10.8 on the Cornell box,
+#: 2.6-2.7 on the caustic, 16x16 to 64x64): the pilot plans as if every technique cost this many
+#: times path tracing, then checks its plan against every technique's own counts after its first
+#: render and stops there (choosing every technique) if the rest would pass its share.
+EVERY_OVER_PATH_PLAN = 16.0
+
+
 def pilot_iterations(spp: int) -> int:
     """Iterations of each of every technique's pilot renders for a render of ``spp`` samples per
-    pixel: spp / PILOT_FRACTION, at least PILOT_MIN_ITERATIONS."""
+    pixel without a share bound (``pilot_share = 1``): spp / PILOT_FRACTION, at least
+    PILOT_MIN_ITERATIONS."""
     return max(PILOT_MIN_ITERATIONS, spp // PILOT_FRACTION)
+
+
+@dataclass(frozen=True)
+class PilotPlan:
+    """The pilot's renders: ``every`` of every technique (the independent ones and, choosing light
+    subpaths, the one sharing a camera seed), ``path`` of path tracing with their seeds, and one
+    of path tracing with ``PATH_TRACING_SIZE`` x ``iterations``; ``extra_every``: every
+    technique's one-iteration renders that ``pilot_costs = measured`` times."""
+    every: int
+    path: int
+    extra_every: int = 0
+
+    def seconds(self, iterations: int, every: float, path: float, per_pass: float, pass_iterations: float) -> float:
+        """Counted seconds of the pilot at ``iterations`` per render, ``every`` and ``path`` its
+        techniques' seconds per iteration, ``per_pass`` a pass's."""
+        passes = self.every * math.ceil(iterations / max(pass_iterations, 1.0)) + self.extra_every
+        return (passes * per_pass + (self.every * iterations + self.extra_every) * every
+                + (self.path + PATH_TRACING_SIZE) * iterations * path)
+
+    def iterations(self, spp: int, budget: float, every: float, path: float, per_pass: float,
+                   pass_iterations: float) -> int:
+        """The most iterations per render, PILOT_MIN_ITERATIONS to ``pilot_iterations(spp)``, whose
+        pilot costs at most ``budget`` counted seconds; 0 if even the fewest cost more."""
+        best = 0
+        for k in range(PILOT_MIN_ITERATIONS, pilot_iterations(spp) + 1):
+            if self.seconds(k, every, path, per_pass, pass_iterations) > budget:
+                break
+            best = k
+        return best
+
+
+def share_budget(share: float, render: float) -> float:
+    """The pilot's counted seconds when it is at most ``share`` of pilot + render and the render
+    costs at least ``render``: share / (1 - share) x render (any cost at share 1)."""
+    return math.inf if share >= 1.0 else share / (1.0 - share) * render
 
 
 def light_path_ratios(light_paths: float, light_paths_max: float) -> list[float]:
@@ -136,6 +189,18 @@ def pilot_variances(every: np.ndarray, shared: np.ndarray | None, camera: np.nda
     return PilotVariances(max(total, 0.0), min(max(camera_side, 0.0), max(total, 0.0)), max(path_tracing, 0.0))
 
 
+def seconds(counts: dict, part: str, costs: dict) -> float:
+    """Counted seconds of ``counts`` (work by kind) in ``part`` of ``WORK_COSTS``, at ``costs``
+    (lab_vcm's ``cost_*`` parameters, nanoseconds per unit)."""
+    return 1e-9 * sum(counts.get(kind, 0) * costs[name] for kind, name in WORK_COSTS[part].items())
+
+
+def every_seconds(counts: dict, costs: dict) -> float:
+    """Counted seconds of every technique's work ``counts`` (``work_counts()``), passes included."""
+    return (seconds(counts, "light", costs) + seconds(counts, "camera", costs)
+            + 1e-9 * costs["cost_pass"] * counts.get("passes", 0))
+
+
 @dataclass(frozen=True)
 class PilotCosts:
     """Seconds per iteration: every technique's camera pass (with its merges) and light pass +
@@ -170,12 +235,9 @@ class PilotCosts:
         renders of ``iterations`` iterations in all, ``path_tracing``, path tracing's over
         ``path_iterations``; ``costs``, lab_vcm's parameters (``WORK_COSTS``: nanoseconds per
         unit; ``cost_pass`` per pass). No clock is read: the same counts, the same costs."""
-        def seconds(counts: dict, part: str) -> float:
-            return 1e-9 * sum(counts.get(kind, 0) * costs[name] for kind, name in WORK_COSTS[part].items())
-
-        return PilotCosts(seconds(every, "camera") / iterations, seconds(every, "light") / iterations,
+        return PilotCosts(seconds(every, "camera", costs) / iterations, seconds(every, "light", costs) / iterations,
                           1e-9 * costs["cost_pass"], pass_iterations,
-                          seconds(path_tracing, "path_tracing") / path_iterations)
+                          seconds(path_tracing, "path_tracing", costs) / path_iterations)
 
     def every_at(self, ratio: float) -> float:
         """Every technique's with ``ratio`` x light_paths (passes hold 1 / ratio the iterations)."""
