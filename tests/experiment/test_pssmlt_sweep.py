@@ -118,3 +118,13 @@ def test_progressive_sweep_checkpoints_continue_the_chains(tmp_path):
         np.testing.assert_allclose(last[..., :3], whole[..., :3], rtol=1e-4, atol=1e-6)
         bs.add(integrator.mlt_stats()["b"])
     assert len(bs) == 2
+
+
+def test_check_judges_lab_pssmlt_by_the_z_test():
+    """``mitsuba-lab check`` renders lab_pssmlt among its strategies, as an unbiased estimator
+    (the z-test with the heavy-tail escalation), not by bias^2 shrinking."""
+    from mitsuba_lab import check
+    from mitsuba_lab.check.render import is_consistent
+
+    kind, params = check.STRATEGIES["lab_pssmlt"]
+    assert kind == "lab_pssmlt" and not is_consistent(kind, params)
