@@ -128,3 +128,14 @@ def test_check_judges_lab_pssmlt_by_the_z_test():
 
     kind, params = check.STRATEGIES["lab_pssmlt"]
     assert kind == "lab_pssmlt" and not is_consistent(kind, params)
+
+
+def test_a_single_continued_pass_is_rescaled_from_the_tries():
+    """A budget run of one pass (its second overran) has no pass times apart from the bootstrap:
+    the second retry fits seconds = once + per spp over the tries (0.2 s + 0.03 s per spp:
+    a 1 s budget is 27 spp); the first, with one try, scales all of the time."""
+    from mitsuba_lab.experiment.execution.worker import rescaled_single_pass
+
+    assert rescaled_single_pass((1,), [{"spp": 1, "measured_s": 0.23}], 1.0) == (4,)
+    tries = [{"spp": 1, "measured_s": 0.23}, {"spp": 5, "measured_s": 0.35}]
+    assert rescaled_single_pass((5,), tries, 1.0) == (27,)

@@ -286,6 +286,20 @@ def continues_passes(strategy: PluginSpec) -> bool:
     return bool(getattr(estimator, "CONTINUES_PASSES", False))
 
 
+def rescaled_single_pass(sizes, tries: list[dict], budget_s: float) -> tuple[int, ...]:
+    """A continued run of one pass (its second overran: a noisy clock) keeps no time of the chains
+    apart from the bootstrap's, so the tries' (spp, measured) are fitted instead: seconds = once +
+    per spp x spp, the bootstrap the intercept, once two tries differ in spp (as
+    ``calibrate``); before that all the time counts as per spp (``rescaled_passes``: short, and
+    tried again)."""
+    points = {t["spp"]: t["measured_s"] for t in tries}
+    if len(points) >= 2:
+        per, once = np.polyfit(list(points), list(points.values()), 1)
+        if per > 0:
+            return (max(1, int(round((budget_s - max(once, 0.0)) / per))),)
+    return rescaled_passes(sizes, tries[-1]["measured_s"], budget_s)
+
+
 def keep_passes_to_budget(task: PointTask, render_at, result: PointResult, sizes) -> None:
     """``keep_to_budget`` for a progressive budget point: while the median of its runs' elapsed
     times is off the budget, the passes are refitted to it from their measured times (fixed cost
@@ -303,7 +317,10 @@ def keep_passes_to_budget(task: PointTask, render_at, result: PointResult, sizes
         rows = [row for row, _ in result.runs]
         if continues_passes(task.strategy):          # the first pass's bootstrap: a cost once per run
             times = pass_times(rows, first=False)
-            sizes = rescaled_passes(sizes, tries[-1]["measured_s"], point.budget_s, times, once_cost(rows, times))
+            if times:
+                sizes = rescaled_passes(sizes, tries[-1]["measured_s"], point.budget_s, times, once_cost(rows, times))
+            else:
+                sizes = rescaled_single_pass(sizes, tries, point.budget_s)
         else:
             sizes = rescaled_passes(sizes, tries[-1]["measured_s"], point.budget_s, pass_times(rows))
         for size in warmup_sizes(sizes):                                    # compile, untimed
