@@ -82,6 +82,7 @@ def test_pixels_finite_non_negative_and_stats():
     assert 0.0 < s["acceptance"] < 1.0 and len(s["acceptance_quantiles"]) == 3
     assert 0.1 < s["large_step_share"] < 0.5
     assert s["b"] > 0 and 0 < s["b_standard_error"] < 0.2 * s["b"]
+    assert 1 <= s["distinct_starts"] <= min(512, s["bootstrap_nonzero"])
     assert s["seconds_per_mutation"] > 0
 
 

@@ -33,6 +33,7 @@ class MLTStats:
     b_standard_error: float = 0.0
     bootstrap: int = 0                  # bootstrap paths
     bootstrap_nonzero: int = 0          # ... of which carried light (I > 0)
+    distinct_starts: int = 0            # distinct bootstrap paths the chains start from
     dims: int = 0                       # primary-sample dimensions stored per chain
     dims_read_max: int = 0              # the most any bootstrap path read
     chains: int = 0
@@ -179,7 +180,7 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         stats.chains = n_chains = self.chains
         stats.dims = dims = min(stats.dims_read_max, MAX_DIMS)
         chains = chain.MarkovChains(n_chains, dims, key, self.large_step, self.small_step, self.sigma)
-        chains.start(boot_keys, values, boot_value, boot_payload)
+        stats.distinct_starts = int(np.unique(chains.start(boot_keys, values, boot_value, boot_payload)).size)
         del boot_value, boot_payload, boot_keys
         return self._continue(scene, sensor, _Held(identity, chains, pixels), spp)
 
