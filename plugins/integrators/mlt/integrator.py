@@ -102,8 +102,8 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     Every render seed is an independent bootstrap and set of chains. A scene whose bootstrap
     finds no light renders black, with a warning. The alpha channel is 1. Refused in one line:
     polarized variants, ``render(develop=False)``. Participating media go through lab_mis's
-    path loop unchanged (whole-image means on fog_shafts and smoke agreed with volpath's once, at
-    16x16; no test yet). Statistics of the last render:
+    path loop unchanged (tests/plugins/test_pssmlt.py: block and image means agree with volpath's
+    on tests/media_scenes.py's fog_box). Statistics of the last render:
     ``mlt_stats()``.
 
     .. code-block:: python
