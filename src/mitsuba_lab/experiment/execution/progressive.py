@@ -30,6 +30,15 @@ fixed + per-sample x spp, fitted to the passes so far), then one pass takes what
 pass that overran is dropped, so the run stops at the last pass that fits. The first seed's
 passes are then the point's (a calibration row), and its other seeds render the same passes.
 
+Chain estimators (``Estimator.CONTINUES_PASSES``: lab_pssmlt) do not render independent passes:
+pass 0 bootstraps and starts the Markov chains, every later pass continues them and returns the
+image of its own mutations normalised by their count, so the spp-weighted mean above is the
+chains' image after all their mutations (one render's, to float rounding), each checkpoint
+unbiased at its own mutation count, and every seed its own bootstrap and chains. The bootstrap
+is a cost of pass 0 alone: a budget's fit leaves pass 0 out, and a rescaled budget point takes
+its excess off the budget once (``budget.once_cost``; ``worker.rescaled_single_pass`` where a
+run kept one pass).
+
 This module renders the passes (``run_passes``); ``worker.execute_progressive`` runs a point's
 seeds and makes their rows.
 """
