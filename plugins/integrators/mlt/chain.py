@@ -237,19 +237,20 @@ def resample(values: np.ndarray, xi: np.ndarray) -> np.ndarray:
 
 @dataclass
 class ChainCounts:
-    """Per chain: summed acceptance probabilities, accepted proposals, large steps, and the
-    acceptance summed over large steps (Float arrays of ``chains``)."""
+    """Per chain: summed acceptance probabilities, accepted proposals, large steps, the
+    acceptance summed over large steps, and steps taken (Float arrays of ``chains``)."""
     acceptance: object = None
     accepted: object = None
     large: object = None
     large_acceptance: object = None
+    taken: object = None
 
     @classmethod
     def zeros(cls, n: int) -> "ChainCounts":
-        return cls(*(dr.zeros(mi.Float, n) for _ in range(4)))
+        return cls(*(dr.zeros(mi.Float, n) for _ in range(5)))
 
     def arrays(self) -> tuple:
-        return self.acceptance, self.accepted, self.large, self.large_acceptance
+        return self.acceptance, self.accepted, self.large, self.large_acceptance, self.taken
 
 
 @dataclass
@@ -355,10 +356,13 @@ class MarkovChains:
         a = dr.select(ok, dr.minimum(ratio, 1.0), 0.0)
         return a, (1.0 - a) / self.value, dr.select(ok, a / value, 0.0)
 
-    def accept(self, key, samples: PrimarySamples, value, payload: tuple, a, large) -> None:
-        """Each chain moves to its proposal with probability ``a``."""
+    def accept(self, key, samples: PrimarySamples, value, payload: tuple, a, large, active=None) -> None:
+        """Each chain moves to its proposal with probability ``a`` (``a`` is 0 where ``active``,
+        a Bool per chain, is false: those chains take no step, and count none)."""
         xi = uniform(key_of(key, P_ACCEPT), self.lane)
         moves = xi < a
+        if active is not None:
+            large = large & active
         if self.dims:
             chain = self.flat % self.chains
             moves_here = uniform(key_of(key, P_ACCEPT), chain) < dr.gather(mi.Float, a, chain)
@@ -378,6 +382,7 @@ class MarkovChains:
         c.accepted = c.accepted + dr.select(moves, 1.0, 0.0)
         c.large = c.large + dr.select(large, 1.0, 0.0)
         c.large_acceptance = c.large_acceptance + dr.select(large, a, 0.0)
+        c.taken = c.taken + (1.0 if active is None else dr.select(active, 1.0, 0.0))
         self.steps += 1
 
     def arrays(self) -> tuple:
@@ -385,27 +390,63 @@ class MarkovChains:
 
 
 def run(chains: MarkovChains, steps: int, evaluate, splat, proposal=None, checkpoint=None) -> None:
-    """``steps`` steps of every chain: propose, ``evaluate(samples)`` -> (I, payload) of the
-    proposal (``samples``: ``PrimarySamples``), splat the current (``splat(payload, (1 - a) / I(u))``)
-    and the proposal (``splat(payload, a / I(v))``), accept. ``proposal(chains, key)`` -> (v, large,
-    q_ratio), v flat like ``chains.u``, replaces the lab's symmetric steps (a test's non-symmetric
-    proposal). Dr.Jit evaluates the state (and the splats) once per step; ``checkpoint()`` runs
-    after each."""
+    """``steps`` steps of every chain (``step``); ``checkpoint()`` runs after each."""
     for _ in range(steps):
-        key = chains.step_key(chains.steps)
-        if proposal is None:
-            samples, large = chains.propose(key)
-            q_ratio = None
-        else:
-            v, large, q_ratio = proposal(chains, key)
-            samples = chains.samples(v, key)
-        value, payload = evaluate(samples)
-        a, w_current, w_proposal = chains.weigh(value, q_ratio)
-        dr.eval(value, *payload, a, w_current, w_proposal)    # (the proposal traced once)
-        splat(chains.payload, w_current)
-        splat(payload, w_proposal)
-        chains.accept(key, samples, value, payload, a, large)
-        dr.eval(*chains.arrays())
+        step(chains, evaluate, splat, proposal)
+        if checkpoint is not None:
+            checkpoint()
+
+
+def step(chains: MarkovChains, evaluate, splat, proposal=None, active=None) -> None:
+    """One step of the chains in lock-step: propose, ``evaluate(samples, active)`` -> (I, payload) of
+    the proposal (``samples``: ``PrimarySamples``; ``active`` None or a Bool per chain), splat the
+    current (``splat(payload, (1 - a) / I(u))``) and the proposal (``splat(payload, a / I(v))``),
+    accept. ``proposal(chains, key)`` -> (v, large, q_ratio), v flat like ``chains.u``, replaces
+    the lab's symmetric steps (a test's non-symmetric proposal). ``active`` (a Bool per chain):
+    the chains that take this step; the others splat nothing and stay as they are (a partial
+    step: ``run_mutations``). Dr.Jit evaluates the state (and the splats) once per step."""
+    key = chains.step_key(chains.steps)
+    if proposal is None:
+        samples, large = chains.propose(key)
+        q_ratio = None
+    else:
+        v, large, q_ratio = proposal(chains, key)
+        samples = chains.samples(v, key)
+    value, payload = evaluate(samples) if active is None else evaluate(samples, active)
+    a, w_current, w_proposal = chains.weigh(value, q_ratio)
+    if active is not None:
+        a, w_current, w_proposal = (dr.select(active, x, 0.0) for x in (a, w_current, w_proposal))
+    dr.eval(value, *payload, a, w_current, w_proposal)    # (the proposal traced once)
+    splat(chains.payload, w_current)
+    splat(payload, w_proposal)
+    chains.accept(key, samples, value, payload, a, large, active)
+    dr.eval(*chains.arrays())
+
+
+def rounds(start: int, count: int, chains: int) -> list[tuple[int, int]]:
+    """The lock-step rounds that make mutations start .. start + count - 1 of a render whose
+    mutation k is a step of chain k mod ``chains``: [(first lane, end lane)] per round, a round
+    stepping lanes first <= c < end. Only the first and the last round may be partial, so a
+    render continued over several passes advances its chains in turn, each at most one step
+    ahead of another."""
+    out, k, end = [], start, start + count
+    while k < end:
+        lane = k % chains
+        stop = min(chains, lane + end - k)
+        out.append((lane, stop))
+        k += stop - lane
+    return out
+
+
+def run_mutations(chains: MarkovChains, start: int, count: int, evaluate, splat, checkpoint=None) -> None:
+    """Mutations start .. start + count - 1 (``rounds``): full rounds step every chain
+    (``step``), a partial one the lanes of its range only (``active``)."""
+    for first, stop in rounds(start, count, chains.chains):
+        active = None
+        if (first, stop) != (0, chains.chains):
+            # (opaque: the bounds change from pass to pass, the kernels do not)
+            active = (chains.lane >= dr.opaque(mi.UInt32, first)) & (chains.lane < dr.opaque(mi.UInt32, stop))
+        step(chains, evaluate, splat, active=active)
         if checkpoint is not None:
             checkpoint()
 

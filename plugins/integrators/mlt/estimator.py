@@ -17,6 +17,9 @@ class PSSMLT(MIS):
     PARAMETERS = declarations.LAB_PSSMLT
     OWN_PARAMETERS = MIS.OWN_PARAMETERS + CHAIN_PARAMETERS
     SIMPLICITY = 4
+    #: A progressive run's later passes continue the first pass's chains (the runner's
+    #: ``progressive.run_passes``; ``LabPSSMLTIntegrator._continue``).
+    CONTINUES_PASSES = True
 
     @classmethod
     def equivalence(cls, traits, params: dict) -> tuple[tuple, str]:

@@ -33,11 +33,13 @@ class MLTStats:
     b_standard_error: float = 0.0
     bootstrap: int = 0                  # bootstrap paths
     bootstrap_nonzero: int = 0          # ... of which carried light (I > 0)
+    distinct_starts: int = 0            # distinct bootstrap paths the chains start from
     dims: int = 0                       # primary-sample dimensions stored per chain
     dims_read_max: int = 0              # the most any bootstrap path read
     chains: int = 0
-    steps: int = 0                      # steps of every chain
-    mutations: int = 0                  # chains x steps
+    steps: int = 0                      # lock-step rounds of this render (the last may be partial)
+    mutations: int = 0                  # this render's: pixels x spp
+    chain_mutations: int = 0            # the chains' since their start (continued renders included)
     mutations_per_pixel: float = 0.0
     acceptance: float = 0.0             # mean acceptance probability over all steps
     acceptance_quantiles: list = field(default_factory=list)   # per chain: 5%, 50%, 95%
@@ -72,8 +74,16 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     edges as lab_bdpt's light tracing is: ``bdpt/splats.py``). b, the integral of I, is the mean I
     of ``bootstrap`` independent paths; each chain starts from one of them drawn in proportion to
     I, which makes the image unbiased (``mlt/chain.py`` has the argument; b's error adds
-    variance, one factor on the whole image, no bias). spp is mutations per pixel: the render
-    runs ceil(pixels x spp / chains) steps of min(chains, pixels x spp) chains.
+    variance, one factor on the whole image, no bias). spp is mutations per pixel, exactly:
+    the render makes pixels x spp mutations, mutation k a step of chain k mod ``chains``, so the
+    last lock-step round may step only some chains (the rest wait, splatting nothing).
+
+    Progressive runs (the runner's ``experiment/execution/progressive.py``): a render with
+    ``continue_chains`` set continues the last render's chains on the same scene and sensor
+    (its seed unused) and returns the image of its own mutations normalised by their count, so
+    the runner's spp-weighted mean of the passes is the chains' image after all their
+    mutations, the same as one render of that many (the bootstrap paid once, by the first
+    pass).
 
     Steps (``mlt/chain.py``): with probability ``large_step`` every stored number is drawn
     afresh, else every stored number is perturbed (``small_step``: a normal of standard deviation
@@ -87,13 +97,21 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
 
     Parameters: lab_mis's (its path loop and weights) and the chains': ``chains`` (lanes in
     lock-step), ``bootstrap`` (paths for b and the chains' start), ``large_step``, ``small_step``
-    and ``sigma`` (the table below).
+    and ``sigma`` (the table below). The defaults were measured at equal time against the
+    alternatives (experiments/results/2026-11-28-mlt-second.md: 32x32, 1 and 4 s, the door ajar
+    and the Cornell box): the bootstrap's size matters most, since where few paths carry light
+    many chains start from one bootstrap path and stay correlated (``mlt_stats()``'s
+    ``distinct_starts``; on the door a 16384-path bootstrap and 2048 chains were 4.6x the
+    defaults' relMSE at 4 s); fewer, longer chains lose (a lock-step costs nearly the same at
+    512 lanes as at 2048), more than 8192 gained nothing resolved, and large_step 0.1 or sigma
+    0.03 changed nothing resolved. A larger bootstrap (262144) gained 2.5x on the door at 4 s
+    but lost on the Cornell box and missed 1 s budgets.
 
     Every render seed is an independent bootstrap and set of chains. A scene whose bootstrap
     finds no light renders black, with a warning. The alpha channel is 1. Refused in one line:
     polarized variants, ``render(develop=False)``. Participating media go through lab_mis's
-    path loop unchanged (whole-image means on fog_shafts and smoke agreed with volpath's once, at
-    16x16; no test yet). Statistics of the last render:
+    path loop unchanged (tests/plugins/test_pssmlt.py: block and image means agree with volpath's
+    on tests/media_scenes.py's fog_box). Statistics of the last render:
     ``mlt_stats()``.
 
     .. code-block:: python
@@ -110,6 +128,10 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         self.chains, self.bootstrap = e.chains, e.bootstrap
         self.large_step, self.small_step, self.sigma = e.large_step, e.small_step, e.sigma
         self.stats = MLTStats()
+        #: Set (by the runner's progressive runs) to continue the chains of the last render of this
+        #: scene and sensor instead of starting new ones (``_continue``).
+        self.continue_chains = False
+        self._held = None
 
     def error(self, text: str) -> ValueError:
         return ValueError(f"{self.ESTIMATOR.plugin_name}: {text}")
@@ -138,6 +160,10 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         film = sensor.film()
         width, height = (int(v) for v in film.crop_size())
         pixels = width * height
+        identity = (id(scene), id(sensor), width, height, mi.variant())
+        held, self._held = self._held, None
+        if self.continue_chains and held is not None and held.identity == identity:
+            return self._continue(scene, sensor, held, spp)
         key = chain.seed_key(seed)
         self.stats = stats = MLTStats(bootstrap=self.bootstrap)
 
@@ -153,47 +179,66 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         stats.bootstrap_nonzero = int(np.count_nonzero(values))
         stats.dims_read_max = int(dr.max(dims_read)[0]) if n else 0
         stats.bootstrap_s = _now() - start
-        block = splats.new_block(film)
         if not stats.b > 0:
             warnings.warn(f"lab_pssmlt: none of the {n} bootstrap paths carried light (the scene has no "
                           f"emitter the paths reach, or bootstrap is too small): the image is black", stacklevel=2)
-            return self._image(film, block, 0.0)
+            return self._image(film, splats.new_block(film), 0.0)
 
         # ---------------- The chains ----------------
-        start = _now()
-        mutations = pixels * spp
-        stats.chains = n_chains = max(1, min(self.chains, mutations))
-        stats.steps = steps = math.ceil(mutations / n_chains)
+        stats.chains = n_chains = self.chains
         stats.dims = dims = min(stats.dims_read_max, MAX_DIMS)
         chains = chain.MarkovChains(n_chains, dims, key, self.large_step, self.small_step, self.sigma)
-        chains.start(boot_keys, values, boot_value, boot_payload)
+        stats.distinct_starts = int(np.unique(chains.start(boot_keys, values, boot_value, boot_payload)).size)
         del boot_value, boot_payload, boot_keys
+        return self._continue(scene, sensor, _Held(identity, chains, pixels), spp)
 
-        def evaluate(samples):
-            value, payload, _ = self.evaluate(scene, sensor, samples, width, height)
+    def _continue(self, scene, sensor, held: "_Held", spp: int):
+        """pixels x spp more mutations of the held chains (``chain.run_mutations``: mutation k a
+        step of chain k mod chains), splatted into a film of their own and normalised by their
+        count: an unbiased image of these mutations alone. Held for the next render, which
+        continues them when ``continue_chains`` is set (a progressive run's later passes: the
+        runner's spp-weighted mean of the passes is then the chains' image after all of them)."""
+        film = sensor.film()
+        width, height = (int(v) for v in film.crop_size())
+        stats, chains = self.stats, held.chains
+        start = _now()
+        block = splats.new_block(film)
+        mutations = held.pixels * spp
+
+        def evaluate(samples, active=True):
+            value, payload, _ = self.evaluate(scene, sensor, samples, width, height, active)
             return value, payload
 
         def splat(payload, weight):
             wavelengths = payload[2] if len(payload) > 2 else type(mi.Ray3f().wavelengths)()   # (rgb, mono: none)
             splats.splat(block, payload[1], wavelengths, payload[0] * weight, weight > 0)
 
-        chain.run(chains, steps, evaluate, splat, checkpoint=lambda: interrupts.checkpoint(self))
-        stats.mutations = n_chains * steps
-        stats.mutations_per_pixel = stats.mutations / pixels
+        steps_before = chains.steps
+        chain.run_mutations(chains, held.mutations, mutations, evaluate, splat,
+                            checkpoint=lambda: interrupts.checkpoint(self))
+        held.mutations += mutations
+        stats.steps = chains.steps - steps_before
+        stats.mutations = mutations
+        stats.mutations_per_pixel = mutations / held.pixels
+        stats.chain_mutations = held.mutations
         self._count(chains)
         image = self._image(film, block, stats.b / stats.mutations_per_pixel)
         stats.chains_s = _now() - start
-        stats.seconds_per_mutation = stats.chains_s / stats.mutations
+        stats.seconds_per_mutation = stats.chains_s / max(mutations, 1)
+        self._held = held
         return image
 
     def _count(self, chains: chain.MarkovChains) -> None:
-        stats, counts, steps = self.stats, chains.counts, chains.steps
+        """The acceptance statistics of every step the chains took so far (continued renders
+        included)."""
+        stats, counts = self.stats, chains.counts
         acceptance = np.array(counts.acceptance, dtype=np.float64)
         large = np.array(counts.large, dtype=np.float64)
         large_acceptance = np.array(counts.large_acceptance, dtype=np.float64)
-        total = steps * chains.chains
+        taken = np.array(counts.taken, dtype=np.float64)
+        total = taken.sum()
         stats.acceptance = float(acceptance.sum() / total)
-        stats.acceptance_quantiles = chain.quantiles(acceptance / steps)
+        stats.acceptance_quantiles = chain.quantiles(acceptance[taken > 0] / taken[taken > 0])
         stats.accepted_share = float(np.array(counts.accepted, dtype=np.float64).sum() / total)
         stats.large_step_share = float(large.sum() / total)
         stats.large_step_acceptance = float(large_acceptance.sum() / large.sum()) if large.sum() else float("nan")
@@ -212,7 +257,7 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
 
     # -- One path per lane, from its primary sample ---------------------------------------
 
-    def evaluate(self, scene, sensor, samples: chain.PrimarySamples, width: int, height: int):
+    def evaluate(self, scene, sensor, samples: chain.PrimarySamples, width: int, height: int, active=True):
         """(I, (f, film position in pixels[, wavelengths]), numbers read) of one path per lane of
         ``samples``: f = the sensor's ray weight times lab_mis's L, I its luminance (0 where not
         finite or not positive, and f 0 there)."""
@@ -224,7 +269,7 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         wavelength_u = sampler.next_1d() if mi.is_spectral else mi.Float(0.5)
         aperture_u = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
         ray, ray_weight = sensor.sample_ray_differential(shutter, wavelength_u, film_u, aperture_u)
-        L, _, _ = self.sample(scene, sampler, ray, sensor.get_medium(), True)
+        L, _, _ = self.sample(scene, sampler, ray, sensor.get_medium(), mi.Bool(active))
         f = mi.Spectrum(ray_weight * L)
         if mi.is_spectral:
             value = mi.luminance(f, ray.wavelengths)
@@ -233,7 +278,7 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         else:
             value = mi.luminance(f)
         value = mi.Float(value)
-        ok = dr.isfinite(value) & (value > 0)
+        ok = dr.isfinite(value) & (value > 0) & active
         value = dr.select(ok, value, 0.0)
         f = dr.select(ok, f, 0.0)
         position = mi.Point2f(film_u.x * width, film_u.y * height)
@@ -245,6 +290,15 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     def mlt_stats(self) -> dict:
         """Statistics of the last render (``MLTStats``), as plain values."""
         return self.stats.as_dict()
+
+
+@dataclass
+class _Held:
+    """The chains of the last render, for a render that continues them."""
+    identity: tuple
+    chains: object
+    pixels: int
+    mutations: int = 0
 
 
 def _now() -> float:

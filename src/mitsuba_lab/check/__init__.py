@@ -19,7 +19,8 @@ sensor's film edited (``scene_xml.load_scene_variant``): N sets the larger side 
 aspect ratio. ``--res WxH`` sets the film's width and height on every scene.
 
 Strategies: lab_naive, lab_nee, lab_mis (power and balance), lab_bdpt, lab_vcm in modes bpt,
-vcm and ppm, and lab_photon (its sample count is its passes).
+vcm and ppm, lab_photon (its sample count is its passes), and lab_pssmlt (its sample count is
+mutations per pixel; each split its own bootstrap and chains; unbiased, so the z-test).
 
 Columns: finite fraction (of pixel channels), negative pixels, max value, fireflies,
 mean luminance, its z-score against the reference, rays per pixel by kind (camera,
@@ -64,9 +65,9 @@ from __future__ import annotations
 
 from ..metrics import luminance
 from .measure import firefly_count, measure, reference_mean_variance, reference_summary
-from .run import BIDIRECTIONAL_STRATEGIES, PATH_STRATEGIES, STRATEGIES, check_scene, settings_text
+from .run import BIDIRECTIONAL_STRATEGIES, CHAIN_STRATEGIES, PATH_STRATEGIES, STRATEGIES, check_scene, settings_text
 from .scenes import check_reference, load_check_scene
 
-__all__ = ["STRATEGIES", "PATH_STRATEGIES", "BIDIRECTIONAL_STRATEGIES", "check_scene", "settings_text",
+__all__ = ["STRATEGIES", "PATH_STRATEGIES", "BIDIRECTIONAL_STRATEGIES", "CHAIN_STRATEGIES", "check_scene", "settings_text",
            "check_reference", "load_check_scene", "firefly_count", "measure", "reference_mean_variance",
            "reference_summary", "luminance"]

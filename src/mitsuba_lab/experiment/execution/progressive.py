@@ -30,6 +30,15 @@ fixed + per-sample x spp, fitted to the passes so far), then one pass takes what
 pass that overran is dropped, so the run stops at the last pass that fits. The first seed's
 passes are then the point's (a calibration row), and its other seeds render the same passes.
 
+Chain estimators (``Estimator.CONTINUES_PASSES``: lab_pssmlt) do not render independent passes:
+pass 0 bootstraps and starts the Markov chains, every later pass continues them and returns the
+image of its own mutations normalised by their count, so the spp-weighted mean above is the
+chains' image after all their mutations (one render's, to float rounding), each checkpoint
+unbiased at its own mutation count, and every seed its own bootstrap and chains. The bootstrap
+is a cost of pass 0 alone: a budget's fit leaves pass 0 out, and a rescaled budget point takes
+its excess off the budget once (``budget.once_cost``; ``worker.rescaled_single_pass`` where a
+run kept one pass).
+
 This module renders the passes (``run_passes``); ``worker.execute_progressive`` runs a point's
 seeds and makes their rows.
 """
@@ -92,10 +101,18 @@ def next_budget_pass(spp: int, times: list[tuple[int, float]], remaining: float)
     return (fits, True) if fits >= 1 else (0, True)
 
 
-def run_passes(render_at, seed: int, sizes=None, budget_s: float | None = None) -> list[Checkpoint]:
+def run_passes(render_at, seed: int, sizes=None, budget_s: float | None = None,
+               continues: bool = False) -> list[Checkpoint]:
     """Render one progressive run: passes of ``sizes`` spp, or fitted to ``budget_s`` when
     ``sizes`` is None. ``render_at(spp, seed)`` is a timed render -> (image, RenderStats).
-    Returns the checkpoint after each pass (spp and times summed, accumulated image)."""
+    Returns the checkpoint after each pass (spp and times summed, accumulated image).
+
+    ``continues`` (chain estimators, ``Estimator.CONTINUES_PASSES``): passes after the first
+    continue the first one's Markov chains (``render_at(spp, seed, True)``) and return the image of
+    their own mutations, normalised by their count, so the spp-weighted mean after a pass is the
+    chains' image after all their mutations so far. The first pass alone pays the chains' fixed
+    cost (the bootstrap), so the budget fit leaves it out: a later pass is predicted from the
+    later passes (time = fixed + per spp x spp over them; the first continued pass is 1 spp)."""
     checkpoints: list[Checkpoint] = []
     times: list[tuple[int, float]] = []
     weighted_sum = None
@@ -110,10 +127,14 @@ def run_passes(render_at, seed: int, sizes=None, budget_s: float | None = None) 
             size, final = next_budget_pass(last.spp, times, budget_s - last.wall_s)
             if size == 0:
                 break
-        image, stats = render_at(size, pass_seed(seed, index))
+        if continues and index > 0:
+            image, stats = render_at(size, pass_seed(seed, index), True)
+        else:
+            image, stats = render_at(size, pass_seed(seed, index))
         if sizes is None and index > 0 and last.wall_s + stats.wall_s > budget_s:
             break                                   # it overran: the run ends at the pass before
-        times.append((size, stats.wall_s))
+        if not (continues and index == 0):
+            times.append((size, stats.wall_s))
         pass_image = image.astype(np.float64) * size
         weighted_sum = pass_image if weighted_sum is None else weighted_sum + pass_image
         rays = {k: last.rays.get(k, 0) + stats.rays.get(k, 0) for k in set(last.rays) | set(stats.rays)}

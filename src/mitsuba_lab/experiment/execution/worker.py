@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ... import metrics
-from ..pipeline.budget import BUDGET_RETRIES, measured_time, pass_times, rescaled_count, rescaled_passes, within_budget
+from ..pipeline.budget import BUDGET_RETRIES, measured_time, once_cost, pass_times, rescaled_count, rescaled_passes, within_budget
 from ..pipeline.config import PluginSpec, SceneSpec, sample_count_plugin
 from ..pipeline.plan import Point, point_id, warmup_sizes
 from .progressive import Checkpoint, run_passes
@@ -158,11 +158,14 @@ def execute(task: PointTask) -> PointResult:
     scene = _cached("scene", scene_key, lambda: load_scene_variant(
         task.scene.path, task.scene.resolution, task.sampler.as_dict(), task.scene.defaults))
 
-    def render_at(count: int, seed: int):
-        """Render with ``count`` camera samples per pixel (spp, or passes: sample_count_plugin)."""
+    def render_at(count: int, seed: int, continues: bool = False):
+        """Render with ``count`` camera samples per pixel (spp, or passes: sample_count_plugin);
+        ``continues``: a chain estimator continues its last render's chains (progressive.run_passes)."""
         spec, spp = sample_count_plugin(task.strategy, count)
         integrator = _cached("integrator", scene_key + json.dumps(spec.as_dict(), sort_keys=True),
                              lambda: _integrator(spec))
+        if hasattr(integrator, "continue_chains"):
+            integrator.continue_chains = continues
         return render(scene, integrator, spp=spp, seed=seed)
 
     if task.point.progressive:
@@ -259,7 +262,7 @@ def progressive_runs(task: PointTask, render_at, result: PointResult, sizes, see
     result.runs = []
     for seed in seeds:
         for _ in range(1 + RECOMPILE_RETRIES):
-            checkpoints = run_passes(render_at, seed, sizes, task.point.budget_s)
+            checkpoints = run_passes(render_at, seed, sizes, task.point.budget_s, continues_passes(task.strategy))
             if checkpoints[-1].cache_misses == 0:
                 break                                   # else the run was a warm-up: again
         totals = [0] + [cp.spp for cp in checkpoints]
@@ -272,6 +275,29 @@ def progressive_runs(task: PointTask, render_at, result: PointResult, sizes, see
         result.spp = checkpoints[-1].spp
         result.runs.append(progressive_row(task, seed, done, checkpoints))
     return sizes
+
+
+def continues_passes(strategy: PluginSpec) -> bool:
+    """Whether the strategy's later passes continue its first pass's Markov chains
+    (``Estimator.CONTINUES_PASSES``: lab_pssmlt) rather than render independently."""
+    from ...plugins.integrators.estimator import lookup
+
+    estimator = lookup(strategy.type)
+    return bool(getattr(estimator, "CONTINUES_PASSES", False))
+
+
+def rescaled_single_pass(sizes, tries: list[dict], budget_s: float) -> tuple[int, ...]:
+    """A continued run of one pass (its second overran: a noisy clock) keeps no time of the chains
+    apart from the bootstrap's, so the tries' (spp, measured) are fitted instead: seconds = once +
+    per spp x spp, the bootstrap the intercept, once two tries differ in spp (as
+    ``calibrate``); before that all the time counts as per spp (``rescaled_passes``: short, and
+    tried again)."""
+    points = {t["spp"]: t["measured_s"] for t in tries}
+    if len(points) >= 2:
+        per, once = np.polyfit(list(points), list(points.values()), 1)
+        if per > 0:
+            return (max(1, int(round((budget_s - max(once, 0.0)) / per))),)
+    return rescaled_passes(sizes, tries[-1]["measured_s"], budget_s)
 
 
 def keep_passes_to_budget(task: PointTask, render_at, result: PointResult, sizes) -> None:
@@ -288,8 +314,15 @@ def keep_passes_to_budget(task: PointTask, render_at, result: PointResult, sizes
         tries.append({"spp": result.spp, "passes": list(sizes), "measured_s": measured_time(times), "times": times})
         if within_budget(tries[-1]["measured_s"], point.budget_s) or retry == BUDGET_RETRIES:
             break
-        sizes = rescaled_passes(sizes, tries[-1]["measured_s"], point.budget_s,
-                                pass_times(row for row, _ in result.runs))
+        rows = [row for row, _ in result.runs]
+        if continues_passes(task.strategy):          # the first pass's bootstrap: a cost once per run
+            times = pass_times(rows, first=False)
+            if times:
+                sizes = rescaled_passes(sizes, tries[-1]["measured_s"], point.budget_s, times, once_cost(rows, times))
+            else:
+                sizes = rescaled_single_pass(sizes, tries, point.budget_s)
+        else:
+            sizes = rescaled_passes(sizes, tries[-1]["measured_s"], point.budget_s, pass_times(rows))
         for size in warmup_sizes(sizes):                                    # compile, untimed
             render_at(size, point.warmup_seed)
         progressive_runs(task, render_at, result, sizes, point.seeds if stored else task.seeds)

@@ -52,19 +52,35 @@ def rescaled_count(count: int, seconds: float, budget_s: float, fixed_s: float =
 FIXED_SHARE = 0.5
 
 
-def pass_times(runs) -> list[tuple[int, float]]:
+def pass_times(runs, first: bool = True) -> list[tuple[int, float]]:
     """(spp, seconds) of every pass of progressive run rows (each row's ``checkpoints``: the
-    elapsed time after each pass, so a pass's time is the difference)."""
+    elapsed time after each pass, so a pass's time is the difference); ``first=False``: the
+    passes after each run's first."""
     out = []
     for row in runs:
         spp, wall = 0, 0.0
-        for cp in row.get("checkpoints", []):
-            out.append((cp["spp"] - spp, cp["wall_s"] - wall))
+        for i, cp in enumerate(row.get("checkpoints", [])):
+            if first or i:
+                out.append((cp["spp"] - spp, cp["wall_s"] - wall))
             spp, wall = cp["spp"], cp["wall_s"]
     return out
 
 
-def rescaled_passes(sizes, seconds: float, budget_s: float, times=()) -> tuple[int, ...]:
+def once_cost(runs, times) -> float:
+    """A continued run's one-off cost (``progressive.run_passes(continues=True)``: a chain
+    estimator's bootstrap, paid by its first pass alone): the median first pass's time above
+    what ``times`` (its later passes, ``pass_times(first=False)``) predict for its size. 0
+    without later passes."""
+    from ..execution.progressive import fit_pass_time
+
+    firsts = [row["checkpoints"][0] for row in runs if row.get("checkpoints")]
+    if not firsts or not times:
+        return 0.0
+    fixed, per = fit_pass_time(list(times))
+    return max(0.0, statistics.median(cp["wall_s"] - fixed - per * cp["spp"] for cp in firsts))
+
+
+def rescaled_passes(sizes, seconds: float, budget_s: float, times=(), once_s: float = 0.0) -> tuple[int, ...]:
     """A progressive budget point's pass sizes that fill ``budget_s``, from a run of ``sizes``
     whose measured time (median over seeds) was ``seconds``. ``times``: (spp, seconds) of the
     passes rendered (``pass_times``), fitted to fixed seconds per pass + seconds per spp
@@ -72,14 +88,17 @@ def rescaled_passes(sizes, seconds: float, budget_s: float, times=()) -> tuple[i
     spp. Every pass pays the fixed part, so fewer samples cannot bring the time under it: while
     the passes' fixed part exceeds FIXED_SHARE of the budget, passes are dropped (the last ones;
     the first one always stays), then the spp that fill the rest of the budget are shared out in
-    the proportions of the passes kept (each at least 1 spp). Deterministic given the times."""
+    the proportions of the passes kept (each at least 1 spp). ``once_s``: a one-off cost of the
+    run that ``times`` leave out (``once_cost``: a chain estimator's bootstrap), taken off the
+    budget before the passes share it. Deterministic given the times."""
     from ..execution.progressive import fit_pass_time
 
     sizes = list(sizes)
     fixed, per = fit_pass_time(list(times)) if times else (0.0, 1.0)
     predicted = fixed * len(sizes) + per * sum(sizes)
-    if predicted > 0 and seconds > 0:                # the fit scaled to the measured median
-        fixed, per = fixed * seconds / predicted, per * seconds / predicted
+    if predicted > 0 and seconds > once_s:           # the fit scaled to the measured median
+        fixed, per = fixed * (seconds - once_s) / predicted, per * (seconds - once_s) / predicted
+    budget_s = max(budget_s - once_s, 1e-6)
     count = len(sizes)
     while count > 1 and fixed * count > FIXED_SHARE * budget_s:
         count -= 1
