@@ -23,7 +23,7 @@ from .camera_subpath import CameraPass, sensor_constants, trace_camera_subpaths
 from .endpoints import direction_is_delta
 from .estimator import Bidirectional
 from .light_subpath import LightTracer, check_variant
-from .media_paths import trace_camera
+from .media_paths import trace_camera, trace_light
 from .passes import PassPlan, Passes, pass_seed
 from .techniques import Strategy, Technique
 from .vertices import NONE, LightVertices, vertex_bytes
@@ -154,7 +154,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         media = bool(traits.media and self.ESTIMATOR.RENDERS_MEDIA)
         if media and v["hide_emitters"]:
             raise self.error("hide_emitters is not supported in scenes with participating media yet")
-        tracer.media = media
+        tracer.media = trace_light if media else False
         inv_area, axis = sensor_constants(sensor, self.ESTIMATOR.plugin_name)
         passes = self.passes
         self.stats = stats = passes.stats_class()

@@ -124,7 +124,8 @@ class LightTracer:
         self.spectra = spectral.EmitterSpectra(scene, plugin) if mi.is_spectral else None
         #: spectral variants: (wavelengths, the sensor's spectral weight) of the pass
         self.pass_spectrum = None
-        #: the scene has (homogeneous) media, which the subpaths scatter in (``media_paths``)
+        #: in a scene with (homogeneous) media, the loop that scatters the subpaths in them
+        #: (``media_paths.trace_light``, set by the driver), else False
         self.media = False
         #: the pass's key of each light subpath's sampling channel in media (``media_paths.path_channel``)
         self.channel_key = 0
@@ -206,12 +207,11 @@ class LightTracer:
             # a scene with media: the subpaths scatter in them too (``media_paths``)
             from types import SimpleNamespace
 
-            from .media_paths import trace_light
             emitted = SimpleNamespace(w=w, count=count, index=index, rng=rng, ray=ray, ray_weight=ray_weight,
                                       sel_weight=sel_weight, emitter=emitter, ps=ps, pos_weight=pos_weight, pmf=pmf,
                                       delta_pos=delta_pos, delta=delta, infinite=infinite, on_surface=on_surface,
                                       scale=scale, cos_emit=cos_emit, pdf_pos=pdf_pos, ds_0=ds_0)
-            return trace_light(self, emitted, block, vertices, store_lanes)
+            return self.media(self, emitted, block, vertices, store_lanes)
 
         # ---------------- s = 1, t = 1: the emitter point seen directly ----------------
         # (light tracing disabled, e.g. lab_vcm's bpm, or a sensor it cannot reach, orthographic:

@@ -1,0 +1,139 @@
+"""The pieces of lab_bdpt's subpaths in homogeneous media (``media_paths`` traces them): the
+path's sampling channel, the analytic free flight in it, the medium a light subpath starts in,
+a medium vertex as a surface interaction, and a vertex's BSDF-or-phase evaluation. The
+densities and the channel are explained in ``media_paths``."""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from mitsuba_lab.plugins.integrators.common import media, spawn
+
+#: A key mixed into the light seed for the sampling channel's hash, and one for the light side's
+#: second random stream (the transmittance's draws, unused in homogeneous media).
+_CHANNEL_KEY = 0x2545F491
+_AUX_KEY = 0x68E31DA4
+
+
+def path_channel(lane, key) -> mi.UInt32:
+    """The sampling channel of light subpath ``lane`` (and of the camera lanes paired with it):
+    uniform over the three in RGB, the hero wavelength (0) in spectral and mono variants."""
+    if not mi.is_rgb:
+        return dr.zeros(mi.UInt32, dr.width(lane))
+    u = mi.sample_tea_float32(mi.UInt32(lane), dr.opaque(mi.UInt32, (key ^ _CHANNEL_KEY) & 0xFFFFFFFF))
+    return mi.UInt32(dr.minimum(mi.UInt32(3.0 * u), 2))
+
+
+class RngSampler:
+    """A ``PCG32`` with the ``next_1d`` / ``next_2d`` of a Mitsuba sampler (for
+    ``common.media.transmittance`` on the light side, which has no sampler)."""
+    DRJIT_STRUCT = {"rng": mi.PCG32}
+
+    def __init__(self, rng=None):
+        self.rng = mi.PCG32() if rng is None else rng
+
+    def next_1d(self, active=True):
+        return self.rng.next_float32(active)
+
+    def next_2d(self, active=True):
+        return mi.Point2f(self.rng.next_float32(active), self.rng.next_float32(active))
+
+
+def homogeneous_flight(medium, ray: mi.Ray3f, t_max, u, channel, active):
+    """A free flight along ``ray`` in the homogeneous ``medium`` up to ``t_max`` (the next
+    surface): (mei, scattered, weight, T_c). ``weight`` multiplies the throughput: T / p_c per
+    channel, times sigma_s at a collision (``common.media.free_flight``'s weights with no null
+    collisions), p_c the density of the outcome in the sampling channel c: sigma_t,c T_c(t) at a
+    collision at t, T_c(t_max) past the surface. ``T_c`` is the transmittance in c up to the
+    outcome, the segment's factor of the next vertex's p_A (whose sigma_t,c is its g)."""
+    r = mi.Ray3f(ray)
+    r.maxt = dr.select(active, t_max, 0.0)
+    m = medium.sample_interaction(r, u, channel, active)
+    end = dr.zeros(mi.SurfaceInteraction3f)
+    end.t = r.maxt
+    tr, pdf = medium.transmittance_eval_pdf(m, end, active)
+    pdf_c = media.channel_value(pdf, channel)
+    ok = active & (pdf_c > 0)
+    weight = dr.select(ok, tr / pdf_c, 0.0)
+    scattered = ok & m.is_valid()
+    weight[scattered] *= m.sigma_s
+    return m, scattered, mi.UnpolarizedSpectrum(weight), dr.select(ok, media.channel_value(tr, channel), 0.0)
+
+
+@dr.syntax
+def origin_medium(scene: mi.Scene, ray: mi.Ray3f, floor: float, active) -> mi.MediumPtr:
+    """The medium at ``ray``'s origin: behind the first medium transition the ray meets (other
+    surfaces are passed), none where it meets none."""
+    ray = mi.Ray3f(ray)
+    found = dr.zeros(mi.MediumPtr, dr.width(ray.o))
+    going = mi.Bool(active)
+    while going:
+        si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=going)
+        hit = going & si.is_valid()
+        transition = hit & si.is_medium_transition()
+        found[transition] = si.target_medium(-ray.d)
+        going = hit & ~transition
+        ray[going] = spawn.spawn_ray(si, ray.d, floor)
+    return found
+
+
+def sigma_t_channel(medium, mei, channel, active):
+    """sigma_t of ``medium`` at ``mei``'s point in the sampling channel."""
+    _, _, sigma_t = medium.get_scattering_coefficients(mei, active)
+    return media.channel_value(sigma_t, channel)
+
+
+def phase_reverse_pdf(phase, ctx, mei, wo, active):
+    """The phase function's density of ``mei.wi`` given the direction ``wo`` (world): the
+    direction back along a subpath, as the other side samples it."""
+    rev = mi.MediumInteraction3f(mei)
+    rev.wi = wo
+    rev.sh_frame = mi.Frame3f(wo)
+    return phase.eval_pdf(ctx, rev, mei.wi, active)[1]
+
+
+def medium_vertex(mei, wavelengths) -> mi.SurfaceInteraction3f:
+    """A medium vertex as a SurfaceInteraction3f for the shared code (its position, time and
+    wavelengths; normal 0, so rays leave it without an offset)."""
+    v = dr.zeros(mi.SurfaceInteraction3f)
+    v.p, v.t, v.time, v.wavelengths = mei.p, mei.t, mei.time, wavelengths
+    v.wi = mei.wi
+    return v
+
+
+class Sides:
+    """The media on the two sides of a subpath vertex: ``medium`` on the side it was reached
+    from (the only one at a medium vertex, where ``scattered``), ``beyond`` on the other (a
+    medium transition's other side; else the same)."""
+    DRJIT_STRUCT = {"n": mi.Vector3f, "arrival": mi.Float, "scattered": mi.Bool, "medium": mi.MediumPtr,
+                    "beyond": mi.MediumPtr}
+
+    def __init__(self, n=None, arrival=None, scattered=None, medium=None, beyond=None):
+        self.n, self.arrival, self.scattered, self.medium, self.beyond = n, arrival, scattered, medium, beyond
+
+    def toward(self, d):
+        """The medium a ray leaving the vertex along ``d`` travels in (``arrival``: the cosine of
+        the direction the vertex was reached along, the incoming ray's)."""
+        return dr.select(self.scattered | (dr.dot(self.n, d) * self.arrival < 0), self.medium, self.beyond)
+
+
+def vertex_eval(ctx, ctx_rev, phase_ctx, si, bsdf, mei, phase, scattered, wo_world, active):
+    """(f, p_W forward, p_W reverse) at a subpath vertex towards ``wo_world``: its BSDF's
+    (cosine included) at a surface, its phase function's where ``scattered``; ``ctx``: the
+    subpath's transport mode, ``ctx_rev`` the other side's."""
+    on_surface = active & ~scattered
+    wo = si.to_local(wo_world)
+    f_s, pdf_s = bsdf.eval_pdf(ctx, si, wo, on_surface)
+    si_rev = mi.SurfaceInteraction3f(si)
+    si_rev.wi = wo
+    rev_s = bsdf.pdf(ctx_rev, si_rev, si.wi, on_surface)
+    in_medium = active & scattered
+    f_p, pdf_p = phase.eval_pdf(phase_ctx, mei, wo_world, in_medium)
+    rev_p = phase_reverse_pdf(phase, phase_ctx, mei, wo_world, in_medium)
+    return (dr.select(scattered, mi.Spectrum(f_p), f_s), dr.select(scattered, pdf_p, pdf_s),
+            dr.select(scattered, rev_p, rev_s))
+
+
+# ------------------------------------------------------------------------------------------
+# Light subpaths
+# ------------------------------------------------------------------------------------------
