@@ -9,7 +9,8 @@ renders a side with disjoint fixed seeds; under agreement each z is about standa
 the bound is |z| <= 5 (at most ~50 z's per comparison: a false failure has probability < 3e-5
 per comparison). Power: the deliberately wrong weight (t = 1 strategy x 1.03) fails the same
 test, lab_bdpt at 32 spp against a 256-spp reference (measured: max |z| 8.36; 8.53 at 64 spp;
-12.5 at 64 against 1024 spp; the connection weight x 1.03: 6.2).
+12.5 at 64 against 1024 spp; the connection weight x 1.03: 6.2): that proof runs in
+benchmarks/power/test_bdpt_vcm_power.py; the suite's own is the thin lens's density x 1.25.
 
 Scenes left out of the agreement tests, by design: near_delta_glossy (a GGX 1e-4 lobe: the
 reference's variance is not estimable from 16 renders, as in test_stiff), closed_box_albedo_099
@@ -202,26 +203,6 @@ POWER_REF_SPP, POWER_LAB_SPP = 256, 32
 def cornell_reference():
     scene = load_scene(scene_path("cornell_box.xml"), res=32)
     return scene, path_reference("cornell_box.xml", 32, POWER_REF_SPP, MAX_DEPTH, SEEDS_REF)
-
-
-def test_a_wrong_weight_is_caught(cornell_reference, monkeypatch):
-    """Power of the agreement test: the t = 1 weight multiplied by 1.03 fails it (max |z| past
-    Z_BOUND: 8.36 at POWER_LAB_SPP against the POWER_REF_SPP reference; 12.5 at 64 against 1024)."""
-    from mitsuba_lab.plugins.integrators.bdpt import integrator
-    from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights
-
-    scene, ref = cornell_reference
-    assert_agrees(renders(scene, bdpt(), POWER_LAB_SPP, SEEDS_LAB), ref, "lab_bdpt on the Cornell box, 32 spp")
-
-    class Perturbed(BdptWeights):
-        def light_to_camera(self, *args, **kwargs):
-            return 1.03 * super().light_to_camera(*args, **kwargs)
-
-    monkeypatch.setattr(integrator, "BdptWeights", Perturbed)
-    wrong = renders(scene, bdpt(), POWER_LAB_SPP, SEEDS_LAB)
-    z = z_scores(wrong, ref).max_abs_z
-    print(f"t = 1 weight x 1.03: max |z| {z:.2f}")
-    assert z > Z_BOUND
 
 
 def test_hide_emitters_agrees_with_mitsuba_path():
