@@ -6,7 +6,7 @@ suite's cases plus these are the matrices as they stood at 6b50876), with the sa
 import pytest
 
 import test_vcm
-from test_vcm import MOVED_MERGING_CASES
+from test_vcm import MOVED_MERGING_CASES, MOVED_STIFF_CASES
 
 
 @pytest.mark.parametrize("name, mode, merge_first", MOVED_MERGING_CASES)
@@ -24,3 +24,8 @@ def test_more_light_paths_agree_with_mitsuba_path():
 
 def test_fewer_light_paths_agree_with_mitsuba_path():
     test_vcm.test_fewer_light_paths_agree_with_mitsuba_path("caustic.xml")
+
+
+@pytest.mark.parametrize("name, merge_first, merge_vertices", MOVED_STIFF_CASES)
+def test_no_nan_inf_or_negative_on_stiff_scenes(name, merge_first, merge_vertices):
+    test_vcm.test_no_nan_inf_or_negative_on_stiff_scenes(name, merge_first, merge_vertices)
