@@ -12,11 +12,11 @@ non-square films and crop windows too). Under the mono and spectral variants, ea
 applicable path tracer runs once on each scene of OTHER_VARIANT_SCENES, with a sampler that
 rotates over scenes and variants. Each case is rendered with SEEDS = 32 seeds at the scene's
 spp and compared with one `path` reference per scene and variant (32 other seeds at
-REF_FACTOR = 8 x the spp) by z-scores of 8x8 block means and whole-image means per channel
+REF_FACTOR = 4 x the spp) by z-scores of 8x8 block means and whole-image means per channel
 (tests/agreement.py).
 
 The bound |z| <= Z_BOUND (tests/agreement.py): the standard errors come from 32 seeds, so under
-agreement each z is about Student-t with >= 31 degrees of freedom (the reference adds ~1/8 of
+agreement each z is about Student-t with >= 31 degrees of freedom (the reference adds ~1/4 of
 the variance and more degrees of freedom). The file computes about 2500 z-scores (blocks x
 channels x cases, all variants), strongly correlated across channels. With 4 seed sets
 (``LAB_TEST_SEED_OFFSET`` = 0, 1e5, 2e5, 3e5) the largest |z| of a correct case was 4.5.
@@ -51,7 +51,7 @@ from mitsuba_lab.scene import SceneTraits, make_integrator, strategy_applicabili
 pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
 
 SEEDS = 32
-REF_FACTOR = 8
+REF_FACTOR = 4
 #: Re-run the statistics on other seeds: LAB_TEST_SEED_OFFSET=100000 pytest ... (default 0).
 SEED_OFFSET = int(os.environ.get("LAB_TEST_SEED_OFFSET", "0"))
 LAB_SEEDS = range(SEED_OFFSET, SEED_OFFSET + SEEDS)
@@ -166,6 +166,7 @@ def test_path_tracers_agree_with_path(variant, assets, name, slot):
     sampler = SAMPLERS[slot]
     estimator = latin_estimator(assets, name, slot)
     result = agreement(assets, name, estimator, sampler)
+    print(f"{estimator} + {sampler} on {name} ({variant}): max |z| {result.max_abs_z:.2f}")
     assert result.max_abs_z <= Z_BOUND, describe(result, name, estimator, sampler, variant)
 
 
@@ -177,6 +178,7 @@ def test_a_biased_renderer_fails(variant, assets):
     name = "textured_mesh_room"
     assert latin_estimator(assets, name, KEPT_SLOTS[name]) == "lab_mis" and SAMPLERS[KEPT_SLOTS[name]] == "lab_sobol"
     scaled = agreement(assets, name, "lab_mis", "lab_sobol", scale=1.03)
+    print(f"lab_mis x 1.03 on {name}: max |z| {scaled.max_abs_z:.2f}")
     assert scaled.max_abs_z > Z_BOUND, describe(scaled, name, "lab_mis x 1.03", "lab_sobol", variant)
 
 
@@ -209,12 +211,19 @@ def test_photon_keeps_the_light_of_every_lobe(variant, assets, name, shape_id):
     image = renders(lab_scene, integrator, 1, [SEED_OFFSET + 7])[0]
     check_pixels(image, f"lab_photon on {name}")
     ratio = float(image[mask].mean() / reference(assets, name).mean(axis=0)[mask].mean())
+    print(f"lab_photon on {name}, '{shape_id}': {ratio:.3f} x path's")
     assert abs(ratio - 1) <= PHOTON_REGION, (
         f"lab_photon on {name}: mean over '{shape_id}' ({int(mask.sum())} pixels) = {ratio:.3f} x path's "
         f"after {PHOTON_REGION_PASSES} passes (wanted within {PHOTON_REGION:.0%})")
 
 
-@pytest.mark.parametrize("variant, name", [pytest.param(RGB, name, id=f"rgb-{name}") for name in SCENE_NAMES]
+#: lab_photon's convergence in rgb on the scenes whose features are its own concern (meshes and a
+#: textured light, principled and blend, delta lights only, an environment map behind a thin lens);
+#: instanced_ortho, normal_bump_maps and mixed_lights_crop: benchmarks/agreement/test_user_scenes_matrix.py.
+PHOTON_RGB_SCENES = ("textured_mesh_room", "principled_and_blend", "spot_and_directional", "thinlens_envmap")
+
+
+@pytest.mark.parametrize("variant, name", [pytest.param(RGB, name, id=f"rgb-{name}") for name in PHOTON_RGB_SCENES]
                          + [pytest.param(v, name, id=f"{v[8:]}-{name}")
                             for v, name, _ in OTHER_VARIANT_CASES], indirect=["variant"])
 def test_photon_converges_to_path(variant, assets, name):
@@ -239,6 +248,7 @@ def test_photon_converges_to_path(variant, assets, name):
         check_pixels(image, f"lab_photon + {sampler} on {name}")
         errors[passes] = rel_mse(image[0], ref)
     few, many = (errors[p] for p in PHOTON_PASSES)
+    print(f"lab_photon + {sampler} on {name} ({variant}): relMSE {few:.4f} -> {many:.4f}")
     assert many <= PHOTON_FALL * few and many <= PHOTON_RELMSE, (
         f"lab_photon + {sampler} on {name} ({variant}): relMSE {few:.4f} at {PHOTON_PASSES[0]} passes, "
         f"{many:.4f} at {PHOTON_PASSES[1]} (wanted <= {PHOTON_FALL} x and <= {PHOTON_RELMSE})")
@@ -258,4 +268,5 @@ def test_path_tracers_agree_under_mono_and_spectral(variant, assets, name, estim
         pytest.skip(reason)
     sampler = other_variant_sampler(variant, name, estimator)
     result = agreement(assets, name, estimator, sampler)
+    print(f"{estimator} + {sampler} on {name} ({variant}): max |z| {result.max_abs_z:.2f}")
     assert result.max_abs_z <= Z_BOUND, describe(result, name, estimator, sampler, variant)
