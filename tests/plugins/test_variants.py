@@ -56,17 +56,26 @@ ESTIMATOR_CASES = [(v, e) for i, v in enumerate(VARIANTS) for e in ("lab_mis", O
 SAMPLER_CASES = [(v, list(SAMPLERS)[i % len(SAMPLERS)]) for i, v in enumerate(VARIANTS)]
 
 
+#: Per variant, the stacks rendered (numpy, kept for the module: pytest does not keep the cases of
+#: one variant together across the three test functions, so the fixture is set up once per run of
+#: consecutive cases, and the reference and lab_mis's stack would otherwise be rendered again).
+_stacks: dict = {}
+
+
 @pytest.fixture(scope="module")
 def variant(request):
     mitsuba_lab.use_variant(request.param)
-    cache = {}
+    cache = _stacks.setdefault(request.param, {})
+    cache.pop("scene", None)               # (a scene belongs to one activation of its variant)
     yield request.param, cache
+    cache.pop("scene", None)
     mitsuba_lab.use_variant(backend.HOME)
 
 
 def reference(cache):
-    if "ref" not in cache:
+    if "scene" not in cache:
         cache["scene"] = mi.load_dict(box())
+    if "ref" not in cache:
         cache["ref"] = renders(cache["scene"], make_integrator("path", DEPTH), SPP, REF_SEEDS)
     return cache["ref"]
 
