@@ -133,17 +133,24 @@ def test_material_grid_under_a_point_light_agrees_with_direct_lighting(assets, k
                         f"{kind} {params} on the material grid")
 
 
+#: The mask's and the instances' cases (issue 41's findings: path drops light gathered on a mask;
+#: instanced groups) at 16 seeds a side, not 64 (64: benchmarks/agreement/test_block_agreement_matrix.py,
+#: max |z| 1.04 and 2.77).
+FINDING_SEEDS_LAB, FINDING_SEEDS_REF = range(16), range(1000, 1016)
+
+
 def test_mitsuba_path_drops_light_gathered_on_a_mask(assets):
     """Why the grid's reference is `direct`: on a one-sided masked sphere Mitsuba's `path`
     renders about 0.76x `direct` (every path there is camera -> sphere -> light), lab_mis does not."""
     scene = load(assets, "mask", material_grid((ONE_SIDED_MASK,)))
-    ref = direct_reference(scene, "mask")
-    ratio = stack(scene, "path", {}, SEEDS_LAB).mean() / ref.mean()
+    ref = renders(scene, make_integrator("direct", {}), SPP, FINDING_SEEDS_REF)
+    ratio = stack(scene, "path", {}, FINDING_SEEDS_LAB).mean() / ref.mean()
+    print(f"path / direct on the masked sphere: {ratio:.3f}")
     assert ratio < 0.85, ratio
-    assert_blocks_agree(stack(scene, "lab_mis", {}, SEEDS_LAB), ref, "lab_mis on a masked sphere")
+    assert_blocks_agree(stack(scene, "lab_mis", {}, FINDING_SEEDS_LAB), ref, "lab_mis on a masked sphere")
 
 
 def test_instanced_shape_groups_agree_with_mitsuba_path(assets):
     scene = load(assets, "instances", instanced_groups())
-    ref = stack(scene, "path", {}, SEEDS_REF)
-    assert_blocks_agree(stack(scene, "lab_bdpt", {}, SEEDS_LAB), ref, "lab_bdpt on instanced shape groups")
+    ref = stack(scene, "path", {}, FINDING_SEEDS_REF)
+    assert_blocks_agree(stack(scene, "lab_bdpt", {}, FINDING_SEEDS_LAB), ref, "lab_bdpt on instanced shape groups")
