@@ -21,7 +21,7 @@ import os
 import numpy as np
 import pytest
 
-from agreement import assert_blocks_agree, block_test, renders
+from agreement import assert_blocks_agree, renders
 from mitsuba_lab.scene import make_integrator
 from user_scenes import write_assets
 
@@ -120,10 +120,12 @@ def direct_reference(scene, key):
     return _references[key]
 
 
+#: The suite keeps lab_bdpt (light tracing and every connection over all twelve materials); lab_vcm's
+#: bpt mode and lab_mis on the grid, and the power proof (lab_bdpt's t = 1 weight x 1.03 fails), run
+#: in benchmarks/agreement/test_block_agreement_matrix.py (results:
+#: experiments/results/2026-11-28-power-proofs.md).
 @pytest.mark.parametrize("kind, params", [
     ("lab_bdpt", {}),
-    ("lab_vcm", {"mode": "bpt"}),
-    ("lab_mis", {}),
 ])
 def test_material_grid_under_a_point_light_agrees_with_direct_lighting(assets, kind, params):
     scene = load(assets, "grid", material_grid())
@@ -131,34 +133,24 @@ def test_material_grid_under_a_point_light_agrees_with_direct_lighting(assets, k
                         f"{kind} {params} on the material grid")
 
 
-def test_a_three_percent_bias_on_one_strategy_fails_the_block_test(assets, monkeypatch):
-    """Power: lab_bdpt with its light-tracing (t = 1) weights x 1.03 fails (a per-pixel z-test at
-    these sample counts does not see it)."""
-    from mitsuba_lab.plugins.integrators.bdpt import integrator
-    from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights
-
-    class Perturbed(BdptWeights):
-        def light_to_camera(self, *args, **kwargs):
-            return 1.03 * super().light_to_camera(*args, **kwargs)
-
-    monkeypatch.setattr(integrator, "BdptWeights", Perturbed)
-    scene = load(assets, "grid", material_grid())
-    result = block_test(stack(scene, "lab_bdpt", {}, SEEDS_LAB), direct_reference(scene, "grid"))
-    print("t = 1 weight x 1.03:", result.summary())
-    assert result.failing
+#: The mask's and the instances' cases (issue 41's findings: path drops light gathered on a mask;
+#: instanced groups) at 16 seeds a side, not 64 (64: benchmarks/agreement/test_block_agreement_matrix.py,
+#: max |z| 1.04 and 2.77).
+FINDING_SEEDS_LAB, FINDING_SEEDS_REF = range(16), range(1000, 1016)
 
 
 def test_mitsuba_path_drops_light_gathered_on_a_mask(assets):
     """Why the grid's reference is `direct`: on a one-sided masked sphere Mitsuba's `path`
     renders about 0.76x `direct` (every path there is camera -> sphere -> light), lab_mis does not."""
     scene = load(assets, "mask", material_grid((ONE_SIDED_MASK,)))
-    ref = direct_reference(scene, "mask")
-    ratio = stack(scene, "path", {}, SEEDS_LAB).mean() / ref.mean()
+    ref = renders(scene, make_integrator("direct", {}), SPP, FINDING_SEEDS_REF)
+    ratio = stack(scene, "path", {}, FINDING_SEEDS_LAB).mean() / ref.mean()
+    print(f"path / direct on the masked sphere: {ratio:.3f}")
     assert ratio < 0.85, ratio
-    assert_blocks_agree(stack(scene, "lab_mis", {}, SEEDS_LAB), ref, "lab_mis on a masked sphere")
+    assert_blocks_agree(stack(scene, "lab_mis", {}, FINDING_SEEDS_LAB), ref, "lab_mis on a masked sphere")
 
 
 def test_instanced_shape_groups_agree_with_mitsuba_path(assets):
     scene = load(assets, "instances", instanced_groups())
-    ref = stack(scene, "path", {}, SEEDS_REF)
-    assert_blocks_agree(stack(scene, "lab_bdpt", {}, SEEDS_LAB), ref, "lab_bdpt on instanced shape groups")
+    ref = stack(scene, "path", {}, FINDING_SEEDS_REF)
+    assert_blocks_agree(stack(scene, "lab_bdpt", {}, FINDING_SEEDS_LAB), ref, "lab_bdpt on instanced shape groups")

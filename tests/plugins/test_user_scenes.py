@@ -12,14 +12,15 @@ non-square films and crop windows too). Under the mono and spectral variants, ea
 applicable path tracer runs once on each scene of OTHER_VARIANT_SCENES, with a sampler that
 rotates over scenes and variants. Each case is rendered with SEEDS = 32 seeds at the scene's
 spp and compared with one `path` reference per scene and variant (32 other seeds at
-REF_FACTOR = 8 x the spp) by z-scores of 8x8 block means and whole-image means per channel
+REF_FACTOR = 4 x the spp) by z-scores of 8x8 block means and whole-image means per channel
 (tests/agreement.py).
 
 The bound |z| <= Z_BOUND (tests/agreement.py): the standard errors come from 32 seeds, so under
-agreement each z is about Student-t with >= 31 degrees of freedom (the reference adds ~1/8 of
+agreement each z is about Student-t with >= 31 degrees of freedom (the reference adds ~1/4 of
 the variance and more degrees of freedom). The file computes about 2500 z-scores (blocks x
 channels x cases, all variants), strongly correlated across channels. With 4 seed sets
-(``LAB_TEST_SEED_OFFSET`` = 0, 1e5, 2e5, 3e5) the largest |z| of a correct case was 4.5.
+(``LAB_TEST_SEED_OFFSET`` = 0, 1e5, 2e5, 3e5) the largest |z| of a correct case was 4.5 (REF_FACTOR 8);
+with REF_FACTOR 4 (2026-11-28, seed offset 0) the kept cases' largest was 3.17.
 Power: the whole-image mean's relative standard error is 0.05-0.8% here (lab_naive under a
 small textured light is the noisiest), so a 3% bias is caught where it is below 0.46%;
 ``test_a_biased_renderer_fails`` shows that lab_mis x 1.03 (|z| ~ 50) and lab_mis with one
@@ -51,7 +52,7 @@ from mitsuba_lab.scene import SceneTraits, make_integrator, strategy_applicabili
 pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier (pytest -m "not slow" leaves it out)
 
 SEEDS = 32
-REF_FACTOR = 8
+REF_FACTOR = 4
 #: Re-run the statistics on other seeds: LAB_TEST_SEED_OFFSET=100000 pytest ... (default 0).
 SEED_OFFSET = int(os.environ.get("LAB_TEST_SEED_OFFSET", "0"))
 LAB_SEEDS = range(SEED_OFFSET, SEED_OFFSET + SEEDS)
@@ -66,6 +67,10 @@ SPP = {name: 8 for name in SCENE_NAMES} | {"spot_and_directional": 16}
 #: The subset also checked under mono and spectral: a textured area light with all three path
 #: tracers on a non-square film, and delta lights only (two path tracers) with a crop window.
 OTHER_VARIANT_SCENES = ("textured_mesh_room", "spot_and_directional")
+#: The suite keeps one (variant, scene, path tracer) each for mono and spectral, one reference
+#: each (every path tracer on both scenes in both variants: benchmarks/agreement/
+#: test_user_scenes_matrix.py; every estimator in every variant on the box: test_variants.py).
+OTHER_VARIANT_CASES = ((MONO, "textured_mesh_room", "lab_mis"), (SPECTRAL, "spot_and_directional", "lab_nee"))
 #: Linear sRGB -> luminance Y (Rec. 709 primaries, as Mitsuba's film).
 
 _scenes: dict = {}
@@ -146,25 +151,36 @@ def describe(result, name, estimator, sampler, variant_name) -> str:
             f"relative difference of means = {np.round(result.rel_diff, 4)}")
 
 
+#: The suite keeps one slot of the Latin square per scene (the full square, 5 slots a scene, runs in
+#: benchmarks/agreement/test_user_scenes_matrix.py): slot (k + 2) mod 5 on scene k puts every scene
+#: (its features), every sampler and every path tracer in the suite at least once, and lab_mis +
+#: lab_sobol on textured_mesh_room, the stack test_a_biased_renderer_fails scales.
+KEPT_SLOTS = {name: (k + 2) % len(SAMPLERS) for k, name in enumerate(SCENE_NAMES)}
+
+
 @pytest.mark.parametrize("variant, name, slot", [
-    pytest.param(RGB, name, slot, id=f"{name}-{SAMPLERS[slot]}")
-    for name in SCENE_NAMES for slot in range(len(SAMPLERS))], indirect=["variant"])
+    pytest.param(RGB, name, KEPT_SLOTS[name], id=f"{name}-{SAMPLERS[KEPT_SLOTS[name]]}")
+    for name in SCENE_NAMES], indirect=["variant"])
 def test_path_tracers_agree_with_path(variant, assets, name, slot):
-    """RGB: the Latin square (every sampler and every applicable path tracer on every scene)."""
+    """RGB: one slot of the Latin square per scene (``KEPT_SLOTS``; the whole square in
+    benchmarks/agreement/test_user_scenes_matrix.py)."""
     sampler = SAMPLERS[slot]
     estimator = latin_estimator(assets, name, slot)
     result = agreement(assets, name, estimator, sampler)
+    print(f"{estimator} + {sampler} on {name} ({variant}): max |z| {result.max_abs_z:.2f}")
     assert result.max_abs_z <= Z_BOUND, describe(result, name, estimator, sampler, variant)
 
 
 @pytest.mark.parametrize("variant", [RGB], indirect=True)
 def test_a_biased_renderer_fails(variant, assets):
-    """The check has the power claimed above: a 3% error, or one bounce too few, fails it."""
+    """The check has the power claimed above: a 3% error fails it (the kept Latin-square stack,
+    scaled: no render of its own). One bounce too few fails it too: that proof renders a stack of
+    its own and runs in benchmarks/agreement/test_user_scenes_matrix.py."""
     name = "textured_mesh_room"
+    assert latin_estimator(assets, name, KEPT_SLOTS[name]) == "lab_mis" and SAMPLERS[KEPT_SLOTS[name]] == "lab_sobol"
     scaled = agreement(assets, name, "lab_mis", "lab_sobol", scale=1.03)
+    print(f"lab_mis x 1.03 on {name}: max |z| {scaled.max_abs_z:.2f}")
     assert scaled.max_abs_z > Z_BOUND, describe(scaled, name, "lab_mis x 1.03", "lab_sobol", variant)
-    shallow = agreement(assets, name, "lab_mis", "lab_sobol", depth_change=-1)
-    assert shallow.max_abs_z > Z_BOUND, describe(shallow, name, "lab_mis (max_depth - 1)", "lab_sobol", variant)
 
 
 PHOTONS_PER_PASS = 40000
@@ -180,9 +196,8 @@ PHOTON_REGION_PASSES = 16
 
 
 @pytest.mark.parametrize("variant", [RGB], indirect=True)
-@pytest.mark.parametrize("name, shape_id", [("principled_and_blend", "plastic_box"),
-                                            ("textured_mesh_room", "gold_box"),
-                                            ("mixed_lights_crop", "red_box")])
+@pytest.mark.parametrize("name, shape_id", [("principled_and_blend", "plastic_box")])   # (the gold and red
+# boxes, the glossy comparisons: benchmarks/agreement/test_user_scenes_matrix.py)
 def test_photon_keeps_the_light_of_every_lobe(variant, assets, name, shape_id):
     """The light a BSDF's delta lobe reflects is not lost: over the smooth plastic box (delta
     coat + diffuse base) lab_photon comes as close to path as over the glossy boxes (gold
@@ -197,14 +212,21 @@ def test_photon_keeps_the_light_of_every_lobe(variant, assets, name, shape_id):
     image = renders(lab_scene, integrator, 1, [SEED_OFFSET + 7])[0]
     check_pixels(image, f"lab_photon on {name}")
     ratio = float(image[mask].mean() / reference(assets, name).mean(axis=0)[mask].mean())
+    print(f"lab_photon on {name}, '{shape_id}': {ratio:.3f} x path's")
     assert abs(ratio - 1) <= PHOTON_REGION, (
         f"lab_photon on {name}: mean over '{shape_id}' ({int(mask.sum())} pixels) = {ratio:.3f} x path's "
         f"after {PHOTON_REGION_PASSES} passes (wanted within {PHOTON_REGION:.0%})")
 
 
-@pytest.mark.parametrize("variant, name", [pytest.param(RGB, name, id=f"rgb-{name}") for name in SCENE_NAMES]
+#: lab_photon's convergence in rgb on the scenes whose features are its own concern (meshes and a
+#: textured light, principled and blend, delta lights only, an environment map behind a thin lens);
+#: instanced_ortho, normal_bump_maps and mixed_lights_crop: benchmarks/agreement/test_user_scenes_matrix.py.
+PHOTON_RGB_SCENES = ("textured_mesh_room", "principled_and_blend", "spot_and_directional", "thinlens_envmap")
+
+
+@pytest.mark.parametrize("variant, name", [pytest.param(RGB, name, id=f"rgb-{name}") for name in PHOTON_RGB_SCENES]
                          + [pytest.param(v, name, id=f"{v[8:]}-{name}")
-                            for v in (MONO, SPECTRAL) for name in OTHER_VARIANT_SCENES], indirect=["variant"])
+                            for v, name, _ in OTHER_VARIANT_CASES], indirect=["variant"])
 def test_photon_converges_to_path(variant, assets, name):
     """relMSE against the reference (the mean of the reference stack) falls from 1 to 8 passes
     and ends low; one camera sample per pass, the sampler rotating over scenes."""
@@ -227,6 +249,7 @@ def test_photon_converges_to_path(variant, assets, name):
         check_pixels(image, f"lab_photon + {sampler} on {name}")
         errors[passes] = rel_mse(image[0], ref)
     few, many = (errors[p] for p in PHOTON_PASSES)
+    print(f"lab_photon + {sampler} on {name} ({variant}): relMSE {few:.4f} -> {many:.4f}")
     assert many <= PHOTON_FALL * few and many <= PHOTON_RELMSE, (
         f"lab_photon + {sampler} on {name} ({variant}): relMSE {few:.4f} at {PHOTON_PASSES[0]} passes, "
         f"{many:.4f} at {PHOTON_PASSES[1]} (wanted <= {PHOTON_FALL} x and <= {PHOTON_RELMSE})")
@@ -238,8 +261,7 @@ def other_variant_sampler(variant_name, name, estimator) -> str:
 
 
 @pytest.mark.parametrize("variant, name, estimator", [
-    pytest.param(v, name, estimator, id=f"{v[8:]}-{name}-{estimator}")
-    for v in (MONO, SPECTRAL) for name in OTHER_VARIANT_SCENES for estimator in PATH_TRACERS],
+    pytest.param(v, name, estimator, id=f"{v[8:]}-{name}-{estimator}") for v, name, estimator in OTHER_VARIANT_CASES],
     indirect=["variant"])
 def test_path_tracers_agree_under_mono_and_spectral(variant, assets, name, estimator):
     ok, reason = applicability(assets, name, estimator)
@@ -247,4 +269,5 @@ def test_path_tracers_agree_under_mono_and_spectral(variant, assets, name, estim
         pytest.skip(reason)
     sampler = other_variant_sampler(variant, name, estimator)
     result = agreement(assets, name, estimator, sampler)
+    print(f"{estimator} + {sampler} on {name} ({variant}): max |z| {result.max_abs_z:.2f}")
     assert result.max_abs_z <= Z_BOUND, describe(result, name, estimator, sampler, variant)

@@ -6,7 +6,7 @@ pixel.
 
 Tolerance: |z| <= Z_BOUND (tests/agreement.py) for every 8x8 block mean and every whole-image channel mean
 (Welch, 16 seeds a side, about 30 degrees of freedom; at most 4 x 3 blocks x 3 channels + 3 =
-39 z-scores a case, 45 cases). Under agreement P(|t_30| > 5) = 2.3e-5, so the whole file fails
+39 z-scores a case, 20 cases here, 45 in benchmarks/agreement/test_variants_matrix.py). Under agreement P(|t_30| > 5) = 2.3e-5, so the whole file fails
 by chance with probability < 0.04 (fewer in fact: the z-scores of a case are correlated);
 seeds are fixed, so a run is deterministic. Power: a 3% bias gives |z| > 5 in every variant
 (test_a_three_percent_bias_is_caught_in_every_variant).
@@ -47,17 +47,35 @@ def box(sampler: dict | None = None) -> dict:
     return scene
 
 
-@pytest.fixture(scope="module", params=VARIANTS)
+#: The suite keeps, per variant, lab_mis (whose stack the bias test scales), one other estimator and
+#: one sampler, rotating so that every estimator and every sampler runs in some variant and every
+#: variant runs three lab stacks against its reference (9 before). Every estimator and every
+#: sampler in every variant: benchmarks/agreement/test_variants_matrix.py.
+OTHER_ESTIMATORS = [e for e in ESTIMATORS if e != "lab_mis"]
+ESTIMATOR_CASES = [(v, e) for i, v in enumerate(VARIANTS) for e in ("lab_mis", OTHER_ESTIMATORS[i % len(OTHER_ESTIMATORS)])]
+SAMPLER_CASES = [(v, list(SAMPLERS)[i % len(SAMPLERS)]) for i, v in enumerate(VARIANTS)]
+
+
+#: Per variant, the stacks rendered (numpy, kept for the module: pytest does not keep the cases of
+#: one variant together across the three test functions, so the fixture is set up once per run of
+#: consecutive cases, and the reference and lab_mis's stack would otherwise be rendered again).
+_stacks: dict = {}
+
+
+@pytest.fixture(scope="module")
 def variant(request):
     mitsuba_lab.use_variant(request.param)
-    cache = {}
+    cache = _stacks.setdefault(request.param, {})
+    cache.pop("scene", None)               # (a scene belongs to one activation of its variant)
     yield request.param, cache
+    cache.pop("scene", None)
     mitsuba_lab.use_variant(backend.HOME)
 
 
 def reference(cache):
-    if "ref" not in cache:
+    if "scene" not in cache:
         cache["scene"] = mi.load_dict(box())
+    if "ref" not in cache:
         cache["ref"] = renders(cache["scene"], make_integrator("path", DEPTH), SPP, REF_SEEDS)
     return cache["ref"]
 
@@ -79,7 +97,7 @@ def estimator_images(cache, strategy):
     return cache[strategy]
 
 
-@pytest.mark.parametrize("strategy", ESTIMATORS)
+@pytest.mark.parametrize("variant, strategy", ESTIMATOR_CASES, indirect=["variant"])
 def test_estimators_agree_with_path_in_every_variant(variant, strategy):
     name, cache = variant
     ref = reference(cache)
@@ -88,7 +106,7 @@ def test_estimators_agree_with_path_in_every_variant(variant, strategy):
     assert_agrees(images, ref, f"{strategy} in {name}", name)
 
 
-@pytest.mark.parametrize("sampler", SAMPLERS)
+@pytest.mark.parametrize("variant, sampler", SAMPLER_CASES, indirect=["variant"])
 def test_samplers_agree_with_independent_in_every_variant(variant, sampler):
     name, cache = variant
     ref = reference(cache)
@@ -97,6 +115,7 @@ def test_samplers_agree_with_independent_in_every_variant(variant, sampler):
     assert_agrees(images, ref, f"lab_mis with {sampler} in {name}", name)
 
 
+@pytest.mark.parametrize("variant", VARIANTS, indirect=True)
 def test_a_three_percent_bias_is_caught_in_every_variant(variant):
     name, cache = variant
     ref = reference(cache)
