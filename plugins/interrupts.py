@@ -18,15 +18,24 @@ wrong:
   Ctrl-C until the call returns.
 
 ``restore`` installs Python's handler again as ``signal.signal`` does (no restart).
-``checkpoint`` is the multi-pass integrators' check between passes. (The orchestration layer's
+``checkpoint`` is the multi-pass integrators' check between passes.
+
+A third thing loses Ctrl-C outside Mitsuba: Python's ``hasattr`` (and C code that calls
+``PyObject_HasAttr``, as Dr.Jit's loop recording does on every loop state) swallows any
+exception raised while it runs, KeyboardInterrupt included. A SIGINT that arrives then is gone.
+Inside ``sticky()`` the handler also notes that Ctrl-C came, and ``raise_pending`` (called by
+``checkpoint``, after each render and between optimisation steps) raises it again. (The orchestration layer's
 ``mitsuba_lab.interrupts`` wraps whole render calls and writes.)
 
 Only the main thread can set handlers: in another thread these do nothing.
 """
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
+
+_pending = [False]          # inside ``sticky()``: a Ctrl-C arrived (it may have been swallowed)
 
 
 def in_main_thread() -> bool:
@@ -45,6 +54,38 @@ def restore() -> None:
         signal.signal(signal.SIGINT, handler)
 
 
+def _note_and_raise(signum, frame):
+    _pending[0] = True
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def sticky():
+    """Ctrl-C that cannot be lost, for a whole command (``mitsuba-lab``, ``mitsuba_lab.sweep``).
+    While Python's default handler is in force, it is replaced by one that raises
+    KeyboardInterrupt as before and also notes the signal for ``raise_pending``. Afterwards the
+    default handler is back and the note cleared. Elsewhere (another thread, Ctrl-C ignored, a
+    handler of the caller's own) it changes nothing."""
+    if not in_main_thread() or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+    _pending[0] = False
+    signal.signal(signal.SIGINT, _note_and_raise)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        _pending[0] = False
+
+
+def raise_pending() -> None:
+    """Raise KeyboardInterrupt if a Ctrl-C came inside ``sticky()`` since the last call: one that
+    was swallowed on the way (see the module's doc) stops the work here instead of never."""
+    if _pending[0]:
+        _pending[0] = False
+        raise KeyboardInterrupt
+
+
 def checkpoint(*integrators) -> None:
     """The cheap check between two passes of a multi-pass render (lab_photon, lab_bdpt, lab_vcm).
 
@@ -57,3 +98,4 @@ def checkpoint(*integrators) -> None:
     restore()
     if any(integrator.should_stop() for integrator in integrators):
         signal.raise_signal(signal.SIGINT)
+    raise_pending()

@@ -1,6 +1,7 @@
 """``mitsuba_lab.interrupts``, in this process: after a lab integrator's render, SIGINT still
 raises KeyboardInterrupt (Mitsuba 3.9's handler used to swallow it for good). Also the pieces:
 ``rendering``, ``checkpoint``, ``deferred``. Real Ctrl-C to the commands is in test_sigint.py."""
+import ctypes
 import signal
 
 import mitsuba as mi
@@ -81,3 +82,52 @@ def test_deferred_holds_sigint_until_the_block_ends():
     with interrupts.deferred():                       # no signal: nothing raised
         steps.append("quiet")
     assert sigint_raises()                            # and Python's handler is back
+
+
+class _Swallower:
+    """An attribute during whose lookup SIGINT arrives."""
+
+    def __getattr__(self, name):
+        signal.raise_signal(signal.SIGINT)
+        raise AttributeError(name)
+
+
+def c_hasattr(obj, name: str) -> bool:
+    """``PyObject_HasAttr``, as Dr.Jit's C++ calls it on loop state (Python's own ``hasattr``
+    passes KeyboardInterrupt on; this C function, before Python 3.13, clears any error)."""
+    return bool(ctypes.pythonapi.PyObject_HasAttr(ctypes.py_object(obj), ctypes.py_object(name)))
+
+
+def test_hasattr_swallows_a_sigint_outside_sticky():
+    # the failure sticky() exists for: without it, this Ctrl-C is gone
+    assert not c_hasattr(_Swallower(), "state")
+    interrupts.raise_pending()                             # nothing noted: nothing raised
+
+
+def test_sticky_raises_a_swallowed_sigint_at_the_next_checkpoint():
+    with interrupts.sticky():
+        assert not c_hasattr(_Swallower(), "state")          # swallowed as before ...
+        with pytest.raises(KeyboardInterrupt):             # ... and raised again here
+            checkpoint()
+        checkpoint()                                       # once only
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_sticky_raises_a_sigint_swallowed_inside_a_render_when_it_returns():
+    with interrupts.sticky():
+        with pytest.raises(KeyboardInterrupt):
+            with interrupts.rendering():
+                c_hasattr(_Swallower(), "state")
+        assert sigint_raises()                             # Ctrl-C still raises as usual ...
+        with pytest.raises(KeyboardInterrupt):             # ... and stays noted: caught and
+            interrupts.raise_pending()                     # dropped somewhere, it comes again
+
+
+def test_sticky_leaves_an_ignored_or_custom_handler_alone():
+    for handler in (signal.SIG_IGN, lambda signum, frame: None):
+        previous = signal.signal(signal.SIGINT, handler)
+        try:
+            with interrupts.sticky():
+                assert signal.getsignal(signal.SIGINT) is handler
+        finally:
+            signal.signal(signal.SIGINT, previous)

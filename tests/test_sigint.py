@@ -35,13 +35,18 @@ RENDER, PASS = timings.RENDER, timings.PASS
 BOUND_S = 20.0
 
 
+def _tail(outcome) -> str:
+    """The end of stderr without progress lines (a failure shows what the command said)."""
+    return "\n".join(line for line in outcome.stderr.splitlines() if "it/s" not in line)[-3000:]
+
+
 def assert_interrupted(outcome):
-    assert outcome.signalled, f"the moment never came:\n{outcome.stderr[-3000:]}"
+    assert outcome.signalled, f"the moment never came:\n{_tail(outcome)}"
     # (Mitsuba's own "Received interrupt signal, winding down.." goes to stdout; skipped if not)
     lines = [line for line in outcome.stderr.splitlines()
              if not line.startswith("sigint-cli:") and "Received interrupt signal" not in line]
-    assert outcome.returncode == timings.EXIT_INTERRUPTED, outcome.stderr[-3000:]
-    assert lines[-1:] == ["mitsuba-lab: interrupted"] and "Traceback" not in outcome.stderr, outcome.stderr[-3000:]
+    assert outcome.returncode == timings.EXIT_INTERRUPTED, f"exit {outcome.returncode}:\n{_tail(outcome)}"
+    assert lines[-1:] == ["mitsuba-lab: interrupted"] and "Traceback" not in outcome.stderr, _tail(outcome)
     assert outcome.seconds < BOUND_S
 
 

@@ -91,12 +91,13 @@ def main(argv: list[str] | None = None, out=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        from . import activate
+        from . import activate, interrupts
 
         command = command_module(args.command)
         if args.command not in NO_VARIANT:
             activate(args.variant)
-        return command.run(args, out)
+        with interrupts.sticky():         # a Ctrl-C swallowed on the way still stops the command
+            return command.run(args, out)
     except KeyboardInterrupt:
         return interrupted()
     except BrokenPipeError:

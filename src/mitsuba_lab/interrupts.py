@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 import signal
 
-from .plugins.interrupts import in_main_thread, restore
+from .plugins.interrupts import in_main_thread, raise_pending, restore, sticky  # noqa: F401 - sticky for callers
 
 
 @contextlib.contextmanager
@@ -19,7 +19,8 @@ def rendering():
     """Around one render call (``render.render``). Afterwards, however it ends, Python's
     handler is installed again (``restore``). A Ctrl-C that arrives inside ``mi.render`` comes
     out of Dr.Jit as a RuntimeError wrapping the KeyboardInterrupt; it is raised again as
-    KeyboardInterrupt, which is what a notebook or a script expects."""
+    KeyboardInterrupt, which is what a notebook or a script expects. One that was swallowed
+    inside the render (``raise_pending``) is raised when the render returns."""
     from .errors import is_interrupt
 
     try:
@@ -30,6 +31,7 @@ def rendering():
         raise
     finally:
         restore()
+    raise_pending()
 
 
 @contextlib.contextmanager

@@ -106,6 +106,7 @@ def sweep(config, output=None, *, progress: bool = True, cluster: str | None = N
         strategy left out), with the message ``mitsuba-lab sweep`` prints (several problems: one
         line each); nothing is rendered then.
     """
+    from .. import interrupts
     from ..progress import NoProgress, ProgressBar
     from .sweep import done_line, prepare_sweep, run_sweep
 
@@ -115,6 +116,7 @@ def sweep(config, output=None, *, progress: bool = True, cluster: str | None = N
     folder = os.fspath(output) if output is not None else config.output
     bar = ProgressBar() if progress else NoProgress()
     start = time.perf_counter()
-    paths = run_sweep(config, plan, folder, bar, cluster, in_process=in_process)
+    with interrupts.sticky():             # a Ctrl-C swallowed on the way still stops the sweep
+        paths = run_sweep(config, plan, folder, bar, cluster, in_process=in_process)
     bar.message(done_line(config, time.perf_counter() - start, paths))
     return results_table(folder, as_frame, paths)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import LabError
+from ..interrupts import raise_pending
 from .config import InverseConfig
 from .prb import TARGET_SEED, loss_function, make_prb, render_image, scalar
 from .scenes import load_inverse_scene, select_params, set_values, start_and_truth, to_numpy
@@ -135,6 +136,7 @@ def gradient_sweep(cfg: InverseConfig, progress=None) -> GradientSweep:
     done = [0]
 
     def tick(label):
+        raise_pending()                   # a Ctrl-C that Dr.Jit swallowed stops the sweep here
         done[0] += 1
         if progress:
             progress(done[0], total, label)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..interrupts import raise_pending
 from .config import InverseConfig
 from .prb import TARGET_SEED, loss_function, make_prb, render_image, scalar
 from .scenes import load_inverse_scene, select_params, set_values, start_and_truth, to_numpy
@@ -115,6 +116,7 @@ def optimise(cfg: InverseConfig, progress=None) -> OptimisationResult:
         row = {"iteration": it, "loss": scalar(loss), "param_error": param_error(current(), truth),
                "time_s": elapsed, "iteration_s": step, "loss_eval": loss_eval()}
         rows.append(row)
+        raise_pending()                   # a Ctrl-C that Dr.Jit swallowed stops the loop here
         if progress:
             progress(it, cfg.iterations, row)
     final = current()
