@@ -6,9 +6,9 @@ the mask's and the instances' findings at 64 seeds a side, not the suite's 16:
 """
 import pytest
 
-from test_block_agreement import (ALL_GRID_CASES, SEEDS_LAB, SEEDS_REF, assets, check_grid,  # noqa: F401  (a fixture)
-                                  check_instances, check_light_tracing_bias_fails, check_mask)
-from test_block_agreement import _scenes  # noqa: F401  (named here, the suite's conftest drops its scenes when this module ends)
+from test_block_agreement import (  # noqa: F401  (assets: a fixture)
+    ALL_GRID_CASES, SEEDS_LAB, SEEDS_REF, assets, check_grid, check_instances, check_light_tracing_bias_fails, check_mask)
+from test_block_agreement import _scenes  # noqa: F401  (so the suite's conftest drops its scenes)
 
 pytestmark = pytest.mark.slow
 

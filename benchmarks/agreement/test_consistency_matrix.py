@@ -8,7 +8,7 @@ import pytest
 
 import test_consistency
 from test_consistency import ALL_CASES, ALL_DIRECT_CASES, check_agreement, check_direct_only
-from test_consistency import _cache  # noqa: F401  (named here, the suite's conftest drops its scenes when this module ends)
+from test_consistency import _cache  # noqa: F401  (so the suite's conftest drops its scenes)
 
 pytestmark = pytest.mark.slow
 

@@ -7,7 +7,7 @@ import pytest
 
 import test_emitters_and_materials
 from test_emitters_and_materials import ALL_CASES, check_agreement
-from test_emitters_and_materials import _cache  # noqa: F401  (named here, the suite's conftest drops its scenes when this module ends)
+from test_emitters_and_materials import _cache  # noqa: F401  (so the suite's conftest drops its scenes)
 
 pytestmark = pytest.mark.slow
 

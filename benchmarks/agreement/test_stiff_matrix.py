@@ -9,7 +9,7 @@ import pytest
 
 import test_stiff
 from test_stiff import ALL_AGREEMENT_CASES, ALL_SAFETY_CASES, check_agreement, check_pixels
-from test_stiff import _scenes  # noqa: F401  (named here, the suite's conftest drops its scenes when this module ends)
+from test_stiff import _scenes  # noqa: F401  (so the suite's conftest drops its scenes)
 
 pytestmark = pytest.mark.slow
 
@@ -21,7 +21,8 @@ def test_no_nan_inf_or_negative_pixels(scene_name, strategy):
     check_pixels(scene_name, strategy)
 
 
-test_mis_power_reproduces_mitsuba_path_for_the_same_seed = test_stiff.test_mis_power_reproduces_mitsuba_path_for_the_same_seed
+test_mis_power_reproduces_mitsuba_path_for_the_same_seed = \
+    test_stiff.test_mis_power_reproduces_mitsuba_path_for_the_same_seed
 
 
 @pytest.mark.parametrize("scene_name, strategy, spp", ALL_AGREEMENT_CASES)

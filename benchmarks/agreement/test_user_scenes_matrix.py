@@ -10,10 +10,10 @@ largest |z| at each: test_user_scenes' docstring).
 """
 import pytest
 
-from test_user_scenes import (ALL_LATIN_CASES, ALL_LOBE_CASES, ALL_OTHER_VARIANT_CASES, ALL_PHOTON_CASES, RGB,
-                              assets, check_latin_slot, check_one_bounce_too_few_fails, check_other_variant,
-                              check_photon_converges, check_photon_lobe, check_three_percent_fails,
-                              other_variant_params, variant)  # noqa: F401  (assets, variant: fixtures)
+from test_user_scenes import (  # noqa: F401  (assets, variant: fixtures)
+    ALL_LATIN_CASES, ALL_LOBE_CASES, ALL_OTHER_VARIANT_CASES, ALL_PHOTON_CASES, RGB, assets, check_latin_slot,
+    check_one_bounce_too_few_fails, check_other_variant, check_photon_converges, check_photon_lobe,
+    check_three_percent_fails, other_variant_params, variant)
 
 pytestmark = pytest.mark.slow
 

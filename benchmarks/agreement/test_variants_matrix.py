@@ -7,7 +7,8 @@ together and renders its reference once:
 """
 import pytest
 
-from test_variants import ESTIMATORS, SAMPLERS, VARIANTS, check_bias_is_caught, check_estimator, check_sampler, in_variant
+from test_variants import (ESTIMATORS, SAMPLERS, VARIANTS, check_bias_is_caught, check_estimator, check_sampler,
+                           in_variant)
 
 pytestmark = pytest.mark.slow
 

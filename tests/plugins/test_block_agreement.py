@@ -18,7 +18,6 @@ nearly noise-free, so the block test resolves differences of 0.1%.
 """
 import os
 
-import numpy as np
 import pytest
 
 from agreement import assert_blocks_agree, block_test, renders
