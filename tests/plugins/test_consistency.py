@@ -47,7 +47,7 @@ _cache = {}
 
 def scene_for(name):
     if name not in _cache:
-        _cache[name] = load_scene(f"scenes/{name}", res=RES)
+        _cache[name] = load_scene(os.path.join(ROOT, "scenes", name), res=RES)
     return _cache[name]
 
 
@@ -69,37 +69,51 @@ def lab_stack(name, strategy):
     return _cache[key]
 
 
+#: The full scene x strategy matrix (19 cases): benchmarks/agreement/test_consistency_matrix.py.
+ALL_CASES = [(scene, strategy) for scene in SCENES for strategy in STRATEGIES
+             if strategy != "naive" or scene in NAIVE_SCENES]
 #: The suite keeps one case per estimator on the box (lab_naive, lab_nee, lab_mis with the power
 #: heuristic, whose stack the bias test scales) and one lab_mis case per other scene (the balance
 #: heuristic under the small light; power with beta 3 and two emitter samples on Veach's plates):
-#: every estimator and every scene. The full scene x strategy matrix (19 cases) and the two other
-#: direct-only cases run in benchmarks/agreement/test_consistency_matrix.py.
+#: every estimator and every scene.
 CASES = [("cornell_box.xml", "naive"), ("cornell_box.xml", "nee"), ("cornell_box.xml", "mis_power"),
          ("glossy_small_light.xml", "mis_balance"), ("veach_mis.xml", "mis_power3_nl2")]
 
 
 @pytest.mark.parametrize("scene_name, strategy", CASES)
-def test_agrees_with_mitsuba_path(scene_name, strategy, monkeypatch):
-    monkeypatch.chdir(ROOT)
+def test_agrees_with_mitsuba_path(scene_name, strategy):
+    check_agreement(scene_name, strategy)
+
+
+def check_agreement(scene_name, strategy):
+    """The strategy's renders of the scene against `path`'s: |z| <= Z_BOUND."""
     result = z_scores(lab_stack(scene_name, strategy), reference(scene_name))
     assert result.max_abs_z <= Z_BOUND, (
         f"{strategy} on {scene_name}: max |z| = {result.max_abs_z:.2f}, image z = {result.image_z}, "
         f"relative difference of means = {result.rel_diff}")
 
 
-DIRECT_CASES = {  # lab strategy -> Mitsuba `direct` parameters that make the same estimator family
+ALL_DIRECT_CASES = {  # lab strategy -> Mitsuba `direct` parameters that make the same estimator family
     "lab_mis_nl2": (("lab_mis", {"emitter_samples": 2}), {"emitter_samples": 2, "bsdf_samples": 1}),
     "lab_nee": (("lab_nee", {}), {"emitter_samples": 1, "bsdf_samples": 0}),
     "lab_naive": (("lab_naive", {}), {"emitter_samples": 0, "bsdf_samples": 1}),
 }
 
 
-@pytest.mark.parametrize("case", ["lab_mis_nl2"])      # (lab_nee's and lab_naive's: the matrix, see CASES)
-def test_direct_only_agrees_with_mitsuba_direct(case, monkeypatch):
+#: The suite keeps lab_mis's (lab_nee's and lab_naive's run in the matrix).
+DIRECT_CASES = ["lab_mis_nl2"]
+
+
+@pytest.mark.parametrize("case", DIRECT_CASES)
+def test_direct_only_agrees_with_mitsuba_direct(case):
+    check_direct_only(case)
+
+
+def check_direct_only(case):
+    """The case's lab estimator at max_depth 2 against Mitsuba's `direct`: |z| <= Z_BOUND."""
     # max_depth 2 = emitters seen directly + one bounce of direct light (no delta BSDFs here,
     # where Mitsuba's `direct` and lab_nee would differ by design).
-    monkeypatch.chdir(ROOT)
-    (kind, params), direct_params = DIRECT_CASES[case]
+    (kind, params), direct_params = ALL_DIRECT_CASES[case]
     scene = scene_for("cornell_box.xml")
     lab = renders(scene, make_integrator(kind, {"max_depth": 2, **params}), 128, LAB_SEEDS)
     ref = renders(scene, make_integrator("direct", direct_params), 128, REF_SEEDS)
@@ -107,9 +121,8 @@ def test_direct_only_agrees_with_mitsuba_direct(case, monkeypatch):
     assert result.max_abs_z <= Z_BOUND, f"{case}: max |z| = {result.max_abs_z:.2f}, image z = {result.image_z}"
 
 
-def test_a_three_percent_bias_is_caught(monkeypatch):
+def test_a_three_percent_bias_is_caught():
     """The test above has the power it claims: a 3% error fails it."""
-    monkeypatch.chdir(ROOT)
     lab = lab_stack("cornell_box.xml", "mis_power")      # (the renders that agree, scaled by 1.03)
     result = z_scores(lab * 1.03, reference("cornell_box.xml"))
     assert result.max_abs_z > Z_BOUND

@@ -67,11 +67,12 @@ SPP = {name: 8 for name in SCENE_NAMES} | {"spot_and_directional": 16}
 #: The subset also checked under mono and spectral: a textured area light with all three path
 #: tracers on a non-square film, and delta lights only (two path tracers) with a crop window.
 OTHER_VARIANT_SCENES = ("textured_mesh_room", "spot_and_directional")
+#: Every path tracer on both scenes in both variants: benchmarks/agreement/test_user_scenes_matrix.py.
+ALL_OTHER_VARIANT_CASES = [(v, name, estimator) for v in (MONO, SPECTRAL) for name in OTHER_VARIANT_SCENES
+                           for estimator in PATH_TRACERS]
 #: The suite keeps one (variant, scene, path tracer) each for mono and spectral, one reference
-#: each (every path tracer on both scenes in both variants: benchmarks/agreement/
-#: test_user_scenes_matrix.py; every estimator in every variant on the box: test_variants.py).
+#: each (every estimator in every variant on the box: test_variants.py).
 OTHER_VARIANT_CASES = ((MONO, "textured_mesh_room", "lab_mis"), (SPECTRAL, "spot_and_directional", "lab_nee"))
-#: Linear sRGB -> luminance Y (Rec. 709 primaries, as Mitsuba's film).
 
 _scenes: dict = {}
 _references: dict = {}
@@ -106,11 +107,11 @@ def check_pixels(stack, what):
     assert not problem, f"{what}: {problem}"
 
 
-def reference(assets, name):
-    """Mitsuba's `path` with its own independent sampler: SEEDS x (REF_FACTOR x spp)."""
-    key = (mi.variant(), name)
+def reference(assets, name, ref_factor=REF_FACTOR):
+    """Mitsuba's `path` with its own independent sampler: SEEDS x (ref_factor x spp)."""
+    key = (mi.variant(), name, ref_factor)
     if key not in _references:
-        spp = REF_FACTOR * SPP[name]
+        spp = ref_factor * SPP[name]
         stack = renders(scene(assets, name), make_integrator("path", {"max_depth": us.max_depth(name)}),
                         spp, REF_SEEDS)
         check_pixels(stack, f"path on {name}")
@@ -132,7 +133,7 @@ def latin_estimator(assets, name, slot) -> str:
 _stacks: dict = {}
 
 
-def agreement(assets, name, estimator, sampler, scale=1.0, depth_change=0):
+def agreement(assets, name, estimator, sampler, scale=1.0, depth_change=0, ref_factor=REF_FACTOR):
     """z-scores of the estimator's renders (x ``scale``) against the reference; the renders are
     made once per (variant, scene, estimator, sampler, depth): test_a_biased_renderer_fails
     scales the Latin square's own lab_mis + lab_sobol stack on textured_mesh_room."""
@@ -142,7 +143,7 @@ def agreement(assets, name, estimator, sampler, scale=1.0, depth_change=0):
         stack = renders(scene(assets, name, sampler), integrator, SPP[name], LAB_SEEDS)
         check_pixels(stack, f"{estimator} + {sampler} on {name}")
         _stacks[key] = stack
-    return z_scores(_stacks[key] * scale, reference(assets, name))
+    return z_scores(_stacks[key] * scale, reference(assets, name, ref_factor))
 
 
 def describe(result, name, estimator, sampler, variant_name) -> str:
@@ -151,36 +152,61 @@ def describe(result, name, estimator, sampler, variant_name) -> str:
             f"relative difference of means = {np.round(result.rel_diff, 4)}")
 
 
-#: The suite keeps one slot of the Latin square per scene (the full square, 5 slots a scene, runs in
-#: benchmarks/agreement/test_user_scenes_matrix.py): slot (k + 2) mod 5 on scene k puts every scene
-#: (its features), every sampler and every path tracer in the suite at least once, and lab_mis +
-#: lab_sobol on textured_mesh_room, the stack test_a_biased_renderer_fails scales.
+def latin_case(name, slot):
+    return pytest.param(RGB, name, slot, id=f"{name}-{SAMPLERS[slot]}")
+
+
+#: The whole Latin square, 5 slots a scene: benchmarks/agreement/test_user_scenes_matrix.py.
+ALL_LATIN_CASES = [latin_case(name, slot) for name in SCENE_NAMES for slot in range(len(SAMPLERS))]
+#: The suite keeps one slot of the Latin square per scene: slot (k + 2) mod 5 on scene k puts every
+#: scene (its features), every sampler and every path tracer in the suite at least once, and
+#: lab_mis + lab_sobol on textured_mesh_room, the stack test_a_biased_renderer_fails scales.
 KEPT_SLOTS = {name: (k + 2) % len(SAMPLERS) for k, name in enumerate(SCENE_NAMES)}
+LATIN_CASES = [latin_case(name, KEPT_SLOTS[name]) for name in SCENE_NAMES]
 
 
-@pytest.mark.parametrize("variant, name, slot", [
-    pytest.param(RGB, name, KEPT_SLOTS[name], id=f"{name}-{SAMPLERS[KEPT_SLOTS[name]]}")
-    for name in SCENE_NAMES], indirect=["variant"])
+@pytest.mark.parametrize("variant, name, slot", LATIN_CASES, indirect=["variant"])
 def test_path_tracers_agree_with_path(variant, assets, name, slot):
     """RGB: one slot of the Latin square per scene (``KEPT_SLOTS``; the whole square in
     benchmarks/agreement/test_user_scenes_matrix.py)."""
+    check_latin_slot(variant, assets, name, slot)
+
+
+def check_latin_slot(variant, assets, name, slot, ref_factor=REF_FACTOR):
+    """The slot's sampler and path tracer on the scene against `path`: |z| <= Z_BOUND."""
     sampler = SAMPLERS[slot]
     estimator = latin_estimator(assets, name, slot)
-    result = agreement(assets, name, estimator, sampler)
+    result = agreement(assets, name, estimator, sampler, ref_factor=ref_factor)
     print(f"{estimator} + {sampler} on {name} ({variant}): max |z| {result.max_abs_z:.2f}")
     assert result.max_abs_z <= Z_BOUND, describe(result, name, estimator, sampler, variant)
+
+
+#: The stack the power proofs change: lab_mis + lab_sobol on this scene.
+BIASED_SCENE = "textured_mesh_room"
 
 
 @pytest.mark.parametrize("variant", [RGB], indirect=True)
 def test_a_biased_renderer_fails(variant, assets):
     """The check has the power claimed above: a 3% error fails it (the kept Latin-square stack,
-    scaled: no render of its own). One bounce too few fails it too: that proof renders a stack of
-    its own and runs in benchmarks/agreement/test_user_scenes_matrix.py."""
-    name = "textured_mesh_room"
-    assert latin_estimator(assets, name, KEPT_SLOTS[name]) == "lab_mis" and SAMPLERS[KEPT_SLOTS[name]] == "lab_sobol"
-    scaled = agreement(assets, name, "lab_mis", "lab_sobol", scale=1.03)
-    print(f"lab_mis x 1.03 on {name}: max |z| {scaled.max_abs_z:.2f}")
-    assert scaled.max_abs_z > Z_BOUND, describe(scaled, name, "lab_mis x 1.03", "lab_sobol", variant)
+    scaled: no render of its own). One bounce too few fails it too (``check_one_bounce_too_few_fails``):
+    that proof renders a stack of its own and runs in benchmarks."""
+    slot = KEPT_SLOTS[BIASED_SCENE]
+    assert latin_estimator(assets, BIASED_SCENE, slot) == "lab_mis" and SAMPLERS[slot] == "lab_sobol"
+    check_three_percent_fails(variant, assets)
+
+
+def check_three_percent_fails(variant, assets, ref_factor=REF_FACTOR):
+    """lab_mis + lab_sobol x 1.03 fails the agreement check."""
+    scaled = agreement(assets, BIASED_SCENE, "lab_mis", "lab_sobol", scale=1.03, ref_factor=ref_factor)
+    print(f"lab_mis x 1.03 on {BIASED_SCENE}: max |z| {scaled.max_abs_z:.2f}")
+    assert scaled.max_abs_z > Z_BOUND, describe(scaled, BIASED_SCENE, "lab_mis x 1.03", "lab_sobol", variant)
+
+
+def check_one_bounce_too_few_fails(variant, assets, ref_factor=REF_FACTOR):
+    """lab_mis + lab_sobol with max_depth - 1 fails the agreement check."""
+    shallow = agreement(assets, BIASED_SCENE, "lab_mis", "lab_sobol", depth_change=-1, ref_factor=ref_factor)
+    print(f"lab_mis max_depth - 1 on {BIASED_SCENE}: max |z| {shallow.max_abs_z:.2f}")
+    assert shallow.max_abs_z > Z_BOUND, describe(shallow, BIASED_SCENE, "lab_mis (max_depth - 1)", "lab_sobol", variant)
 
 
 PHOTONS_PER_PASS = 40000
@@ -195,10 +221,20 @@ PHOTON_REGION = 0.15
 PHOTON_REGION_PASSES = 16
 
 
+#: The smooth plastic box and the glossy boxes it is compared with (benchmarks/agreement/
+#: test_user_scenes_matrix.py); the suite keeps the plastic box.
+ALL_LOBE_CASES = [("principled_and_blend", "plastic_box"), ("textured_mesh_room", "gold_box"),
+                  ("mixed_lights_crop", "red_box")]
+LOBE_CASES = ALL_LOBE_CASES[:1]
+
+
 @pytest.mark.parametrize("variant", [RGB], indirect=True)
-@pytest.mark.parametrize("name, shape_id", [("principled_and_blend", "plastic_box")])   # (the gold and red
-# boxes, the glossy comparisons: benchmarks/agreement/test_user_scenes_matrix.py)
+@pytest.mark.parametrize("name, shape_id", LOBE_CASES)
 def test_photon_keeps_the_light_of_every_lobe(variant, assets, name, shape_id):
+    check_photon_lobe(variant, assets, name, shape_id)
+
+
+def check_photon_lobe(variant, assets, name, shape_id, ref_factor=REF_FACTOR):
     """The light a BSDF's delta lobe reflects is not lost: over the smooth plastic box (delta
     coat + diffuse base) lab_photon comes as close to path as over the glossy boxes (gold
     roughconductor, twosided roughplastic), whose only error is the kernel's blur. 16 passes of
@@ -211,29 +247,39 @@ def test_photon_keeps_the_light_of_every_lobe(variant, assets, name, shape_id):
                                                 "max_depth": us.max_depth(name)})
     image = renders(lab_scene, integrator, 1, [SEED_OFFSET + 7])[0]
     check_pixels(image, f"lab_photon on {name}")
-    ratio = float(image[mask].mean() / reference(assets, name).mean(axis=0)[mask].mean())
+    ratio = float(image[mask].mean() / reference(assets, name, ref_factor).mean(axis=0)[mask].mean())
     print(f"lab_photon on {name}, '{shape_id}': {ratio:.3f} x path's")
     assert abs(ratio - 1) <= PHOTON_REGION, (
         f"lab_photon on {name}: mean over '{shape_id}' ({int(mask.sum())} pixels) = {ratio:.3f} x path's "
         f"after {PHOTON_REGION_PASSES} passes (wanted within {PHOTON_REGION:.0%})")
 
 
-#: lab_photon's convergence in rgb on the scenes whose features are its own concern (meshes and a
-#: textured light, principled and blend, delta lights only, an environment map behind a thin lens);
-#: instanced_ortho, normal_bump_maps and mixed_lights_crop: benchmarks/agreement/test_user_scenes_matrix.py.
+def photon_cases(rgb_scenes, other_variant_cases):
+    return ([pytest.param(RGB, name, id=f"rgb-{name}") for name in rgb_scenes]
+            + [pytest.param(v, name, id=f"{v[8:]}-{name}") for v, name in other_variant_cases])
+
+
+#: lab_photon's convergence on every scene in rgb and on OTHER_VARIANT_SCENES in mono and spectral:
+#: benchmarks/agreement/test_user_scenes_matrix.py. The suite keeps, in rgb, the scenes whose features
+#: are its own concern (meshes and a textured light, principled and blend, delta lights only, an
+#: environment map behind a thin lens), and the scenes of OTHER_VARIANT_CASES.
+ALL_PHOTON_CASES = photon_cases(SCENE_NAMES, [(v, name) for v in (MONO, SPECTRAL) for name in OTHER_VARIANT_SCENES])
 PHOTON_RGB_SCENES = ("textured_mesh_room", "principled_and_blend", "spot_and_directional", "thinlens_envmap")
+PHOTON_CASES = photon_cases(PHOTON_RGB_SCENES, [(v, name) for v, name, _ in OTHER_VARIANT_CASES])
 
 
-@pytest.mark.parametrize("variant, name", [pytest.param(RGB, name, id=f"rgb-{name}") for name in PHOTON_RGB_SCENES]
-                         + [pytest.param(v, name, id=f"{v[8:]}-{name}")
-                            for v, name, _ in OTHER_VARIANT_CASES], indirect=["variant"])
+@pytest.mark.parametrize("variant, name", PHOTON_CASES, indirect=["variant"])
 def test_photon_converges_to_path(variant, assets, name):
+    check_photon_converges(variant, assets, name)
+
+
+def check_photon_converges(variant, assets, name, ref_factor=REF_FACTOR):
     """relMSE against the reference (the mean of the reference stack) falls from 1 to 8 passes
     and ends low; one camera sample per pass, the sampler rotating over scenes."""
     ok, reason = applicability(assets, name, "lab_photon")
     assert ok, reason
     sampler = SAMPLERS[SCENE_NAMES.index(name) % len(SAMPLERS)]
-    ref = reference(assets, name).mean(axis=0)
+    ref = reference(assets, name, ref_factor).mean(axis=0)
     errors = {}
     # (the radius these bounds were set for: the scene's size over the film's, the automatic radius
     # before it became the pixel footprint, which on spot_and_directional is smaller and noisier at
@@ -260,14 +306,21 @@ def other_variant_sampler(variant_name, name, estimator) -> str:
     return SAMPLERS[(PATH_TRACERS.index(estimator) + shift) % len(SAMPLERS)]
 
 
-@pytest.mark.parametrize("variant, name, estimator", [
-    pytest.param(v, name, estimator, id=f"{v[8:]}-{name}-{estimator}") for v, name, estimator in OTHER_VARIANT_CASES],
-    indirect=["variant"])
+def other_variant_params(cases):
+    return [pytest.param(v, name, estimator, id=f"{v[8:]}-{name}-{estimator}") for v, name, estimator in cases]
+
+
+@pytest.mark.parametrize("variant, name, estimator", other_variant_params(OTHER_VARIANT_CASES), indirect=["variant"])
 def test_path_tracers_agree_under_mono_and_spectral(variant, assets, name, estimator):
+    check_other_variant(variant, assets, name, estimator)
+
+
+def check_other_variant(variant, assets, name, estimator, ref_factor=REF_FACTOR):
+    """The path tracer in mono or spectral against `path`: |z| <= Z_BOUND (skipped where it does not apply)."""
     ok, reason = applicability(assets, name, estimator)
     if not ok:
         pytest.skip(reason)
     sampler = other_variant_sampler(variant, name, estimator)
-    result = agreement(assets, name, estimator, sampler)
+    result = agreement(assets, name, estimator, sampler, ref_factor=ref_factor)
     print(f"{estimator} + {sampler} on {name} ({variant}): max |z| {result.max_abs_z:.2f}")
     assert result.max_abs_z <= Z_BOUND, describe(result, name, estimator, sampler, variant)

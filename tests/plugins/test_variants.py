@@ -49,8 +49,8 @@ def box(sampler: dict | None = None) -> dict:
 
 #: The suite keeps, per variant, lab_mis (whose stack the bias test scales), one other estimator and
 #: one sampler, rotating so that every estimator and every sampler runs in some variant and every
-#: variant runs three lab stacks against its reference (9 before). Every estimator and every
-#: sampler in every variant: benchmarks/agreement/test_variants_matrix.py.
+#: variant runs three lab stacks against its reference (9 before). Every estimator (``ESTIMATORS``)
+#: and every sampler (``SAMPLERS``) in every variant: benchmarks/agreement/test_variants_matrix.py.
 OTHER_ESTIMATORS = [e for e in ESTIMATORS if e != "lab_mis"]
 ESTIMATOR_CASES = [(v, e) for i, v in enumerate(VARIANTS) for e in ("lab_mis", OTHER_ESTIMATORS[i % len(OTHER_ESTIMATORS)])]
 SAMPLER_CASES = [(v, list(SAMPLERS)[i % len(SAMPLERS)]) for i, v in enumerate(VARIANTS)]
@@ -64,10 +64,16 @@ _stacks: dict = {}
 
 @pytest.fixture(scope="module")
 def variant(request):
-    mitsuba_lab.use_variant(request.param)
-    cache = _stacks.setdefault(request.param, {})
+    yield from in_variant(request.param)
+
+
+def in_variant(name):
+    """The body of a `variant` fixture: the variant switched on, with its stacks; the run's own
+    variant back at teardown."""
+    mitsuba_lab.use_variant(name)
+    cache = _stacks.setdefault(name, {})
     cache.pop("scene", None)               # (a scene belongs to one activation of its variant)
-    yield request.param, cache
+    yield name, cache
     cache.pop("scene", None)
     mitsuba_lab.use_variant(backend.HOME)
 
@@ -99,6 +105,11 @@ def estimator_images(cache, strategy):
 
 @pytest.mark.parametrize("variant, strategy", ESTIMATOR_CASES, indirect=["variant"])
 def test_estimators_agree_with_path_in_every_variant(variant, strategy):
+    check_estimator(variant, strategy)
+
+
+def check_estimator(variant, strategy):
+    """The estimator's renders of the box in the variant against `path`'s: |z| <= Z_BOUND, sound pixels."""
     name, cache = variant
     ref = reference(cache)
     images = estimator_images(cache, strategy)
@@ -108,6 +119,11 @@ def test_estimators_agree_with_path_in_every_variant(variant, strategy):
 
 @pytest.mark.parametrize("variant, sampler", SAMPLER_CASES, indirect=["variant"])
 def test_samplers_agree_with_independent_in_every_variant(variant, sampler):
+    check_sampler(variant, sampler)
+
+
+def check_sampler(variant, sampler):
+    """lab_mis with the sampler in the variant against `path` with the independent one."""
     name, cache = variant
     ref = reference(cache)
     scene = mi.load_dict(box({"type": sampler, **SAMPLERS[sampler]}))
@@ -117,6 +133,11 @@ def test_samplers_agree_with_independent_in_every_variant(variant, sampler):
 
 @pytest.mark.parametrize("variant", VARIANTS, indirect=True)
 def test_a_three_percent_bias_is_caught_in_every_variant(variant):
+    check_bias_is_caught(variant)
+
+
+def check_bias_is_caught(variant):
+    """lab_mis's renders x 1.03 fail the agreement check."""
     name, cache = variant
     ref = reference(cache)
     images = estimator_images(cache, "lab_mis")       # (the renders that agree, scaled by 1.03)
