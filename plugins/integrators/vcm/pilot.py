@@ -192,7 +192,9 @@ class Pilot:
         hitting an emitter through them (caustics, light behind glass); path tracing elsewhere.
         On the four scenes of issue 17's targets it is what the pilot chooses: every technique
         10-57x more efficient on the caustic and sds, path tracing 1.6-4.2x on the Cornell box and
-        Veach's plates (``experiments/results/2026-11-28-vcm-defaults-2.md``)."""
+        Veach's plates (``experiments/results/2026-11-28-vcm-defaults-2.md``). Wrong where a glossy
+        shape without a delta lobe focuses a small light (scenes/glossy_small_light.xml: every
+        technique 4.3x better than path tracing at 2 s, 2026-11-28-vcm-defaults-3.md)."""
         return 1.0 if target_shapes(scene, "specular", "lab_vcm") else None
 
     def size(self, plan: PilotPlan, spp: int, path: float | None, every: float | None, pass_iterations: float) -> int:
