@@ -45,7 +45,8 @@ FAMILIES = {
     "lab_mis": {"type": "lab_mis"},
     "lab_photon": {"type": "lab_photon", "photons_per_pass": 4000},
     "lab_bdpt": {"type": "lab_bdpt", "max_vertices": 4000},
-    "lab_vcm": {"type": "lab_vcm", "max_vertices": 4000},
+    # (no pilot: on the Cornell box below its share it renders path tracing alone, one kernel)
+    "lab_vcm": {"type": "lab_vcm", "max_vertices": 4000, "pilot": False},
 }
 MULTI_PASS = ("lab_photon", "lab_bdpt", "lab_vcm")
 #: What sigint_cli.py writes when a render begins, and at a multi-pass integrator's pass boundary.

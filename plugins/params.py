@@ -255,7 +255,8 @@ LAB_VCM = (
           "iteration (pilot_costs) with every technique and with path tracing alone, and the render uses the lower "
           "(path tracing alone: mode pt, lab_mis's estimator)"),
     Param("pilot_share", float, 0.125, "with pilot: the most the pilot's counted work (cost_* x its counts) may be of "
-          "the whole render's; where its fewest iterations would cost more, no pilot: every technique at light_paths; "
+          "the whole render's; where its fewest iterations would cost more, no pilot: every technique at light_paths if "
+          "the scene has a specular shape (only delta lobes), else path tracing alone; "
           "1 = no bound (pilot renders of max(4, spp / 128) iterations)",
           check=lambda v: 0.0 < v <= 1.0, expected="a number in (0, 1]"),
     Param("light_paths_max", float, VCM_LIGHT_PATHS_MAX, "with pilot: the most light subpaths per camera subpath the "

@@ -10,7 +10,8 @@
   tracing on Veach's plates and every technique on the caustic scene; light that path tracing's
   pilot misses counts as error. Its counted work is at most ``pilot_share`` (1/8) of the whole
   render's: no pilot where it would be more, or a pilot that stops after its first pair of renders
-  once every technique's own counts show the rest would pass it.
+  once every technique's own counts show the rest would pass it; then the scene decides (every
+  technique where a shape is specular, path tracing elsewhere).
 """
 import numpy as np
 import pytest
@@ -233,19 +234,18 @@ def test_the_pilot_is_at_most_its_share_of_the_render():
     """``pilot_share`` (1/8 by default) bounds the pilot's counted work (its renders' counts x the
     ``cost_*`` parameters: no clock) by that share of the whole render's. The Cornell box at 16x16
     with `vcm_auto`'s settings: at 64 spp even the fewest pilot iterations would pass the share, so
-    there is no pilot (no pilot render at all) and the image is lab_vcm's without one, every
-    technique at light_paths; at 8192 spp a pilot of 6 iterations per render fits (path tracing
-    costs 0.61 ms per iteration there, every technique 6.5 ms and a pass 71 ms), chooses path
-    tracing, as the unbounded one does at 512 spp on 64x64, and costs at most 1/8 of the whole."""
+    there is no pilot (no pilot render at all) and the choice is the scene's fallback, path tracing
+    (no specular shape): the image is lab_mis's with the same seed (a render of every technique
+    instead fails the comparison); at 8192 spp a pilot of 6 iterations per render fits (path
+    tracing costs 0.61 ms per iteration there, every technique 6.5 ms and a pass 71 ms), chooses
+    path tracing, as the unbounded one does at 512 spp on 64x64, and costs at most 1/8 of the whole."""
     scene = load_scene(scene_path("cornell_box.xml"), res=16)
     integrator = vcm(**AUTO, count_rays=True)
     image = render(scene, integrator, spp=64, seed=5)
     stats = integrator.bdpt_stats()
     assert stats["pilot_iterations"] == 0 and stats["pilot_counted_s"] == 0.0 and stats["pilot_scores"] == {}
-    assert stats["light_paths_chosen"] == 1.0 and not stats["chose_path_tracing"] and stats["pilot_share"] == 0.0
-    unpiloted = render(scene, vcm(**{k: v for k, v in AUTO.items() if k not in ("pilot", "light_paths_max")}),
-                       spp=64, seed=5)
-    np.testing.assert_allclose(image, unpiloted, rtol=1e-6, atol=1e-7)      # (float atomics in the splats)
+    assert stats["light_paths_chosen"] == 0.0 and stats["chose_path_tracing"] and stats["light_subpaths"] == 0
+    np.testing.assert_array_equal(image, render(scene, integrator.pilot.path_tracer(), spp=64, seed=5))
     render(scene, integrator, spp=8192, seed=5)
     stats = integrator.bdpt_stats()
     print(f"8192 spp: {stats['pilot_iterations']} iterations per pilot render, pilot {stats['pilot_counted_s']:.3f} "
@@ -255,19 +255,36 @@ def test_the_pilot_is_at_most_its_share_of_the_render():
     assert stats["pilot_share"] == stats["pilot_counted_s"] / (stats["pilot_counted_s"] + stats["render_counted_s"])
 
 
+def test_without_a_pilot_a_scene_with_a_specular_shape_renders_every_technique():
+    """The caustic scene (a glass sphere) at 16x16 and 64 spp: no pilot fits, and the fallback is
+    every technique at light_paths, the image of lab_vcm without a pilot."""
+    scene = load_scene(scene_path("caustic.xml"), res=16)
+    integrator = vcm(**AUTO, count_rays=True)
+    image = render(scene, integrator, spp=64, seed=5)
+    stats = integrator.bdpt_stats()
+    assert stats["pilot_iterations"] == 0 and stats["pilot_scores"] == {} and stats["pilot_share"] == 0.0
+    assert stats["light_paths_chosen"] == 1.0 and not stats["chose_path_tracing"]
+    unpiloted = render(scene, vcm(**{k: v for k, v in AUTO.items() if k not in ("pilot", "light_paths_max")}),
+                       spp=64, seed=5)
+    np.testing.assert_allclose(image, unpiloted, rtol=1e-6, atol=1e-7)      # (float atomics in the splats)
+
+
 def test_a_pilot_that_would_pass_its_share_stops_after_its_first_pair():
     """The Cornell box at 16x16 and 2048 spp: priced at EVERY_OVER_PATH_PLAN x path tracing the
     whole pilot does not fit in 1/8, its first pair of renders does (a pass, 71 ms counted, is 117
     iterations of path tracing there); counted, every technique's 10.7x path tracing still leaves
-    the whole pilot over its share (it needs about 5900 spp), so it stops: every technique chosen,
-    no scores, and what it did cost (one every-technique render, path tracing's counted iteration
-    and first render) within the share of spp iterations of path tracing."""
+    the whole pilot over its share (it needs about 5900 spp), so it stops: no scores, the scene's
+    fallback (path tracing: no specular shape) with what the pilot rendered of it (its counted
+    iteration and first render of 4: 5 iterations) to average in, and what it did cost (one
+    every-technique render too) within the share of spp iterations of path tracing."""
     scene = load_scene(scene_path("cornell_box.xml"), res=16)
     integrator = vcm(**AUTO)
     integrator.first_radius = AUTO["radius"]      # (what render() sets before its pilot)
     pilot = integrator.pilot
     every, camera = pilot.companion(), pilot.path_tracer()
-    assert pilot.run(scene, scene.sensors()[0], 5, 2048, every, camera) == (1.0, None, 0, {})
+    choice, image, camera_spp, scores = pilot.run(scene, scene.sensors()[0], 5, 2048, every, camera)
+    assert choice is None and camera_spp == 1 + selection.PILOT_MIN_ITERATIONS and scores == {}
+    assert image.shape == (16, 16, 3) and np.all(np.isfinite(image)) and image.mean() > 0
     assert pilot.iterations == 0 and pilot.every_all["passes"] == 1
     path_iteration = selection.seconds(pilot.path_all, "path_tracing", integrator.values) / (1 + 4)
     print(f"stopped: {pilot.counted_s:.4f} counted s, budget {selection.share_budget(1 / 8, 2048 * path_iteration):.4f}")

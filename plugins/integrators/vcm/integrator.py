@@ -212,8 +212,10 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     them) and, before it has rendered every technique, prices an iteration of it at
     ``selection.EVERY_OVER_PATH_PLAN`` times that, checked against every technique's own counts
     after its first pilot render. Where even its fewest iterations (``selection.PILOT_MIN_ITERATIONS``
-    per render: fewer chose wrongly on sds) would pass the share there is no pilot, and the render
-    is every technique at ``light_paths``, as without one: on the Cornell box at 64x64 the smallest
+    per render: fewer chose wrongly on sds) would pass the share there is no pilot, and the choice
+    follows the scene (``Pilot.fallback``): every technique at ``light_paths`` where a shape has only
+    delta lobes (glass, mirrors: caustics, light behind glass), path tracing alone elsewhere, with
+    what the pilot rendered of path tracing averaged in. On the Cornell box at 64x64 the smallest
     pilot costs the counted work of about 276 iterations of path tracing, so at the default
     share of 1/8 it starts at about 1930 spp (2048 spp: 4 iterations per pilot render, 0.12 of
     the counted work), and at 1024 spp it stops after its first pair of renders (0.005) (``experiments/results/2026-11-28-vcm-pilot.md``); ``pilot_share = 1`` sizes it

@@ -18,6 +18,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitsuba_lab.plugins.integrators.bdpt.passes import pass_seed
+from mitsuba_lab.plugins.integrators.common.aim import target_shapes
 from mitsuba_lab.plugins.integrators.common.support import render_arguments
 
 from .selection import (EVERY_OVER_PATH_PLAN, PATH_TRACING_SIZE, PILOT_MIN_ITERATIONS, PILOT_RENDERS, PilotCosts,
@@ -82,8 +83,9 @@ class Pilot:
         seconds per iteration), from pilot renders of both (``selection``): priced by the work
         they count (``pilot_costs = counted``) or by their times (``measured``). The pilot is sized
         so that its counted work is at most ``pilot_share`` of the whole render's (``size``); where
-        even its fewest iterations would cost more, it renders every technique unpiloted: (1.0,
-        None, 0, {}), ``iterations`` 0."""
+        even its fewest iterations would cost more, the choice is ``fallback``'s, with path
+        tracing's image of what the pilot rendered of it (None if nothing) and no scores,
+        ``iterations`` 0."""
         values = self.plugin.values
         ratios = light_path_ratios(values["light_paths"], values["light_paths_max"])
         counted = values["pilot_costs"] == "counted"
@@ -109,6 +111,7 @@ class Pilot:
         images = {"every": [], "shared": [], "camera": []}
         large, camera_times = [], []
         every_work = Counter()
+        first = iterations
         for r in range(PILOT_RENDERS if iterations else 0):
             for name, integrator in (("every", every), ("camera", camera)):
                 image, secs = timed(integrator, scene, sensor, pass_seed(base, r + 1), iterations)
@@ -132,7 +135,13 @@ class Pilot:
             self.counted_s = every_seconds(self.every_all, values) + seconds(self.path_all, "path_tracing", values)
             self.variances = self.costs = None
             self.work = {}
-            return 1.0, None, 0, {}
+            choice = self.fallback(scene)
+            if choice is not None or probe is None:
+                return choice, None, 0, {}
+            # path tracing: the probe's iteration and a first pair's render are its estimator
+            done = [probe] + [image * first for image in images["camera"]]
+            camera_spp = 1 + first * len(images["camera"])
+            return None, np.sum(done, axis=0) / camera_spp, camera_spp, {}
         self.iterations = iterations
         if len(ratios) > 1:       # render 0's camera seed, a light seed of its own
             every.passes.light_seed = pass_seed(base ^ LIGHT_SALT, 1)
@@ -175,6 +184,19 @@ class Pilot:
         self.variances, self.costs = variances, costs
         return choice, pilot_image, camera_spp, scores
 
+    @staticmethod
+    def fallback(scene) -> float | None:
+        """The choice where no pilot fits (None: path tracing alone; 1.0: every technique at
+        light_paths), from the scene alone: every technique where a shape has only delta lobes
+        (``aim.target_shapes``' "specular": glass, mirrors), which path tracing reaches only by
+        hitting an emitter through them (caustics, light behind glass); path tracing elsewhere.
+        On the four scenes of issue 17's targets it is what the pilot chooses: every technique
+        10-57x more efficient on the caustic and sds, path tracing 1.6-4.2x on the Cornell box and
+        Veach's plates (``experiments/results/2026-11-28-vcm-defaults-2.md``). Wrong where a glossy
+        shape without a delta lobe focuses a small light (scenes/glossy_small_light.xml: every
+        technique 4.3x better than path tracing at 2 s, 2026-11-28-vcm-defaults-3.md)."""
+        return 1.0 if target_shapes(scene, "specular", "lab_vcm") else None
+
     def size(self, plan: PilotPlan, spp: int, path: float | None, every: float | None, pass_iterations: float) -> int:
         """Iterations per pilot render within ``pilot_share`` of the render (0: no pilot). The
         render costs at least ``spp`` x path tracing's counted seconds per iteration (``path``;
@@ -216,11 +238,11 @@ class Pilot:
             self.plugin.stats = self.plugin.passes.stats_class(passes=1, camera_s=secs)
             render_counts = {k: v - before.get(k, 0) for k, v in camera.ray_counts(reset=False).items()}
             render_s = seconds(render_counts, "path_tracing", values)
-            # the pilot's path tracing is this render's estimator: its iterations count too
-            out = np.array(image)
-            channels = pilot_image.shape[-1]
-            out[..., :channels] = (spp * out[..., :channels] + pilot_spp * pilot_image) / (spp + pilot_spp)
-            image = mi.TensorXf(out)
+            if pilot_spp:       # the pilot's path tracing is this render's estimator: its iterations count too
+                out = np.array(image)
+                channels = pilot_image.shape[-1]
+                out[..., :channels] = (spp * out[..., :channels] + pilot_spp * pilot_image) / (spp + pilot_spp)
+                image = mi.TensorXf(out)
         elif choice == 1.0:
             image = self.plugin.render_every(scene, sensor, seed, spp, develop, evaluate)
             work = self.plugin.work_counts()

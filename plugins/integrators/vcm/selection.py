@@ -14,7 +14,8 @@ measured variance and cost; this is its coarsest form, one choice for the whole 
   ``EVERY_OVER_PATH_PLAN`` times it until its first render of them has counted their own, and
   renders the most iterations per render up to ``pilot_iterations`` that fit
   (``PilotPlan.iterations``); none at all where ``PILOT_MIN_ITERATIONS`` would not fit (then the
-  render is every technique at ``light_paths``). The choice rests on ``PILOT_RENDERS`` independent
+  render is ``pilot.Pilot.fallback``'s choice: every technique at ``light_paths`` where the scene has
+  a shape with only delta lobes, path tracing alone elsewhere). The choice rests on ``PILOT_RENDERS`` independent
   renders of each kind of at least ``PILOT_MIN_ITERATIONS`` iterations (16 or more independent
   iterations of each, spread over every pixel of the image);
 * the pilot renders the scene ``PILOT_RENDERS`` times with every technique at ``light_paths`` and
