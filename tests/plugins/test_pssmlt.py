@@ -150,9 +150,9 @@ def test_a_tiny_bootstrap_adds_variance_not_bias():
     assert not result.failing, result.summary()
 
 
-@pytest.mark.slow
-def test_fog_box_agrees_with_volpath():
-    """Participating media go through lab_mis's path loop unchanged: on tests/media_scenes.py's
+def check_fog_box_agrees_with_volpath():
+    """(Run by benchmarks/agreement/test_pssmlt_matrix.py: 16 + 16 renders, about a minute, too
+    heavy for the suite.) Participating media go through lab_mis's path loop unchanged: on tests/media_scenes.py's
     fog_box (32 x 24, fog behind a null boundary under an area light, max_depth 6), 16 lab_pssmlt
     renders (seeds 0-15; 16 mutations per pixel, 1024 chains of 12 steps, bootstrap 16384) against
     16 of volpath (seeds 1000-1015, 16 spp): every 8 x 8 block mean and every channel's image mean
