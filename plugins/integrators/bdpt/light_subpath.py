@@ -150,10 +150,12 @@ class LightTracer:
 
     @dr.syntax
     def trace(self, count: int, seed: int, block: mi.ImageBlock, sample_scale: float,
-              vertices: LightVertices | None = None, store_lanes: int | None = None):
-        """Trace ``count`` light subpaths (PCG32 stream per lane from ``seed``), splat every t = 1
-        connection into ``block`` and, with ``vertices``, store the connectable vertices (of the
-        first ``store_lanes`` subpaths only, when given: the ones camera subpaths read).
+              vertices: LightVertices | None = None, store_lanes: int | None = None, rng=None):
+        """Trace ``count`` light subpaths (PCG32 stream per lane from ``seed``, or ``rng``: any
+        object of ``count`` lanes with ``next_float32()``, such as lab_mmlt's chain state), splat
+        every t = 1 connection into ``block`` and, with ``vertices``, store the connectable
+        vertices (of the first ``store_lanes`` subpaths only, when given: the ones camera
+        subpaths read).
 
         Returns (surface vertices reached (UInt32[1]), stores attempted (UInt32[1]), each lane's
         last stored slot (``vertices.NONE`` when none))."""
@@ -161,8 +163,9 @@ class LightTracer:
         index = dr.arange(mi.UInt32, count)
         w = self.weights.at_lanes(index)          # (lab_vcm: each lane's iteration's merging terms)
         s = dr.opaque(mi.UInt32, seed & 0xFFFFFFFF)
-        rng = mi.PCG32(count)
-        rng.seed(mi.sample_tea_64(s, index), mi.sample_tea_64(index, s ^ 0x9E3779B9))
+        if rng is None:
+            rng = mi.PCG32(count)
+            rng.seed(mi.sample_tea_64(s, index), mi.sample_tea_64(index, s ^ 0x9E3779B9))
         scale = dr.opaque(mi.Float, sample_scale)
 
         # ---------------- x_0: emitter, position, direction ----------------
