@@ -85,6 +85,12 @@ def strategy_mask(only: Strategy | None, s, t):
     return bool(keep) if isinstance(keep, bool) else keep
 
 
+def depth_bound(max_depth):
+    """``max_depth`` as the loops hold it: an int opaque (one kernel for every value), or a UInt32
+    per lane as it is (lab_mmlt bounds each lane by the length its chain picked)."""
+    return dr.opaque(mi.UInt32, max_depth) if isinstance(max_depth, int) else max_depth
+
+
 def sensor_pdf(ds: mi.DirectionSample3f, importance):
     """The sensor's direction density (``endpoints.camera_direction_pdf``) of the direction from
     the sensor to the reference point of ``ds`` (``Sensor.sample_direction``'s result)."""
@@ -102,6 +108,9 @@ class LightTracer:
     #: ``counters.RayCounters`` counting light subpaths' rays and light tracing's rays to the
     #: sensor (set by the integrator when it counts rays), else None
     counters = None
+    #: a UInt32 per subpath bounding its path's length in place of ``max_depth`` (no longer than
+    #: it; lab_mmlt's lanes, each of one length), else None
+    lane_max_depth = None
 
     def __init__(self, scene: mi.Scene, sensor: mi.Sensor, max_depth: int = -1, rr_depth: int = 5,
                  weights: BdptWeights | None = None, offset_floor: float = 1.0, only: Strategy | None = None,
@@ -237,7 +246,9 @@ class LightTracer:
         # ---------------- x_1, x_2, ..: the light subpath ----------------
         beta = mi.Spectrum(ray_weight) * sel_weight
         beta_max0 = dr.max(mi.unpolarized_spectrum(beta))
-        max_depth = dr.opaque(mi.UInt32, self.max_depth if self.max_depth > 0 else 0xFFFFFFFF)
+        max_depth = depth_bound(self.max_depth if self.max_depth > 0 else 0xFFFFFFFF)
+        if self.lane_max_depth is not None:
+            max_depth = self.lane_max_depth
         rr_depth = dr.opaque(mi.UInt32, self.rr_depth)
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
         storing = vertices is not None and bool(w.techniques & (Technique.CONNECT | Technique.MERGE))

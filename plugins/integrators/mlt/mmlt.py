@@ -84,8 +84,9 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     others at the camera stream's film position. The target is f's luminance, the image
     (b / mutations per pixel) sum over steps of the expected-value splats (lab_pssmlt's), so its
     mean is lab_bdpt's image at the same ``max_depth``. No Russian roulette (pbrt-v4's MMLT has
-    none). Both subpaths are traced up to ``max_depth`` at every evaluation and only the picked
-    strategy's contribution is kept (simple, not yet fast).
+    none). Both subpaths are traced up to the picked length (not to the t and s vertices the
+    strategy needs, as pbrt-v4 does: lab_bdpt's loops bound a path's length, not a side's), and
+    only the picked strategy's contribution is kept.
 
     Variants: RGB and mono; spectral, polarized, crop windows, participating media and
     ``render(develop=False)`` are refused in one line. A scene whose bootstrap finds no light
@@ -156,13 +157,14 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         weights, floor = setup.weights, setup.floor
         tracer = LightTracer(scene, sensor, self.max_depth, NO_ROULETTE, weights, floor, only,
                              plugin=self.ESTIMATOR.plugin_name)
+        tracer.lane_max_depth = k                # (both subpaths stop at the picked length)
         record = LaneSplats(lanes)
         vertices = LightVertices(lanes * self.max_depth, setup.traits.tangent_bsdf)
         reached, stores, last = tracer.trace(lanes, 0, record, 1.0, vertices, rng=light)
         # (the slots come from atomics: evaluated before the camera subpaths read them, as lab_bdpt does)
         dr.eval(last, reached, stores, *vertices.arrays(), record._value, record._position, light.dim)
         # ---------------- the camera subpath (t >= 2) ----------------
-        cp = CameraPass(vertices, last, weights, tracer.table, setup.inv_area, setup.axis, self.max_depth,
+        cp = CameraPass(vertices, last, weights, tracer.table, setup.inv_area, setup.axis, k,
                         NO_ROULETTE, False, floor, setup.traits.hittable_emitters, only, lanes,
                         sensor_delta=direction_is_delta(sensor))
         L, _ = trace_camera_subpaths(scene, cp, camera, mi.Ray3f(ray), mi.Bool(active))
