@@ -1,6 +1,6 @@
-"""lab_mmlt's images: agreement in expectation with Mitsuba's `path` (the block test) and its power
-(the strategy pick's probability left out fails it); finite, non-negative pixels on stiff scenes;
-a scene without light is black with a warning; the refusals; ``mlt_stats()``.
+"""lab_mmlt's images: agreement in expectation with Mitsuba's `path` (the block test, RGB and mono)
+and its power (the strategy pick's probability left out fails it); finite, non-negative pixels on
+stiff scenes; a scene without light is black with a warning; the one-line refusals; ``mlt_stats()``.
 
 The block test (tests/agreement.py): the Cornell box at 16 x 16, max_depth 4, 16 renders a side
 (lab_mmlt seeds 0-15, `path` seeds 1000-1015), 32 mutations (or samples) per pixel, 16 blocks of
@@ -74,6 +74,7 @@ def test_pixels_finite_non_negative_and_stats():
     assert 0 < s["dims"] == s["dims_read_max"] <= 256
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["tiny_bright_light.xml", "near_delta_glossy.xml"])
 def test_stiff_scenes_give_finite_non_negative_pixels(name):
     integrator = make_integrator("lab_mmlt", {"max_depth": 5, "chains": 256, "bootstrap": 4096})
@@ -109,3 +110,51 @@ def test_bad_parameters_are_one_line_errors(params, message):
         resolve("lab_mmlt", params)
     assert str(error.value).startswith(message)
     assert "\n" not in str(error.value)
+
+
+@pytest.mark.slow
+def test_mono_agrees_with_mitsuba_path():
+    """The mono variant: the same block test as above, lab_mmlt against `path` in mono (16 renders
+    a side, seeds 0-15 and 1000-1015). Measured: max |z| 2.07 (bound 3.42)."""
+    import mitsuba_lab
+    from backend import HOME, variant
+
+    try:
+        mitsuba_lab.use_variant(variant("ad_mono"))
+        scene = load_scene(scene_path("cornell_box.xml"), res=RES)
+        lab = renders(scene, make_integrator("lab_mmlt", MMLT), SPP, range(SEEDS))
+        ref = renders(scene, make_integrator("path", {"max_depth": DEPTH}), SPP, range(1000, 1000 + SEEDS))
+        result = block_test(lab, ref, BLOCK)
+        print(f"lab_mmlt vs path, mono: {result.summary()}")
+        assert not result.failing, result.summary()
+    finally:
+        mitsuba_lab.use_variant(HOME)
+
+
+def test_refusals_are_one_line():
+    """Crop windows, media, develop=False and spectral variants are refused in one line each."""
+    import mitsuba as mi
+
+    import media_scenes
+    import mitsuba_lab
+    from backend import HOME, variant
+
+    params = {"max_depth": 3, "chains": 64, "bootstrap": 256}
+    with open(scene_path("cornell_box.xml")) as f:
+        text = f.read().replace('<integer name="height" value="$res"/>',
+                                '<integer name="height" value="$res"/><integer name="crop_width" value="4"/>')
+    cases = [(mi.load_string(text, res=8), {}, "lab_mmlt: crop windows are not supported"),
+             (mi.load_dict(media_scenes.fog_box()), {}, "lab_mmlt does not support participating media"),
+             (cornell(), {"develop": False}, "lab_mmlt: render(develop=False) is not supported")]
+    for scene, extra, message in cases:
+        with pytest.raises(ValueError) as error:
+            make_integrator("lab_mmlt", params).render(scene, spp=1, **extra)
+        assert str(error.value).startswith(message) and "\n" not in str(error.value)
+    spectral = variant("ad_spectral")
+    if spectral in mi.variants():
+        try:
+            mitsuba_lab.use_variant(spectral)
+            with pytest.raises(ValueError, match=f"^lab_mmlt: variant '{spectral}' is not supported yet"):
+                make_integrator("lab_mmlt", params).render(load_scene(scene_path("cornell_box.xml"), res=8), spp=1)
+        finally:
+            mitsuba_lab.use_variant(HOME)
