@@ -65,6 +65,7 @@ class CameraPass:
     media: bool = False                  # the scene has (homogeneous) media: ``media_paths``' loops
     channel_key: int = 0                 # in media: the key of each light subpath's sampling channel
     sensor_medium: object = None         # in media: the sensor's medium (the camera subpaths start in it)
+    camera_depth: object = None          # lab_mmlt: per lane, the last camera vertex its one strategy needs
 
 
 def sensor_constants(sensor: mi.Sensor, plugin: str = "lab_bdpt") -> tuple[float, tuple]:
@@ -324,6 +325,8 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         if dr.hint(merging and cp.grid.first_only, mode="scalar"):
             # lab_vcm's ppm: the merge took the smooth lobes' light; only a delta lobe goes on
             active_next &= ~smooth | mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        if dr.hint(cp.camera_depth is not None, mode="scalar"):
+            active_next &= depth < cp.camera_depth
         pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
         tally(cp.counters, "extension", active_next)
         active = active_next

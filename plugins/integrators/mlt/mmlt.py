@@ -84,9 +84,9 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     others at the camera stream's film position. The target is f's luminance, the image
     (b / mutations per pixel) sum over steps of the expected-value splats (lab_pssmlt's), so its
     mean is lab_bdpt's image at the same ``max_depth``. No Russian roulette (pbrt-v4's MMLT has
-    none). Both subpaths are traced up to the picked length (not to the t and s vertices the
-    strategy needs, as pbrt-v4 does: lab_bdpt's loops bound a path's length, not a side's), and
-    only the picked strategy's contribution is kept.
+    none). Each side is traced only as far as the picked strategy needs (the camera subpath t - 1
+    segments, the light subpath s, one more than needed so that its last needed vertex is stored),
+    and only that strategy's contribution is kept.
 
     Variants: RGB and mono; spectral, polarized, crop windows, participating media and
     ``render(develop=False)`` are refused in one line. A scene whose bootstrap finds no light
@@ -157,7 +157,10 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         weights, floor = setup.weights, setup.floor
         tracer = LightTracer(scene, sensor, self.max_depth, NO_ROULETTE, weights, floor, only,
                              plugin=self.ESTIMATOR.plugin_name)
-        tracer.lane_max_depth = k                # (both subpaths stop at the picked length)
+        # Each side stops where the strategy needs it: the light subpath at x_(s-1) (its bound, a
+        # path length, lets x_(s-1) be stored for a connection: s + 1), the camera's at t - 1
+        # segments (its own bound stays the path's length k, which its checks compare against).
+        tracer.lane_max_depth = dr.select(s > 1, dr.minimum(k, s + 1), 1)
         record = LaneSplats(lanes)
         vertices = LightVertices(lanes * self.max_depth, setup.traits.tangent_bsdf)
         reached, stores, last = tracer.trace(lanes, 0, record, 1.0, vertices, rng=light)
@@ -166,8 +169,8 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         # ---------------- the camera subpath (t >= 2) ----------------
         cp = CameraPass(vertices, last, weights, tracer.table, setup.inv_area, setup.axis, k,
                         NO_ROULETTE, False, floor, setup.traits.hittable_emitters, only, lanes,
-                        sensor_delta=direction_is_delta(sensor))
-        L, _ = trace_camera_subpaths(scene, cp, camera, mi.Ray3f(ray), mi.Bool(active))
+                        sensor_delta=direction_is_delta(sensor), camera_depth=t - 1)
+        L, _ = trace_camera_subpaths(scene, cp, camera, mi.Ray3f(ray), mi.Bool(active) & (t > 1))
         light_tracing = t == 1
         f = dr.select(light_tracing, record.value, mi.Spectrum(ray_weight * L)) * pick
         value, f = target(f, ray.wavelengths, active)
