@@ -1,9 +1,9 @@
-"""lab_pssmlt (and lab_mmlt, which shares its driver) in the runner: a progressive run's later
-passes continue the first pass's Markov chains (``Estimator.CONTINUES_PASSES``, ``progressive.run_passes(continues=True)``), so the
-checkpoint after N mutations per pixel is the chains' normalised image after N mutations per
-pixel, the same image (to float32 rounding) as one render of N; every seed is its own bootstrap
-and set of chains. Exact checks only (no statistics, no clock); the sweep is 16 x 16 at
-max_depth 3 with a 1024-path bootstrap (a few seconds)."""
+"""lab_pssmlt (and lab_mmlt, which shares its driver) in the runner: a progressive run's later passes
+continue the first pass's Markov chains (``Estimator.CONTINUES_PASSES``,
+``progressive.run_passes(continues=True)``), so the checkpoint after N mutations per pixel is the
+chains' normalised image after N mutations per pixel, the same image (to float32 rounding) as one
+render of N; every seed is its own bootstrap and set of chains. Exact checks only (no statistics, no
+clock); the sweep is 16 x 16 at max_depth 3 with a 1024-path bootstrap (a few seconds)."""
 import json
 import os
 

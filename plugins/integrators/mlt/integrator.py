@@ -1,7 +1,6 @@
 """``lab_pssmlt``: the driver (bootstrap, chains, splats, normalisation) and the plugin."""
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
@@ -188,8 +187,9 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         stats.dims_read_max = int(dr.max(dims_read)[0]) if n else 0
         stats.bootstrap_s = _now() - start
         if not stats.b > 0:
-            warnings.warn(f"{self.ESTIMATOR.plugin_name}: none of the {n} bootstrap paths carried light (the scene has no "
-                          f"emitter the paths reach, or bootstrap is too small): the image is black", stacklevel=2)
+            warnings.warn(f"{self.ESTIMATOR.plugin_name}: none of the {n} bootstrap paths carried light (the "
+                          f"scene has no emitter the paths reach, or bootstrap is too small): the image is black",
+                          stacklevel=2)
             return self._image(film, splats.new_block(film), 0.0)
 
         # ---------------- The chains ----------------

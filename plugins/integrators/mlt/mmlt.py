@@ -125,8 +125,8 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         interrupts.restore()
         name = self.ESTIMATOR.plugin_name
         inv_area, axis = sensor_constants(sensor, name)
-        self._scene = _SceneSetup(traits, spawn.offset_floor(traits), inv_area, axis,
-                                  BdptWeights(self.values["heuristic"], self.values["beta"], self.estimator.techniques()))
+        weights = BdptWeights(self.values["heuristic"], self.values["beta"], self.estimator.techniques())
+        self._scene = _SceneSetup(traits, spawn.offset_floor(traits), inv_area, axis, weights)
         try:
             return self._render(scene, sensor, seed, spp)
         finally:
