@@ -48,12 +48,14 @@ _ORDER = (
     "samplers.stratified", "samplers.zsobol",
     # lab_pssmlt (its chains read numbers through samplers.common's hash)
     "integrators.mlt.chain", "integrators.mlt.sampler", "integrators.mlt.integrator",
+    # lab_mmlt: lab_pssmlt's chains over lab_bdpt's subpaths
+    "integrators.mlt.mmlt",
 )
 #: The modules of ``_ORDER`` that import no Mitsuba variant, not even through another module.
 _VARIANT_FREE = frozenset(_ORDER[:_ORDER.index("scene_traits")])
 #: The modules that register plugins (``mi.register_integrator`` / ``mi.register_sampler``).
 _REGISTERING = ("integrators.path", "integrators.photon.integrator", "integrators.bdpt.integrator",
-                "integrators.vcm.integrator", "integrators.mlt.integrator", "samplers.halton", "samplers.independent",
+                "integrators.vcm.integrator", "integrators.mlt.integrator", "integrators.mlt.mmlt", "samplers.halton", "samplers.independent",
                 "samplers.sobol", "samplers.stratified", "samplers.zsobol")
 
 #: Every module of the package (full names), in import order.

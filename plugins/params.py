@@ -298,6 +298,15 @@ LAB_PSSMLT = LAB_MIS + (
           check=lambda v: 0.0 < v <= 1.0, expected="a number in (0, 1]"),
 )
 
+#: lab_mmlt (multiplexed MLT over lab_bdpt's subpaths and MIS weights, ``integrators/mlt/mmlt.py``): its
+#: depth and strategy are part of the chains' state, so the depth must be bounded; no Russian roulette
+#: (pbrt-v4's MLTIntegrator has none: a path's length is what the state picks).
+LAB_MMLT = (
+    Param("max_depth", int, 8, "longest path in segments (light + camera subpath); each chain's state picks "
+          "a length from 1 to max_depth uniformly", **_int_at_least(1)),
+) + tuple(p for p in LAB_BDPT if p.name in ("heuristic", "beta")) + tuple(
+    p for p in LAB_PSSMLT if p.name in ("chains", "bootstrap", "large_step", "small_step", "sigma"))
+
 #: Shared by every lab sampler (``LabSampler``).
 SAMPLER = (
     Param("sample_count", int, 4, "samples per pixel", **_int_at_least(1)),
@@ -329,6 +338,7 @@ _DECLARED: dict[str, tuple[Param, ...]] = {
     "lab_bdpt": LAB_BDPT,
     "lab_vcm": LAB_VCM,
     "lab_pssmlt": LAB_PSSMLT,
+    "lab_mmlt": LAB_MMLT,
     "lab_independent": SAMPLER,
     "lab_stratified": LAB_STRATIFIED,
     "lab_halton": LAB_HALTON,

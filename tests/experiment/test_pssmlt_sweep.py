@@ -1,13 +1,14 @@
-"""lab_pssmlt in the runner: a progressive run's later passes continue the first pass's Markov
-chains (``Estimator.CONTINUES_PASSES``, ``progressive.run_passes(continues=True)``), so the
-checkpoint after N mutations per pixel is the chains' normalised image after N mutations per
-pixel, the same image (to float32 rounding) as one render of N; every seed is its own bootstrap
-and set of chains. Exact checks only (no statistics, no clock); the sweep is 16 x 16 at
-max_depth 3 with a 1024-path bootstrap (a few seconds)."""
+"""lab_pssmlt (and lab_mmlt, which shares its driver) in the runner: a progressive run's later passes
+continue the first pass's Markov chains (``Estimator.CONTINUES_PASSES``,
+``progressive.run_passes(continues=True)``), so the checkpoint after N mutations per pixel is the
+chains' normalised image after N mutations per pixel, the same image (to float32 rounding) as one
+render of N; every seed is its own bootstrap and set of chains. Exact checks only (no statistics, no
+clock); the sweep is 16 x 16 at max_depth 3 with a 1024-path bootstrap (a few seconds)."""
 import json
 import os
 
 import numpy as np
+import pytest
 
 from mitsuba_lab.experiment.pipeline.config import parse_config
 from mitsuba_lab.experiment.pipeline.plan import build_plan
@@ -56,7 +57,8 @@ def test_budget_passes_leave_the_bootstrap_out_of_their_fit():
     assert rescaled_passes((1, 1, 2, 4), 1.3, 2.1, times, 0.5) == (2, 2, 4, 8)     # 1.6 s of passes: 16 spp
 
 
-def test_continued_passes_are_one_render_of_all_their_mutations():
+@pytest.mark.parametrize("plugin", ["lab_pssmlt", "lab_mmlt"])
+def test_continued_passes_are_one_render_of_all_their_mutations(plugin):
     """Two passes of 2 mutations per pixel, the second continuing the first's chains, weighted by
     their spp as the runner's progressive runs weigh them, equal one render of 4 (same seed,
     the same chain steps: 16 x 16 x 2 mutations are whole rounds of 128 chains); and a pass of 1
@@ -67,8 +69,8 @@ def test_continued_passes_are_one_render_of_all_their_mutations():
 
     scene = load_scene(CORNELL, res=16)
     params = {k: v for k, v in MLT.items() if k != "type"} | {"max_depth": 3}
-    whole, _ = render(scene, make_integrator("lab_pssmlt", params), spp=4, seed=5)
-    integrator = make_integrator("lab_pssmlt", params)
+    whole, _ = render(scene, make_integrator(plugin, params), spp=4, seed=5)
+    integrator = make_integrator(plugin, params)
     first, _ = render(scene, integrator, spp=2, seed=5)
     integrator.continue_chains = True
     second, _ = render(scene, integrator, spp=2, seed=77)           # (a continued pass ignores its seed)

@@ -49,6 +49,7 @@ CASES = [
     *[("lab_vcm", {"mode": mode, "radius": 0.05, **LEARNT_PASSES}) for mode in VCM_MODES],
     ("lab_vcm", {"pilot": True, "light_paths_max": 4, "radius": 0.05, "pilot_share": 1.0, **LEARNT_PASSES}),
     ("lab_pssmlt", {"chains": 256, "bootstrap": 4096}),
+    ("lab_mmlt", {"max_depth": 4, "chains": 256, "bootstrap": 4096}),
 ]
 #: The issue's case, smaller: light_in_glass with the pilot choosing up to 16 light subpaths.
 #: (``pilot_share`` 1 here and below: at these sizes the default share, 1/8 of the counted work,

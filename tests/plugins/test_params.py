@@ -15,7 +15,8 @@ from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.params import declared, resolve
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis", "lab_photon", "lab_bdpt", "lab_vcm", "lab_pssmlt")
+LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis", "lab_photon", "lab_bdpt", "lab_vcm", "lab_pssmlt",
+                   "lab_mmlt")
 LAB_SAMPLERS = ("lab_independent", "lab_stratified", "lab_halton", "lab_sobol", "lab_zsobol")
 MIS_VALID = ("beta, count_rays, emitter_samples, heuristic, hide_emitters, majorant_resolution, majorants, max_depth, "
              "medium_sampling, rr_depth, spectral_mis, transmittance")
@@ -167,6 +168,8 @@ DEFAULTS = {
     "lab_pssmlt": {**PATH_DEFAULTS, "heuristic": "power", "beta": 2.0, "emitter_samples": 1, "medium_sampling": "mis",
                    "transmittance": "ratio", **MEDIA_DEFAULTS, "chains": 8192, "bootstrap": 100_000, "large_step": 0.3,
                    "small_step": "normal", "sigma": 0.01},
+    "lab_mmlt": {"max_depth": 8, "heuristic": "power", "beta": 2.0, "chains": 8192, "bootstrap": 100_000,
+                 "large_step": 0.3, "small_step": "normal", "sigma": 0.01},
     "lab_independent": {"sample_count": 4, "seed": 0},
     "lab_stratified": {"sample_count": 4, "seed": 0, "jitter": True},
     "lab_halton": {"sample_count": 4, "seed": 0, "randomization": "owen"},

@@ -32,7 +32,7 @@ from mitsuba_lab.plugins.integrators.common.direct import spectrum_or_zero
 from mitsuba_lab.plugins.integrators.common.roulette import kept, russian_roulette
 
 from .endpoints import EmitterTable, direction_is_delta, nee_density
-from .light_subpath import carried, float_or_zero, reverse_pdf, strategy_mask
+from .light_subpath import carried, depth_bound, float_or_zero, reverse_pdf, strategy_mask
 from .vertices import NONE, LightVertices
 from .techniques import Strategy, Technique
 from .weights import BdptWeights, SubpathMis
@@ -50,7 +50,7 @@ class CameraPass:
     table: EmitterTable
     inv_image_area: float
     axis: tuple
-    max_depth: int
+    max_depth: int                       # (or a UInt32 per lane: lab_mmlt's, ``depth_bound``)
     rr_depth: int
     hide_emitters: bool
     offset_floor: float
@@ -65,6 +65,7 @@ class CameraPass:
     media: bool = False                  # the scene has (homogeneous) media: ``media_paths``' loops
     channel_key: int = 0                 # in media: the key of each light subpath's sampling channel
     sensor_medium: object = None         # in media: the sensor's medium (the camera subpaths start in it)
+    camera_depth: object = None          # lab_mmlt: per lane, the last camera vertex its one strategy needs
 
 
 def sensor_constants(sensor: mi.Sensor, plugin: str = "lab_bdpt") -> tuple[float, tuple]:
@@ -115,7 +116,7 @@ def connection(scene, cp: CameraPass, si, bsdf, beta, mis: SubpathMis, depth, sl
     w, floor = cp.weights, cp.offset_floor
     ctx = mi.BSDFContext(mi.TransportMode.Radiance)
     ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
-    max_depth = dr.opaque(mi.UInt32, cp.max_depth)
+    max_depth = depth_bound(cp.max_depth)
     y, bsdf_y, beta_y, mis_y, depth_y, prev = cp.vertices.load(slot, si.wavelengths, on)
     use = on & (depth_y + 1 + depth <= max_depth) & strategy_mask(cp.only, depth_y + 1, depth + 1)
     d = y.p - si.p
@@ -161,7 +162,7 @@ def pick_light_vertex(cp: CameraPass, head, depth, active, u):
     connection from a camera vertex ``depth`` segments from the sensor may use, each with
     probability 1 / n (reservoir sampling along the list, hashing the uniform ``u`` with the
     count so far); NONE where n = 0. Walking the list reads two numbers per vertex."""
-    max_depth = dr.opaque(mi.UInt32, cp.max_depth)
+    max_depth = depth_bound(cp.max_depth)
     key = dr.reinterpret_array(mi.UInt32, u)
     chosen = dr.full(mi.UInt32, NONE, dr.width(head))
     n = dr.zeros(mi.UInt32, dr.width(head))
@@ -200,7 +201,7 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
     w, table, floor = cp.weights, cp.table, cp.offset_floor
     ctx = mi.BSDFContext(mi.TransportMode.Radiance)
     ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
-    max_depth = dr.opaque(mi.UInt32, cp.max_depth)
+    max_depth = depth_bound(cp.max_depth)
     rr_depth = dr.opaque(mi.UInt32, cp.rr_depth)
     emitter_hits, hide = cp.emitter_hits and Technique.HIT in w.techniques, cp.hide_emitters
 
@@ -324,6 +325,8 @@ def trace_camera_subpaths(scene: mi.Scene, cp: CameraPass, sampler: mi.Sampler, 
         if dr.hint(merging and cp.grid.first_only, mode="scalar"):
             # lab_vcm's ppm: the merge took the smooth lobes' light; only a delta lobe goes on
             active_next &= ~smooth | mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        if dr.hint(cp.camera_depth is not None, mode="scalar"):
+            active_next &= depth < cp.camera_depth
         pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
         tally(cp.counters, "extension", active_next)
         active = active_next

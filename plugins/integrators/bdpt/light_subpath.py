@@ -85,6 +85,12 @@ def strategy_mask(only: Strategy | None, s, t):
     return bool(keep) if isinstance(keep, bool) else keep
 
 
+def depth_bound(max_depth):
+    """``max_depth`` as the loops hold it: an int opaque (one kernel for every value), or a UInt32
+    per lane as it is (lab_mmlt bounds each lane by the length its chain picked)."""
+    return dr.opaque(mi.UInt32, max_depth) if isinstance(max_depth, int) else max_depth
+
+
 def sensor_pdf(ds: mi.DirectionSample3f, importance):
     """The sensor's direction density (``endpoints.camera_direction_pdf``) of the direction from
     the sensor to the reference point of ``ds`` (``Sensor.sample_direction``'s result)."""
@@ -102,6 +108,9 @@ class LightTracer:
     #: ``counters.RayCounters`` counting light subpaths' rays and light tracing's rays to the
     #: sensor (set by the integrator when it counts rays), else None
     counters = None
+    #: a UInt32 per subpath bounding its path's length in place of ``max_depth`` (no longer than
+    #: it; lab_mmlt's lanes, each of one length), else None
+    lane_max_depth = None
 
     def __init__(self, scene: mi.Scene, sensor: mi.Sensor, max_depth: int = -1, rr_depth: int = 5,
                  weights: BdptWeights | None = None, offset_floor: float = 1.0, only: Strategy | None = None,
@@ -150,10 +159,12 @@ class LightTracer:
 
     @dr.syntax
     def trace(self, count: int, seed: int, block: mi.ImageBlock, sample_scale: float,
-              vertices: LightVertices | None = None, store_lanes: int | None = None):
-        """Trace ``count`` light subpaths (PCG32 stream per lane from ``seed``), splat every t = 1
-        connection into ``block`` and, with ``vertices``, store the connectable vertices (of the
-        first ``store_lanes`` subpaths only, when given: the ones camera subpaths read).
+              vertices: LightVertices | None = None, store_lanes: int | None = None, rng=None):
+        """Trace ``count`` light subpaths (PCG32 stream per lane from ``seed``, or ``rng``: any
+        object of ``count`` lanes with ``next_float32()``, such as lab_mmlt's chain state), splat
+        every t = 1 connection into ``block`` and, with ``vertices``, store the connectable
+        vertices (of the first ``store_lanes`` subpaths only, when given: the ones camera
+        subpaths read).
 
         Returns (surface vertices reached (UInt32[1]), stores attempted (UInt32[1]), each lane's
         last stored slot (``vertices.NONE`` when none))."""
@@ -161,8 +172,9 @@ class LightTracer:
         index = dr.arange(mi.UInt32, count)
         w = self.weights.at_lanes(index)          # (lab_vcm: each lane's iteration's merging terms)
         s = dr.opaque(mi.UInt32, seed & 0xFFFFFFFF)
-        rng = mi.PCG32(count)
-        rng.seed(mi.sample_tea_64(s, index), mi.sample_tea_64(index, s ^ 0x9E3779B9))
+        if rng is None:
+            rng = mi.PCG32(count)
+            rng.seed(mi.sample_tea_64(s, index), mi.sample_tea_64(index, s ^ 0x9E3779B9))
         scale = dr.opaque(mi.Float, sample_scale)
 
         # ---------------- x_0: emitter, position, direction ----------------
@@ -234,7 +246,9 @@ class LightTracer:
         # ---------------- x_1, x_2, ..: the light subpath ----------------
         beta = mi.Spectrum(ray_weight) * sel_weight
         beta_max0 = dr.max(mi.unpolarized_spectrum(beta))
-        max_depth = dr.opaque(mi.UInt32, self.max_depth if self.max_depth > 0 else 0xFFFFFFFF)
+        max_depth = depth_bound(self.max_depth if self.max_depth > 0 else 0xFFFFFFFF)
+        if self.lane_max_depth is not None:
+            max_depth = self.lane_max_depth
         rr_depth = dr.opaque(mi.UInt32, self.rr_depth)
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
         storing = vertices is not None and bool(w.techniques & (Technique.CONNECT | Technique.MERGE))

@@ -1,7 +1,6 @@
 """``lab_pssmlt``: the driver (bootstrap, chains, splats, normalisation) and the plugin."""
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
@@ -124,6 +123,10 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
+        self._init_chains()
+
+    def _init_chains(self) -> None:
+        """The chains' settings, from ``self.estimator`` (shared with lab_mmlt)."""
         e = self.estimator
         self.chains, self.bootstrap = e.chains, e.bootstrap
         self.large_step, self.small_step, self.sigma = e.large_step, e.small_step, e.sigma
@@ -140,12 +143,7 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
 
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
-        if not develop:
-            raise self.error("render(develop=False) is not supported: the chains splat into a film of their "
-                             "own, normalised by b when developed")
-        if mi.is_polarized:
-            raise self.error(f"variant '{mi.variant()}' is not supported: the target is a luminance; use "
-                             f"{mi.variant().replace('_polarized', '')}")
+        self.refuse(develop)
         traits = SceneTraits.from_scene(scene)
         warn_if_unsupported(self, traits)
         sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
@@ -155,6 +153,15 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
             return self._render(scene, sensor, seed, spp)
         finally:
             self._plan = None
+
+    def refuse(self, develop: bool) -> None:
+        """One-line errors for what no chain estimator renders."""
+        if not develop:
+            raise self.error("render(develop=False) is not supported: the chains splat into a film of their "
+                             "own, normalised by b when developed")
+        if mi.is_polarized:
+            raise self.error(f"variant '{mi.variant()}' is not supported: the target is a luminance; use "
+                             f"{mi.variant().replace('_polarized', '')}")
 
     def _render(self, scene, sensor, seed: int, spp: int):
         film = sensor.film()
@@ -180,8 +187,9 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         stats.dims_read_max = int(dr.max(dims_read)[0]) if n else 0
         stats.bootstrap_s = _now() - start
         if not stats.b > 0:
-            warnings.warn(f"lab_pssmlt: none of the {n} bootstrap paths carried light (the scene has no "
-                          f"emitter the paths reach, or bootstrap is too small): the image is black", stacklevel=2)
+            warnings.warn(f"{self.ESTIMATOR.plugin_name}: none of the {n} bootstrap paths carried light (the "
+                          f"scene has no emitter the paths reach, or bootstrap is too small): the image is black",
+                          stacklevel=2)
             return self._image(film, splats.new_block(film), 0.0)
 
         # ---------------- The chains ----------------
@@ -270,17 +278,7 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         aperture_u = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
         ray, ray_weight = sensor.sample_ray_differential(shutter, wavelength_u, film_u, aperture_u)
         L, _, _ = self.sample(scene, sampler, ray, sensor.get_medium(), mi.Bool(active))
-        f = mi.Spectrum(ray_weight * L)
-        if mi.is_spectral:
-            value = mi.luminance(f, ray.wavelengths)
-        elif mi.is_monochromatic:
-            value = f[0]
-        else:
-            value = mi.luminance(f)
-        value = mi.Float(value)
-        ok = dr.isfinite(value) & (value > 0) & active
-        value = dr.select(ok, value, 0.0)
-        f = dr.select(ok, f, 0.0)
+        value, f = target(mi.Spectrum(ray_weight * L), ray.wavelengths, active)
         position = mi.Point2f(film_u.x * width, film_u.y * height)
         payload = (f, position, ray.wavelengths) if mi.is_spectral else (f, position)
         return value, payload, sampler.dim
@@ -299,6 +297,20 @@ class _Held:
     chains: object
     pixels: int
     mutations: int = 0
+
+
+def target(f, wavelengths, active=True):
+    """(I, f): a chain's target I, the luminance of the contribution f, and f, both 0 where I is
+    not finite or not positive (or the lane is not ``active``)."""
+    if mi.is_spectral:
+        value = mi.luminance(f, wavelengths)
+    elif mi.is_monochromatic:
+        value = f[0]
+    else:
+        value = mi.luminance(f)
+    value = mi.Float(value)
+    ok = dr.isfinite(value) & (value > 0) & active
+    return dr.select(ok, value, 0.0), dr.select(ok, f, 0.0)
 
 
 def _now() -> float:
