@@ -126,16 +126,22 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
             raise self.error("render(develop=False) is not supported: light tracing splats into a film of "
                              "its own, added to the camera image when developed")
 
+    def refuse_unsupported(self, scene: mi.Scene) -> SceneTraits:
+        """The scene's traits; a one-line ValueError naming this plugin where the scene has
+        what it cannot render (a sensor, an emitter kind, heterogeneous media)."""
+        traits = SceneTraits.from_scene(scene)
+        problem = self.ESTIMATOR.unsupported(traits)
+        if problem:
+            raise ValueError(problem)
+        return traits
+
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
         if self._pass is not None:
             # Mitsuba's render(sensor index) calls render(sensor object) back: the pass is set up
             return base_render(self, scene, sensor, seed, spp, develop, evaluate)
         self.refuse_undeveloped(develop)
-        traits = SceneTraits.from_scene(scene)
-        problem = self.ESTIMATOR.unsupported(traits)
-        if problem:
-            raise ValueError(problem)
+        traits = self.refuse_unsupported(scene)
         warn_if_unsupported(self, traits)         # media, or light a strategy subset cannot reach
         sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
         bind_film_layout(scene, sensor)

@@ -284,6 +284,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             self.first_radius = r1
         if self._pass is None and self.values["pilot"]:
             self.refuse_undeveloped(develop)
+            self.refuse_unsupported(scene)         # (the pilot may choose path tracing, which would not)
             return self.pilot.render(scene, sensor, seed, spp, develop, evaluate)
         return super().render(scene, sensor, seed, spp, develop, evaluate)
 
