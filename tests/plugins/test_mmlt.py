@@ -13,7 +13,6 @@ the image means are lab_mmlt 0.13725 +- 0.00060 (seeds 0-15) and `path` 0.13985 
 0.13710 +- 0.00006, and 32 more lab_mmlt renders (seeds 100-131) 0.13739 +- 0.00035. Resolution:
 the lab renders scaled by 0.95 fail the block test (max |z| 3.80; 0.90: 5.24).
 """
-import numpy as np
 import pytest
 
 from agreement import block_test, pixel_problem, renders, scene_path
@@ -83,19 +82,9 @@ def test_stiff_scenes_give_finite_non_negative_pixels(name):
 
 
 def test_a_scene_without_light_is_black_with_a_warning():
-    import mitsuba as mi
+    from test_pssmlt import check_a_scene_without_light_is_black_with_a_warning
 
-    scene = mi.load_dict({
-        "type": "scene",
-        "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 8, "height": 8}},
-        "box": {"type": "cube", "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse"}},
-                "to_world": mi.ScalarTransform4f().scale(5.0)},
-    })
-    integrator = make_integrator("lab_mmlt", {"chains": 64, "bootstrap": 256, "max_depth": 3})
-    with pytest.warns(UserWarning, match="lab_mmlt: none of the 256 bootstrap paths carried light"):
-        image, _ = render(scene, integrator, spp=4, seed=0)
-    assert np.all(image[..., :3] == 0) and np.isfinite(image).all()
-    assert integrator.mlt_stats()["b"] == 0.0
+    check_a_scene_without_light_is_black_with_a_warning("lab_mmlt", 3)
 
 
 @pytest.mark.parametrize("params, message", [

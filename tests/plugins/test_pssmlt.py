@@ -98,7 +98,9 @@ def test_stiff_scenes_give_finite_non_negative_pixels(name):
     assert pixel_problem(image[None], False) == "", name
 
 
-def test_a_scene_without_light_is_black_with_a_warning():
+def check_a_scene_without_light_is_black_with_a_warning(plugin: str, max_depth: int):
+    """A closed box without an emitter: no bootstrap path carries light, so the render warns
+    (naming ``plugin``) and is black, with b = 0 and no division by it (lab_mmlt's test too)."""
     import mitsuba as mi
 
     scene = mi.load_dict({
@@ -107,11 +109,15 @@ def test_a_scene_without_light_is_black_with_a_warning():
         "box": {"type": "cube", "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse"}},
                 "to_world": mi.ScalarTransform4f().scale(5.0)},
     })
-    integrator = make_integrator("lab_pssmlt", {"chains": 64, "bootstrap": 256, "max_depth": 4})
-    with pytest.warns(UserWarning, match="none of the 256 bootstrap paths carried light"):
+    integrator = make_integrator(plugin, {"chains": 64, "bootstrap": 256, "max_depth": max_depth})
+    with pytest.warns(UserWarning, match=f"{plugin}: none of the 256 bootstrap paths carried light"):
         image, _ = render(scene, integrator, spp=4, seed=0)
     assert np.all(image[..., :3] == 0) and np.isfinite(image).all()
     assert integrator.mlt_stats()["b"] == 0.0
+
+
+def test_a_scene_without_light_is_black_with_a_warning():
+    check_a_scene_without_light_is_black_with_a_warning("lab_pssmlt", 4)
 
 
 @pytest.mark.parametrize("params, message", [
