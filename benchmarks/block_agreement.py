@@ -6,14 +6,21 @@ ones where `path` is right, tests/user_scenes.py's users' scenes) and every vari
 --ref-scale x the samples), compared by tests/agreement.py's ``block_test`` (6x6-pixel block
 means, Welch z over the seeds, Sidak-corrected alpha 0.01 over the blocks). Unbiased
 estimators (lab_bdpt, lab_vcm mode bpt) must pass; consistent ones (lab_vcm modes vcm and ppm,
-lab_photon) are shown at two sample counts, where their worst |z| should fall as the count
-grows (their bias shrinks, the test's power stays).
+lab_photon) are rendered at three sample counts (--spp / 4, --spp, 4 x --spp) and judged by their
+bias, which must shrink as the count grows: the root mean square over the blocks of the relative
+difference of block means, with the part the two sides' noise explains taken out (``block_bias``,
+its standard error by resampling the seeds). Their worst |z| need not fall: a merging radius that
+shrinks slowly (alpha < 1) leaves a bias that falls more slowly than the standard error.
 
     .venv/bin/python benchmarks/block_agreement.py [--variants llvm_ad_rgb,llvm_ad_spectral]
         [--seeds 64] [--spp 16] [--scenes cornell_box.xml,...] [--estimators bdpt,vcm_bpt,...]
 
 Prints one Markdown row per scene, variant and estimator: worst |z|, the bound, the blocks
-past it, and PASS / FAIL (unbiased) or the worst |z| at both counts (consistent).
+past it, and PASS / FAIL (unbiased) or, for consistent ones, their bias at each count with a
+verdict: "converging" (it fell from the first count to the last by more than two standard
+errors), "falling (not resolved)", "no bias resolved" (within two standard errors of zero at
+every count), "bias resolved only at larger counts" (the first count's noise hides it) or "NOT
+SHRINKING" (resolved at the first count and no lower at the last).
 """
 from __future__ import annotations
 
@@ -41,6 +48,40 @@ ESTIMATORS = {
 }
 MAX_DEPTH = 8
 RES = 24
+#: Resamplings of the seeds behind each bias's standard error.
+RESAMPLES = 200
+
+
+def block_bias(lab_blocks, ref_blocks, rng) -> tuple[float, float]:
+    """(bias, standard error) of the lab's block means (seeds, blocks_y, blocks_x) against the
+    reference's: sqrt(max(0, mean_b(d_b^2 - s_b^2))), d_b the relative difference of block b's
+    means and s_b^2 its variance from both sides' spread over the seeds; the error is the spread
+    of that number over resamplings of both sides' seeds."""
+    import numpy as np
+
+    def bias(a, b):
+        ma, mb = a.mean(axis=0), b.mean(axis=0)
+        lit = mb > 0
+        d = (ma[lit] - mb[lit]) / mb[lit]
+        s2 = (a.var(axis=0, ddof=1)[lit] / len(a) + b.var(axis=0, ddof=1)[lit] / len(b)) / mb[lit] ** 2
+        return float(np.sqrt(max(0.0, float(np.mean(d * d - s2)))))
+
+    draws = [bias(lab_blocks[rng.integers(0, len(lab_blocks), len(lab_blocks))],
+                  ref_blocks[rng.integers(0, len(ref_blocks), len(ref_blocks))]) for _ in range(RESAMPLES)]
+    return bias(lab_blocks, ref_blocks), float(np.std(draws, ddof=1))
+
+
+def trend(biases) -> str:
+    """The verdict on (bias, standard error) at increasing counts."""
+    resolved = [b > 2 * s for b, s in biases]
+    if not any(resolved):
+        return "no bias resolved"
+    if not resolved[0]:
+        return "bias resolved only at larger counts"     # (the first count's noise hides it)
+    (b1, s1), (b2, s2) = biases[0], biases[-1]
+    if b1 - b2 > 2 * (s1 * s1 + s2 * s2) ** 0.5:
+        return "converging"
+    return "falling (not resolved)" if b2 < b1 else "NOT SHRINKING"
 
 
 def main(argv=None) -> int:
@@ -54,9 +95,14 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     import mitsuba_lab
-    from agreement import block_test, renders
+    import numpy as np
+    from agreement import BLOCK_SIZE, block_means, block_test, renders
     from mitsuba_lab.scene import load_scene, make_integrator
     import user_scenes
+
+    def grey_blocks(stack):
+        grey = stack[..., : min(3, stack.shape[-1])].mean(axis=-1)[..., None]
+        return np.stack([block_means(img, BLOCK_SIZE)[..., 0] for img in grey])
 
     assets = user_scenes.write_assets(os.path.join(ROOT, "out", "block_agreement_assets"))
     lab_seeds, ref_seeds = range(args.seeds), range(10_000, 10_000 + args.seeds)
@@ -75,15 +121,21 @@ def main(argv=None) -> int:
                 plugin, params, unbiased = ESTIMATORS[key]
                 integrator = make_integrator(plugin, {"max_depth": depth, **params})
                 start = time.perf_counter()
-                counts = [args.spp] if unbiased else [max(1, args.spp // 4), args.spp]
-                results = [block_test(renders(scene, integrator, spp, lab_seeds), ref) for spp in counts]
+                counts = [args.spp] if unbiased else [max(1, args.spp // 4), args.spp, 4 * args.spp]
+                stacks = [renders(scene, integrator, spp, lab_seeds) for spp in counts]
+                results = [block_test(stack, ref) for stack in stacks]
                 seconds = time.perf_counter() - start
                 last = results[-1]
                 if unbiased:
                     verdict = "PASS" if not last.failing else "FAIL"
                     failures += verdict == "FAIL"
                 else:
-                    verdict = "converging: " + " -> ".join(f"{r.max_abs_z:.1f} at {c}" for r, c in zip(results, counts))
+                    rng = np.random.default_rng(0)
+                    biases = [block_bias(grey_blocks(stack), grey_blocks(ref), rng) for stack in stacks]
+                    verdict = trend(biases) + ": bias " + " -> ".join(
+                        f"{b:.4f} +- {s:.4f} at {c}" for (b, s), c in zip(biases, counts)) + "; |z| " + " -> ".join(
+                        f"{r.max_abs_z:.1f}" for r in results)
+                    failures += verdict.startswith("NOT")
                 print(f"| {name} | {variant} | {key} | {last.max_abs_z:.2f} | {last.bound:.2f} | "
                       f"{len(last.failing)} of {last.z.size} | {verdict} | {seconds:.0f} |", flush=True)
             del scene
