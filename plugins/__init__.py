@@ -32,7 +32,7 @@ _ORDER = (
     "integrators.common.adjoint", "integrators.common.counters", "integrators.common.roulette",
     "integrators.common.spawn", "integrators.common.direct", "integrators.common.aim",
     "integrators.common.support", "integrators.common.footprint", "integrators.common.grid",
-    "integrators.common.majorants", "integrators.common.media",
+    "integrators.common.majorants", "integrators.common.media", "integrators.common.equiangular",
     # the path tracers
     "integrators.path",
     # lab_photon

@@ -56,7 +56,7 @@ PATH_TRACER = (
     Param("count_rays", bool, True, "count camera, extension and shadow rays (ray_counts())"),
 )
 
-#: How the NEE path tracers sample where light scatters in a homogeneous medium and how their shadow
+#: How the NEE path tracers sample where light scatters in a medium and how their shadow
 #: rays estimate transmittance (``integrators/common/media.py``); no effect on a scene without media.
 MEDIUM_SAMPLINGS = ("distance", "equiangular", "mis")
 TRANSMITTANCES = ("ratio", "delta")
@@ -66,10 +66,11 @@ MAJORANTS = ("global", "grid")
 def _media(sampling_default: str) -> tuple[Param, ...]:
     return (
         Param("medium_sampling", str, sampling_default,
-              "where in-scattered direct light is sampled along a ray in a homogeneous medium: distance "
-              "(free flights, NEE at the collision), equiangular (Kulla-Fajardo, towards a light point "
-              "sampled from the ray's origin) or mis (both, weighted by the estimator's MIS); heterogeneous "
-              "media always use distance", choices=MEDIUM_SAMPLINGS),
+              "where in-scattered direct light is sampled along a ray in a medium: distance (free flights, "
+              "NEE at the collision), equiangular (Kulla-Fajardo, towards a light point sampled from the "
+              "ray's origin; in heterogeneous media inside the medium's box, its transmittance tracked as "
+              "the shadow rays') or mis (both, weighted by the estimator's MIS; in heterogeneous media over "
+              "the null collisions, Miller et al. 2019)", choices=MEDIUM_SAMPLINGS),
         Param("transmittance", str, "ratio",
               "shadow rays' transmittance in heterogeneous media: ratio (ratio tracking) or delta (delta "
               "tracking, 0 or 1); exact (Beer-Lambert) in homogeneous media either way",

@@ -1,7 +1,8 @@
 """Scenes with participating media written as users write them, as dicts for ``mi.load_dict``
 (the current variant): a box of fog under an area light, a point light inside fog seen from a
 camera inside it, a chromatic medium inside glass, heterogeneous smoke under an environment and
-a spot light beside a masked card. 32x24 films (8x8 blocks: 4 x 3), box filter."""
+a spot light beside a masked card, a point light inside uneven heterogeneous fog. 32x24 films
+(8x8 blocks: 4 x 3), box filter."""
 from __future__ import annotations
 
 import numpy as np
@@ -105,8 +106,35 @@ def chromatic_smoke() -> dict:
     return scene
 
 
+def uneven_fog_grid(n: int = 8) -> mi.VolumeGrid:
+    """Thin fog thickening from 0.1 at the bottom to 0.4 at the top, a clear pocket (0) around
+    one lower corner and a dense knot (4) in an upper one."""
+    x = np.linspace(0, 1, n)
+    Z, Y, X = np.meshgrid(x, x, x, indexing="ij")            # the grid's [z, y, x] order
+    density = 0.1 + 0.3 * Y
+    density[(X - 1) ** 2 + Y ** 2 + Z ** 2 < 0.5] = 0.0
+    density[(X < 0.2) & (Y > 0.8) & (Z < 0.2)] = 4.0
+    return mi.VolumeGrid(density.astype(np.float32)[..., None])
+
+
+def point_in_smoke(albedo: float = 0.3) -> dict:
+    """A point light inside a null box of uneven, smoky (albedo 0.3) heterogeneous fog
+    (``uneven_fog_grid``, HG g = 0.3), seen from outside: a lantern in smoke, with no floor, so
+    that the medium is all there is to see (its single scattering most of the image: a test on it
+    sees an error in equi-angular sampling)."""
+    scene = base()
+    del scene["floor"]
+    scene["box"] = {"type": "cube", "to_world": T().translate([0, 0.8, 0]).scale(0.8), "bsdf": {"type": "null"},
+                    "interior": {"type": "heterogeneous", "albedo": albedo, "scale": 1.0,
+                                 "phase": {"type": "hg", "g": 0.3},
+                                 "sigma_t": {"type": "gridvolume", "grid": uneven_fog_grid(),
+                                             "to_world": T().translate([-0.8, 0, -0.8]).scale(1.6)}}}
+    scene["light"] = {"type": "point", "position": [-0.2, 0.9, 0.2], "intensity": rgb(3)}
+    return scene
+
+
 SCENES = {"fog_box": fog_box, "point_in_fog": point_in_fog, "chromatic_in_glass": chromatic_in_glass,
-          "smoke": smoke, "chromatic_smoke": chromatic_smoke}
+          "smoke": smoke, "chromatic_smoke": chromatic_smoke, "point_in_smoke": point_in_smoke}
 
 
 def fog_box_point() -> dict:

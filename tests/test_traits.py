@@ -106,6 +106,18 @@ def test_naive_with_delta_and_area_lights_is_biased():
     assert not applies and "(point)" in reason and "biased" in reason
 
 
+def test_naive_is_left_out_under_a_point_light_whose_only_smooth_vertices_are_in_a_medium():
+    """A point light in fog inside a null box, no other surface: the phase function is smooth,
+    so NEE reaches the light from medium vertices and lab_naive cannot (|z| 264 when rendered)."""
+    scene = mi.load_dict({"type": "scene", "box": {"type": "cube", "bsdf": {"type": "null"},
+                                                   "interior": {"type": "homogeneous", "sigma_t": 0.5}},
+                          "lamp": {"type": "point", "position": [0, 0, 0]}})
+    t = SceneTraits.from_scene(scene)
+    assert t.media and not t.smooth_bsdf
+    applies, reason = strategy_applicability(t, "lab_naive", {})
+    assert not applies and "cannot reach delta lights (point)" in reason
+
+
 # -- Equivalence ---------------------------------------------------------------------------
 
 def test_equivalences_on_an_ordinary_scene():

@@ -17,14 +17,15 @@ from test_media import lab, reference
 def test_a_three_percent_error_in_a_medium_estimator_is_caught(monkeypatch, what):
     """The shadow rays' transmittance 3% too high, or the equi-angular density that the other
     techniques' MIS weights see 30% too high (the weights then no longer sum to 1)."""
-    from mitsuba_lab.plugins.integrators.common import media
+    from mitsuba_lab.plugins.integrators.common import equiangular, media
 
-    original = getattr(media, what)
+    module = equiangular if what == "equiangular_pdf" else media
+    original = getattr(module, what)
 
     def biased(*args, **kwargs):
         return original(*args, **kwargs) * (1.3 if what == "equiangular_pdf" else 1.03)
 
-    monkeypatch.setattr(media, what, biased)
+    monkeypatch.setattr(module, what, biased)
     scene = mi.load_dict(media_scenes.fog_box())
     result = z_scores(lab(scene), reference(scene, name="fog_box"))
     print(f"{what} too high: max |z| {result.max_abs_z:.1f}, relative difference {result.rel_diff.round(4)}")
@@ -53,8 +54,8 @@ def test_spectral_mis_without_the_carried_ratios_is_caught(monkeypatch):
     original = media.free_flight
 
     def forgetful(*args, **kwargs):
-        mei, scattered, weight, ratios = original(*args, **kwargs)
-        return mei, scattered, weight, None if ratios is None else dr.ones(type(ratios))
+        mei, scattered, weight, ratios, nulls = original(*args, **kwargs)
+        return mei, scattered, weight, None if ratios is None else dr.ones(type(ratios)), nulls
 
     monkeypatch.setattr(media, "free_flight", forgetful)
     scene = mi.load_dict(media_scenes.chromatic_in_glass())

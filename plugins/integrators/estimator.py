@@ -142,7 +142,7 @@ class Densities(NamedTuple):
     * ``delta``: x was drawn from a delta component (a delta BSDF lobe for an emitter hit, a
       delta emitter for an emitter sample), which the other technique cannot produce;
     * ``equiangular``: at a medium vertex where equi-angular sampling runs, the density of that
-      third technique (``media.equiangular_density``), and then all three are densities per unit
+      third technique (``equiangular.equiangular_density``), and then all three are densities per unit
       distance along the ray and solid angle at the vertex; None elsewhere (two techniques).
     """
     bsdf: Any

@@ -18,10 +18,11 @@ class Naive(PathEstimator):
     @classmethod
     def applicability(cls, traits, params: dict) -> tuple[bool, str]:
         """Left out where delta lights light a vertex it could shade: BSDF-sampled rays never
-        reach a delta light. (With only delta BSDFs no estimator can use a delta light, so
-        there lab_naive is not worse than the others.)"""
+        reach a delta light. (With only delta BSDFs and no medium no estimator can use a delta
+        light, so there lab_naive is not worse than the others; a medium's phase functions are
+        smooth.)"""
         ok, reason = super().applicability(traits, params)
-        if ok and traits.delta_emitters and traits.smooth_bsdf:
+        if ok and traits.delta_emitters and (traits.smooth_bsdf or traits.media):
             kinds = ", ".join(dict.fromkeys(traits.delta_emitters))
             if not traits.hittable_emitters:
                 return False, (f"lab_naive cannot reach delta lights ({kinds}): the scene has no other "

@@ -12,8 +12,8 @@ Veach 1997, ch. 9). The shared pieces: ``direct`` (emitter sampling and emitter 
 In a scene with participating media the loop gains a *Medium interaction* section (free
 flights by delta tracking, ``common.media``); a vertex is then a surface point or a medium
 point, whose phase function stands in for the BSDF with the same two weights, and lab_nee and
-lab_mis add a third technique for the light scattered along a ray in a homogeneous medium:
-equi-angular sampling towards a light point (Kulla and Fajardo 2012; ``medium_sampling``).
+lab_mis add a third technique for the light scattered along a ray in a medium: equi-angular
+sampling towards a light point (Kulla and Fajardo 2012; ``medium_sampling``, ``common.equiangular``).
 
 The plugins ``lab_naive``, ``lab_nee`` and ``lab_mis`` are the subclasses at the end, each
 naming its estimator (``ESTIMATOR``), which also answers the experiment planner's questions
@@ -28,7 +28,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.param_docs import documented
-from mitsuba_lab.plugins.integrators.common import direct, majorants, media, spawn
+from mitsuba_lab.plugins.integrators.common import direct, equiangular, majorants, media, spawn
 from mitsuba_lab.plugins.integrators.common.counters import RayCounters
 from mitsuba_lab.plugins.integrators.estimator import PathEstimator
 from mitsuba_lab.plugins.integrators.mis import MIS
@@ -173,10 +173,10 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         hits_are_delta, track_prev = plan.hits_are_delta, plan.tracks_previous_vertex
         floor = plan.offset_floor
         has_media = plan.media
-        # equi-angular sampling of the light in homogeneous media (medium_sampling equiangular or
-        # mis), and whether NEE at free-flight collisions is a technique beside it (mis)
+        # equi-angular sampling of the light in media (medium_sampling equiangular or mis), and whether NEE at free-flight collisions is a technique beside it (mis)
         equiangular_on = has_media and emitter_sampling and self.medium_sampling != "distance"
         nee_in_media = self.medium_sampling != "equiangular"
+        at_infinity = any(mi.has_flag(e.flags(), mi.EmitterFlags.Infinite) for e in scene.emitters())
         spectral = has_media and self.spectral_mis and not mi.is_monochromatic   # (media.free_flight)
         tracking = self.tracking_kind
         estimator = self.estimator
@@ -206,7 +206,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
             phase_ctx = mi.PhaseFunctionContext(sampler)
             grid = majorants.of_integrator(self, scene)
         # the previous vertex's equi-angular state, for emitter hits' weights
-        prev_ea = media.Equiangular() if equiangular_on else mi.Bool(False)
+        prev_ea = equiangular.Equiangular() if equiangular_on else mi.Bool(False)
         ratios = mi.UnpolarizedSpectrum(1.0) if spectral else mi.Bool(False)   # spectral MIS's r_c
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
         if dr.hint(self.hide_emitters and emitter_hits, mode="scalar"):
@@ -224,15 +224,15 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                 in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
                 if dr.hint(equiangular_on, mode="scalar"):
                     # the light scattered along the whole segment, sampled towards a light point
-                    segment = media.Segment(ray.o, ray.d, si.t)
-                    ea_lanes = (in_medium & medium.is_homogeneous() & medium.use_emitter_sampling()
-                                & (depth + 1 < self.max_depth))
-                    L += media.equiangular_scatter(scene, sampler, phase_ctx, medium, segment, ray.wavelengths,
+                    ea_lanes = in_medium & medium.use_emitter_sampling() & (depth + 1 < self.max_depth)
+                    segment = equiangular.Segment.of_ray(medium, ray, si.t, ea_lanes)
+                    ea_lanes &= segment.t_max > 0
+                    L += equiangular.equiangular_scatter(scene, sampler, phase_ctx, medium, segment, ray.wavelengths,
                                                    beta, channel, estimator.equiangular_weight, n_L,
                                                    nee_in_media, ea_lanes, floor, tracking, grid,
                                                    ratios if spectral else None)
                     n_shadow += dr.select(ea_lanes, 1, 0)
-                mei, scattered, w_flight, ratios_next = media.free_flight(
+                mei, scattered, w_flight, ratios_next, nulls = media.free_flight(
                     medium, ray, si.t, sampler, channel, in_medium, grid, ratios if spectral else None)
                 beta[in_medium] *= w_flight
                 on_surface = active & ~scattered
@@ -267,11 +267,12 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                 it[scattered] = mei
                 ea_here = None
                 if dr.hint(equiangular_on, mode="scalar"):
-                    p_d = media.distance_pdf(medium, mei.t, mei.sigma_t, channel, ratios if spectral else None)
-                    ea_here = media.Equiangular(segment, p_d, scattered & ea_lanes)
+                    p_d = equiangular.distance_pdf(medium, mei.t, mei.sigma_t, channel, ratios if spectral else None,
+                                                   equiangular.flight_nulls(nulls, tracking))
+                    ea_here = equiangular.Equiangular(segment, p_d, scattered & ea_lanes)
                 if dr.hint(emitter_sampling, mode="scalar"):
                     in_medium_nee = scattered & mei.medium.use_emitter_sampling()
-                    if dr.hint(equiangular_on and not nee_in_media, mode="scalar"):
+                    if dr.hint(equiangular_on and not nee_in_media and not at_infinity, mode="scalar"):
                         in_medium_nee &= ~ea_here.lanes    # equi-angular sampling alone finds that light
                     active_em = further & ((surface & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
                                            | in_medium_nee)
@@ -447,12 +448,13 @@ class LabMISIntegrator(LabPathIntegrator):
     two estimators, Veach's cautionary example, kept for study. The kernel holds
     ``emitter_samples`` copies of the emitter-sampling code.
 
-    In a homogeneous medium, ``medium_sampling = mis`` adds a third technique for the light
+    In a medium, ``medium_sampling = mis`` adds a third technique for the light
     scattered along each ray segment: a light point y sampled from the segment's origin and a
     distance t with density proportional to 1 / |x(t) - y|^2 (equi-angular sampling, Kulla and
     Fajardo 2012). The three techniques (free flight + emitter sample, free flight + phase
     sample, equi-angular) are weighted by the heuristic over their densities per unit distance
-    and solid angle (``mis_weight.mis_weight_many``). In chromatic media ``spectral_mis``
+    and solid angle (``mis_weight.mis_weight_many``); in heterogeneous media the free flight's
+    density is taken over its null collisions (``common.equiangular``). In chromatic media ``spectral_mis``
     samples distances with one channel's coefficients and weights by the mean of every
     channel's density (one-sample MIS over the channels, as ``volpathmis``, Miller et al. 2019);
     in heterogeneous media ``majorants = grid`` tracks against local bounds of a coarse grid

@@ -115,8 +115,8 @@ def test_a_three_percent_error_in_a_medium_estimator_is_caught(monkeypatch, what
     def biased(*args, **kwargs):
         out = original(*args, **kwargs)
         if what == "free_flight":
-            mei, scattered, weight, ratios = out
-            return mei, scattered, weight * 1.03, ratios
+            mei, scattered, weight, ratios, nulls = out
+            return mei, scattered, weight * 1.03, ratios, nulls
         return out * (1.3 if what == "equiangular_pdf" else 1.03)
 
     monkeypatch.setattr(media, what, biased)
@@ -253,7 +253,7 @@ def _grid_transmittance_z(kind: str, rays: int = 256, reps: int = 1024) -> float
     ray = mi.Ray3f(mi.Point3f(*(o[lane, a] for a in range(3))), mi.Vector3f(*(d[lane, a] for a in range(3))))
     sampler = mi.load_dict({"type": "independent"})
     sampler.seed(7, rays * reps)
-    _, _, T = majorants.track(grid, ray, mi.Float(length[lane]), sampler, mi.Bool(True), kind)
+    _, _, T, _ = majorants.track(grid, ray, mi.Float(length[lane]), sampler, mi.Bool(True), kind)
     T = np.array(T)[0].reshape(rays, reps)
     se = T.std(axis=1, ddof=1) if kind == "ratio" else np.sqrt(T_true * (1 - T_true))
     z = (T.mean(axis=1) - T_true) / np.maximum(se / np.sqrt(reps), 1e-6)

@@ -255,6 +255,9 @@ def track(grid: MajorantGrid, ray: mi.Ray3f, t_max, sampler: mi.Sampler, active,
     bound is one number for every channel). ``ratio``: returns (_, _, T), T the product of
     sigma_n / sigma_bar over the tentative collisions (ratio tracking); ``delta``: T = 0 at a
     real collision, sigma_n / (sigma_bar P_null) at each null one (1 with equal channels).
+    Each also returns ``nulls`` last, the null chain (``media``): the product of P_null over the
+    null collisions that delta tracking chose (``flight``, ``delta``: there 1) or that ratio
+    tracking passed (``ratio``: every tentative collision).
     """
     medium = grid.medium
     o, d = _local_ray(grid, ray)
@@ -272,6 +275,7 @@ def track(grid: MajorantGrid, ray: mi.Ray3f, t_max, sampler: mi.Sampler, active,
     weight = mi.UnpolarizedSpectrum(1.0)
     scattered = mi.Bool(False)
     t_hit = mi.Float(dr.inf)
+    nulls = mi.Float(1.0)
     while going:
         # the next tentative collision: an optical depth tau spent cell by cell from t
         tau = -dr.log(1.0 - sampler.next_1d(going))
@@ -282,11 +286,13 @@ def track(grid: MajorantGrid, ray: mi.Ray3f, t_max, sampler: mi.Sampler, active,
         p_null = dr.mean(sigma_n) / bound
         if dr.hint(kind == "ratio", mode="scalar"):
             weight[collide] *= sigma_n / bound
+            nulls[collide] *= p_null
         else:
             null = collide & (sampler.next_1d(collide) < p_null)
             real = collide & ~null
             weight[null] *= sigma_n / (bound * p_null)
             if dr.hint(kind == "flight", mode="scalar"):
+                nulls[null] *= p_null
                 weight[real] *= sigma_s / (bound * (1.0 - p_null))
                 scattered |= real
                 t_hit[real] = t
@@ -294,13 +300,13 @@ def track(grid: MajorantGrid, ray: mi.Ray3f, t_max, sampler: mi.Sampler, active,
                 weight[real] = 0.0
             going &= ~real
         going &= dr.max(weight) > 0
-    return t_hit, scattered, weight
+    return t_hit, scattered, weight, nulls
 
 
 def free_flight(grid: MajorantGrid, ray: mi.Ray3f, t_max, sampler: mi.Sampler, active):
     """``track(kind='flight')`` with its collision as a medium interaction: (mei, scattered,
-    weight), as ``media.free_flight`` returns them."""
-    t_hit, scattered, weight = track(grid, ray, t_max, sampler, active, "flight")
+    weight, nulls), as ``media.free_flight`` returns them."""
+    t_hit, scattered, weight, nulls = track(grid, ray, t_max, sampler, active, "flight")
     mei = dr.zeros(mi.MediumInteraction3f)
     mei.t = dr.select(scattered, t_hit, dr.inf)
     mei.p = ray.o + mei.t * ray.d
@@ -313,4 +319,4 @@ def free_flight(grid: MajorantGrid, ray: mi.Ray3f, t_max, sampler: mi.Sampler, a
     mei.sigma_s, mei.sigma_t = sigma_s, sigma_t
     mei.combined_extinction = mi.UnpolarizedSpectrum(grid.global_majorant)
     mei.sigma_n = mei.combined_extinction - sigma_t
-    return mei, scattered, weight
+    return mei, scattered, weight, nulls
