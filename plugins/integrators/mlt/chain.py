@@ -364,8 +364,9 @@ class MarkovChains:
         if active is not None:
             large = large & active
         if self.dims:
+            # (the chain's coin gathered, not drawn again per number: one hash per chain, not per number)
             chain = self.flat % self.chains
-            moves_here = uniform(key_of(key, P_ACCEPT), chain) < dr.gather(mi.Float, a, chain)
+            moves_here = dr.gather(mi.Bool, moves, chain)
             next_iteration = dr.gather(mi.UInt32, self.iteration, chain) + 1
             if samples.lazy is not None:             # the numbers its path read
                 moves_here &= self.stamps == samples.lazy.stamp
