@@ -122,14 +122,15 @@ def test_progressive_sweep_checkpoints_continue_the_chains(tmp_path):
     assert len(bs) == 2
 
 
-def test_check_judges_lab_pssmlt_by_the_z_test():
-    """``mitsuba-lab check`` renders lab_pssmlt among its strategies, as an unbiased estimator
-    (the z-test with the heavy-tail escalation), not by bias^2 shrinking."""
+@pytest.mark.parametrize("name", ["lab_pssmlt", "lab_mmlt"])
+def test_check_judges_chain_estimators_by_the_z_test(name):
+    """``mitsuba-lab check`` renders lab_pssmlt and lab_mmlt among its strategies, as unbiased
+    estimators (the z-test with the heavy-tail escalation), not by bias^2 shrinking."""
     from mitsuba_lab import check
     from mitsuba_lab.check.render import is_consistent
 
-    kind, params = check.STRATEGIES["lab_pssmlt"]
-    assert kind == "lab_pssmlt" and not is_consistent(kind, params)
+    kind, params = check.STRATEGIES[name]
+    assert kind == name and not is_consistent(kind, params)
 
 
 def test_a_single_continued_pass_is_rescaled_from_the_tries():
