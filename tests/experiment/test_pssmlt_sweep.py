@@ -95,8 +95,9 @@ TINY = {"experiment": {"spp": [2, 8], "repetitions": 2, "max_depth": 3},
 
 def test_progressive_sweep_checkpoints_continue_the_chains(tmp_path):
     """Each seed's run: passes 2, 2, 4 (checkpoints at 2, 4 and 8 mutations per pixel); the
-    last checkpoint's image is one render of 8 mutations per pixel with that seed; the seeds'
-    bootstraps differ."""
+    last checkpoint's image is one render of 8 mutations per pixel with that seed; the row keeps
+    the last pass's mlt_stats() (b of the first pass's bootstrap, the chains' mutations in all);
+    the seeds' bootstraps differ."""
     import mitsuba as mi
 
     from mitsuba_lab.render import render
@@ -119,6 +120,8 @@ def test_progressive_sweep_checkpoints_continue_the_chains(tmp_path):
         whole, _ = render(scene, integrator, spp=8, seed=row["seed"])
         np.testing.assert_allclose(last[..., :3], whole[..., :3], rtol=1e-4, atol=1e-6)
         bs.add(integrator.mlt_stats()["b"])
+        assert row["integrator_stats"]["b"] == pytest.approx(integrator.mlt_stats()["b"], rel=1e-6)
+        assert row["integrator_stats"]["chain_mutations"] == 16 * 16 * 8
     assert len(bs) == 2
 
 
