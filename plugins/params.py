@@ -302,11 +302,15 @@ LAB_PSSMLT = LAB_MIS + (
 #: lab_mmlt (multiplexed MLT over lab_bdpt's subpaths and MIS weights, ``integrators/mlt/mmlt.py``): its
 #: depth and strategy are part of the chains' state, so the depth must be bounded; no Russian roulette
 #: (pbrt-v4's MLTIntegrator has none: a path's length is what the state picks).
-LAB_MMLT = (
-    Param("max_depth", int, 8, "longest path in segments (light + camera subpath); each chain's state picks "
-          "a length from 1 to max_depth uniformly", **_int_at_least(1)),
+LAB_MMLT = _override((
+    Param("max_depth", int, 8, "longest path in segments (light + camera subpath); each chain keeps one "
+          "length from 1 to max_depth, the lengths' chains in proportion to their b", **_int_at_least(1)),
 ) + tuple(p for p in LAB_BDPT if p.name in ("heuristic", "beta")) + tuple(
-    p for p in LAB_PSSMLT if p.name in ("chains", "bootstrap", "large_step", "small_step", "sigma"))
+    p for p in LAB_PSSMLT if p.name in ("chains", "bootstrap", "large_step", "small_step", "sigma")), Param(
+    "bootstrap", int, 100_000, "independent paths, split evenly over the lengths (bootstrap // max_depth "
+    "each), that estimate each length's normaliser b_k and from which the chains start, drawn in proportion "
+    "to their luminance", check=lambda v: 1 <= v <= MLT_MAX_BOOTSTRAP,
+    expected=f"an integer in [1, {MLT_MAX_BOOTSTRAP}]"))
 
 #: Shared by every lab sampler (``LabSampler``).
 SAMPLER = (

@@ -44,7 +44,7 @@ def test_budget_passes_leave_the_bootstrap_out_of_their_fit():
         calls.append((size, continues))
         wall = (0.0 if continues else 0.5) + 0.1 * size
         return np.ones((2, 2, 3), np.float32), SimpleNamespace(wall_s=wall, kernel_s=wall, compile_s=0.0,
-                                                              cache_misses=0, rays={})
+                                                              cache_misses=0, rays={}, integrator={})
 
     checkpoints = run_passes(render_at, 7, None, 2.0, continues=True)
     assert calls[:4] == [(1, False), (1, True), (2, True), (4, True)] and all(c for _, c in calls[1:])
@@ -95,8 +95,9 @@ TINY = {"experiment": {"spp": [2, 8], "repetitions": 2, "max_depth": 3},
 
 def test_progressive_sweep_checkpoints_continue_the_chains(tmp_path):
     """Each seed's run: passes 2, 2, 4 (checkpoints at 2, 4 and 8 mutations per pixel); the
-    last checkpoint's image is one render of 8 mutations per pixel with that seed; the seeds'
-    bootstraps differ."""
+    last checkpoint's image is one render of 8 mutations per pixel with that seed; the row keeps
+    the last pass's mlt_stats() (b of the first pass's bootstrap, the chains' mutations in all);
+    the seeds' bootstraps differ."""
     import mitsuba as mi
 
     from mitsuba_lab.render import render
@@ -119,17 +120,20 @@ def test_progressive_sweep_checkpoints_continue_the_chains(tmp_path):
         whole, _ = render(scene, integrator, spp=8, seed=row["seed"])
         np.testing.assert_allclose(last[..., :3], whole[..., :3], rtol=1e-4, atol=1e-6)
         bs.add(integrator.mlt_stats()["b"])
+        assert row["integrator_stats"]["b"] == pytest.approx(integrator.mlt_stats()["b"], rel=1e-6)
+        assert row["integrator_stats"]["chain_mutations"] == 16 * 16 * 8
     assert len(bs) == 2
 
 
-def test_check_judges_lab_pssmlt_by_the_z_test():
-    """``mitsuba-lab check`` renders lab_pssmlt among its strategies, as an unbiased estimator
-    (the z-test with the heavy-tail escalation), not by bias^2 shrinking."""
+@pytest.mark.parametrize("name", ["lab_pssmlt", "lab_mmlt"])
+def test_check_judges_chain_estimators_by_the_z_test(name):
+    """``mitsuba-lab check`` renders lab_pssmlt and lab_mmlt among its strategies, as unbiased
+    estimators (the z-test with the heavy-tail escalation), not by bias^2 shrinking."""
     from mitsuba_lab import check
     from mitsuba_lab.check.render import is_consistent
 
-    kind, params = check.STRATEGIES["lab_pssmlt"]
-    assert kind == "lab_pssmlt" and not is_consistent(kind, params)
+    kind, params = check.STRATEGIES[name]
+    assert kind == name and not is_consistent(kind, params)
 
 
 def test_a_single_continued_pass_is_rescaled_from_the_tries():

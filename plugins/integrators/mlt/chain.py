@@ -292,12 +292,16 @@ class MarkovChains:
 
     # -- start ------------------------------------------------------------------------
 
-    def start(self, boot_keys, boot_values: np.ndarray, boot_value, boot_payload: tuple) -> np.ndarray:
+    def start(self, boot_keys, boot_values: np.ndarray, boot_value, boot_payload: tuple,
+              sort: bool = False) -> np.ndarray:
         """Each chain starts from a bootstrap sample drawn in proportion to its I (``resample``):
         its primary sample read again from its key (``uniform(key, d)``), its I and payload
-        gathered. The bootstrap's total I must be > 0. Returns the drawn indices."""
+        gathered. The bootstrap's total I must be > 0. Returns the drawn indices; ``sort`` hands
+        them to the chains in increasing order (the draws are independent of the chains' keys, so
+        the order changes no chain's distribution, only which lanes run side by side)."""
         xi = np.array(uniform(key_of(self.key, P_START), self.lane), dtype=np.float64)
-        index = mi.UInt32(resample(boot_values, xi))
+        drawn = resample(boot_values, xi)
+        index = mi.UInt32(np.sort(drawn) if sort else drawn)
         keys = dr.gather(mi.UInt32, boot_keys, index)
         if self.dims:
             self.u = uniform(dr.gather(mi.UInt32, keys, self.flat % self.chains), self.flat // self.chains)
@@ -364,8 +368,9 @@ class MarkovChains:
         if active is not None:
             large = large & active
         if self.dims:
+            # (the chain's coin gathered, not drawn again per number: one hash per chain, not per number)
             chain = self.flat % self.chains
-            moves_here = uniform(key_of(key, P_ACCEPT), chain) < dr.gather(mi.Float, a, chain)
+            moves_here = dr.gather(mi.Bool, moves, chain)
             next_iteration = dr.gather(mi.UInt32, self.iteration, chain) + 1
             if samples.lazy is not None:             # the numbers its path read
                 moves_here &= self.stamps == samples.lazy.stamp

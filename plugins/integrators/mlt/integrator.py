@@ -33,6 +33,8 @@ class MLTStats:
     bootstrap: int = 0                  # bootstrap paths
     bootstrap_nonzero: int = 0          # ... of which carried light (I > 0)
     distinct_starts: int = 0            # distinct bootstrap paths the chains start from
+    b_per_length: list = field(default_factory=list)       # lab_mmlt: b of each path length 1 .. max_depth
+    chains_per_length: list = field(default_factory=list)  # lab_mmlt: chains that hold each length
     dims: int = 0                       # primary-sample dimensions stored per chain
     dims_read_max: int = 0              # the most any bootstrap path read
     chains: int = 0
@@ -120,6 +122,8 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     """
     ESTIMATOR = PSSMLT
     PARAMETERS = PSSMLT.PARAMETERS
+    #: Chains take their starts in the bootstrap's order (lab_mmlt: lanes grouped by path length).
+    SORT_STARTS = False
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
@@ -176,13 +180,14 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
 
         # ---------------- Bootstrap: b and the paths the chains start from ----------------
         start = _now()
-        n = self.bootstrap
+        stats.bootstrap = n = self._bootstrap_paths()
         boot_keys = chain.key_of(key, chain.P_BOOTSTRAP, dr.arange(mi.UInt32, n))
+        self._before_bootstrap(n)
         boot_value, boot_payload, dims_read = self.evaluate(scene, sensor, chain.PrimarySamples(n, boot_keys),
                                                             width, height)
         dr.eval(boot_keys, boot_value, *boot_payload, dims_read)
         values = np.array(boot_value, dtype=np.float64)
-        stats.b, stats.b_standard_error = chain.normaliser(values)
+        stats.b, stats.b_standard_error = self._normaliser(values)
         stats.bootstrap_nonzero = int(np.count_nonzero(values))
         stats.dims_read_max = int(dr.max(dims_read)[0]) if n else 0
         stats.bootstrap_s = _now() - start
@@ -196,9 +201,27 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         stats.chains = n_chains = self.chains
         stats.dims = dims = min(stats.dims_read_max, MAX_DIMS)
         chains = chain.MarkovChains(n_chains, dims, key, self.large_step, self.small_step, self.sigma)
-        stats.distinct_starts = int(np.unique(chains.start(boot_keys, values, boot_value, boot_payload)).size)
+        starts = chains.start(boot_keys, values, boot_value, boot_payload, sort=self.SORT_STARTS)
+        stats.distinct_starts = int(np.unique(starts).size)
         del boot_value, boot_payload, boot_keys
-        return self._continue(scene, sensor, _Held(identity, chains, pixels), spp)
+        held = _Held(identity, chains, pixels)
+        self._started(held, starts)
+        return self._continue(scene, sensor, held, spp)
+
+    # -- What lab_mmlt's per-length populations change (lab_pssmlt: one population) ----------
+
+    def _bootstrap_paths(self) -> int:
+        return self.bootstrap
+
+    def _before_bootstrap(self, n: int) -> None:
+        """Called before the bootstrap's ``n`` paths are evaluated."""
+
+    def _normaliser(self, values: np.ndarray) -> tuple[float, float]:
+        """(b, its standard error) from the bootstrap's I."""
+        return chain.normaliser(values)
+
+    def _started(self, held: "_Held", starts: np.ndarray) -> None:
+        """Called once the chains have started from the bootstrap paths ``starts`` (one per chain)."""
 
     def _continue(self, scene, sensor, held: "_Held", spp: int):
         """pixels x spp more mutations of the held chains (``chain.run_mutations``: mutation k a
@@ -297,6 +320,7 @@ class _Held:
     chains: object
     pixels: int
     mutations: int = 0
+    lengths: object = None      # lab_mmlt: each chain's path length (UInt32 per chain)
 
 
 def target(f, wavelengths, active=True):

@@ -1,8 +1,11 @@
 """``lab_mmlt``: multiplexed Metropolis light transport over lab_bdpt's subpaths and MIS weights."""
 from __future__ import annotations
 
+import math
+
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from mitsuba_lab.plugins import interrupts
 from mitsuba_lab.plugins.integrators.bdpt.camera_subpath import CameraPass, sensor_constants, trace_camera_subpaths
@@ -25,14 +28,23 @@ from .sampler import PrimarySampleSampler
 #: Russian roulette never starts (pbrt-v4's MLTIntegrator has none: the state picks the length).
 NO_ROULETTE = 1 << 30
 #: The primary sample's streams, interleaved (``PrimarySampleSampler``): the camera's (the
-#: length, the strategy, the film position, the camera subpath and its NEE) and the light's.
+#: strategy, the film position, the camera subpath and its NEE) and the light's.
 CAMERA_STREAM, LIGHT_STREAM, STREAMS = 0, 1, 2
 
 
-def strategy_probability(n_lengths: int, n_strategies):
-    """The probability of one (length, strategy) pick: 1 / max_depth for the length, 1 / (k + 1) for
-    the strategy of a length of k segments (``n_strategies`` = k + 1, per lane)."""
-    return 1.0 / (n_lengths * mi.Float(n_strategies))
+def strategy_probability(n_strategies):
+    """The probability of one strategy pick among the k + 1 of a length of k segments
+    (``n_strategies`` = k + 1, per lane)."""
+    return 1.0 / mi.Float(n_strategies)
+
+
+def per_length_normaliser(values: np.ndarray, lengths: int) -> tuple[list, list]:
+    """(b_k, its standard error) per length of a bootstrap laid out length by length, ``lengths``
+    equal blocks."""
+    per = np.asarray(values, dtype=np.float64).reshape(lengths, -1)
+    n = per.shape[1]
+    se = per.std(axis=1, ddof=1) / math.sqrt(n) if n > 1 else np.full(lengths, math.inf)
+    return per.mean(axis=1).tolist(), se.tolist()
 
 
 class LaneSplats:
@@ -71,12 +83,16 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     lab_pssmlt's chains (``mlt/chain.py``: lock-step chains, lazy normal steps, expected-value
     splatting, bootstrap and start in proportion to the target). The primary sample holds two
     interleaved streams (pbrt-v4's ``MLTSampler`` streams): the camera's first number picks the
-    path's length k (segments, 1 .. ``max_depth``, each with probability 1 / max_depth), its
-    second the strategy (s, t) with s + t = k + 1 vertices (each of the k + 1 with probability
-    1 / (k + 1)), the next the film position, then the camera subpath's numbers; the light stream
-    drives the light subpath. One population of chains: the length is part of the state (a
-    chain changes length by a step that moves that number across a boundary, mostly a large
-    step), one bootstrap and one b for all lengths.
+    strategy (s, t) with s + t = k + 1 vertices (each of the k + 1 with probability 1 / (k + 1)),
+    the next the film position, then the camera subpath's numbers; the light stream drives the
+    light subpath. One population of chains per path length k (segments, 1 .. ``max_depth``), as
+    pbrt-v4's: the bootstrap's ``bootstrap`` paths are split evenly over the lengths, b_k is the
+    mean I of length k's and b their sum; each chain starts from a bootstrap path drawn in
+    proportion to I over all of them, so a length gets chains in proportion to b_k (drawn from
+    the seed), and keeps its length (the chains' lanes are grouped by length, so neighbouring
+    lanes trace alike). Every step is then a step on the joint space of (length, primary
+    sample) that never changes the length, which leaves its target invariant: the image stays
+    unbiased (``mlt/chain.py``'s argument, with the bootstrap stratified by length).
 
     A sample's value f is that one strategy's contribution with lab_bdpt's MIS weight over all
     strategies of its path (``heuristic``, ``beta``), divided by the probability of picking it;
@@ -99,6 +115,7 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     """
     ESTIMATOR = MMLT
     PARAMETERS = MMLT.PARAMETERS
+    SORT_STARTS = True
 
     def __init__(self, props: mi.Properties):
         values = plugin_settings(self.ESTIMATOR.plugin_name, props, self.PARAMETERS, "integrator")
@@ -108,6 +125,32 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         self.max_depth = values["max_depth"]
         self._init_chains()
         self._scene = None
+        self._lengths = None        # each lane's path length k, for ``evaluate``
+
+    # -- One population per path length -------------------------------------------------
+
+    def _per_length(self) -> int:
+        return max(1, self.bootstrap // self.max_depth)
+
+    def _bootstrap_paths(self) -> int:
+        return self._per_length() * self.max_depth
+
+    def _before_bootstrap(self, n: int) -> None:
+        self._lengths = dr.arange(mi.UInt32, n) // self._per_length() + 1
+
+    def _normaliser(self, values: np.ndarray) -> tuple[float, float]:
+        b, se = per_length_normaliser(values, self.max_depth)
+        self.stats.b_per_length = b
+        return float(sum(b)), float(math.sqrt(sum(e * e for e in se)))
+
+    def _started(self, held, starts: np.ndarray) -> None:
+        lengths = np.asarray(starts) // self._per_length() + 1
+        held.lengths = mi.UInt32(lengths.astype(np.uint32))
+        self.stats.chains_per_length = np.bincount(lengths - 1, minlength=self.max_depth).tolist()
+
+    def _continue(self, scene, sensor, held, spp: int):
+        self._lengths = held.lengths
+        return super()._continue(scene, sensor, held, spp)
 
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
@@ -135,19 +178,19 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     def evaluate(self, scene, sensor, samples: chain.PrimarySamples, width: int, height: int, active=True):
         """(I, (f, film position in pixels), numbers read) of one strategy of one path per lane of
         ``samples`` (the class docstring)."""
-        setup, lanes, n_lengths = self._scene, samples.lanes, self.max_depth
+        setup, lanes = self._scene, samples.lanes
         if not scene.emitters():     # (no light subpath to start: every path is dark, the driver warns)
             zero = dr.zeros(mi.Float, lanes)
             return zero, (dr.zeros(mi.Spectrum, lanes), dr.zeros(mi.Point2f, lanes)), dr.zeros(mi.UInt32, lanes)
         camera = PrimarySampleSampler(samples, CAMERA_STREAM, STREAMS)
         light = PrimarySampleSampler(samples, LIGHT_STREAM, STREAMS)
-        # ---------------- the length and the strategy ----------------
-        k = dr.minimum(mi.UInt32(camera.next_1d() * n_lengths), n_lengths - 1) + 1   # segments
+        # ---------------- the length (the lane's) and the strategy ----------------
+        k = mi.UInt32(self._lengths)            # segments
         n_strategies = k + 1
         s = dr.minimum(mi.UInt32(camera.next_1d() * mi.Float(n_strategies)), n_strategies - 1)
         t = n_strategies - s
         only = Strategy(s, t)
-        pick = dr.rcp(strategy_probability(n_lengths, n_strategies))
+        pick = dr.rcp(strategy_probability(n_strategies))
         # ---------------- the camera ray ----------------
         film_u = camera.next_2d()
         aperture_u = camera.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)

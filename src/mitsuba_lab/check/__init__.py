@@ -19,8 +19,9 @@ sensor's film edited (``scene_xml.load_scene_variant``): N sets the larger side 
 aspect ratio. ``--res WxH`` sets the film's width and height on every scene.
 
 Strategies: lab_naive, lab_nee, lab_mis (power and balance), lab_bdpt, lab_vcm in modes bpt,
-vcm and ppm, lab_photon (its sample count is its passes), and lab_pssmlt (its sample count is
-mutations per pixel; each split its own bootstrap and chains; unbiased, so the z-test).
+vcm and ppm, lab_photon (its sample count is its passes), and lab_pssmlt and lab_mmlt (their
+sample count is mutations per pixel; each split its own bootstrap and chains; unbiased, so the
+z-test).
 
 Columns: finite fraction (of pixel channels), negative pixels, max value, fireflies,
 mean luminance, its z-score against the reference, rays per pixel by kind (camera,

@@ -31,13 +31,14 @@ BIDIRECTIONAL_STRATEGIES = {
     "lab_vcm_ppm": ("lab_vcm", {"mode": "ppm"}),
     "lab_photon": ("lab_photon", {"photons_per_pass": 10_000}),
 }
-#: Markov chains: lab_pssmlt is unbiased (its chains start from bootstrap paths drawn in
-#: proportion to their luminance, ``mlt/chain.py``), so the z-test judges it, with the heavy-tail
-#: escalation; each split is its own bootstrap and set of chains, so b's error is in the splits'
-#: spread. 1024 chains and a 16384-path bootstrap: at check's default budget (32 x 32, 8 spp per
-#: split) 8 steps per chain, b's relative standard error 5-15%.
+#: Markov chains: lab_pssmlt and lab_mmlt are unbiased (their chains start from bootstrap paths
+#: drawn in proportion to their luminance, ``mlt/chain.py``), so the z-test judges them, with the
+#: heavy-tail escalation; each split is its own bootstrap and set of chains, so b's error is in the
+#: splits' spread. 1024 chains and a 16384-path bootstrap (lab_mmlt's split over its lengths): at
+#: check's default budget (32 x 32, 8 spp per split) 8 steps per chain.
 CHAIN_STRATEGIES = {
     "lab_pssmlt": ("lab_pssmlt", {"chains": 1024, "bootstrap": 16384}),
+    "lab_mmlt": ("lab_mmlt", {"chains": 1024, "bootstrap": 16384}),
 }
 STRATEGIES = {**PATH_STRATEGIES, **BIDIRECTIONAL_STRATEGIES, **CHAIN_STRATEGIES}
 

@@ -24,8 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.description = (
         "Render every scene with every lab strategy that applies (lab_naive, lab_nee, lab_mis "
-        "power and balance, lab_bdpt, lab_vcm modes bpt, vcm and ppm, lab_photon) and Mitsuba's path as "
-        "reference; print finite fraction, negative "
+        "power and balance, lab_bdpt, lab_vcm modes bpt, vcm and ppm, lab_photon, lab_pssmlt, "
+        "lab_mmlt) and Mitsuba's path as reference; print finite fraction, negative "
         "pixels, max value, fireflies, mean and its z-score against the reference, rays per "
         "pixel by kind; write CSV + HTML. Exit status 1 when any strategy gives NaN, Inf or "
         "negative values or a mean beyond --z-max standard errors of the reference, except a low "

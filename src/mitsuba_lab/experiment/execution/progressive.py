@@ -61,6 +61,7 @@ class Checkpoint:
     cache_misses: int
     rays: dict = field(default_factory=dict)
     image: np.ndarray | None = None
+    integrator: dict = field(default_factory=dict)   # the last pass's integrator statistics
 
 
 def pass_seed(seed: int, index: int) -> int:
@@ -139,7 +140,8 @@ def run_passes(render_at, seed: int, sizes=None, budget_s: float | None = None,
         weighted_sum = pass_image if weighted_sum is None else weighted_sum + pass_image
         rays = {k: last.rays.get(k, 0) + stats.rays.get(k, 0) for k in set(last.rays) | set(stats.rays)}
         last = Checkpoint(last.spp + size, index + 1, last.wall_s + stats.wall_s, last.kernel_s + stats.kernel_s,
-                          last.compile_s + stats.compile_s, last.cache_misses + stats.cache_misses, rays)
+                          last.compile_s + stats.compile_s, last.cache_misses + stats.cache_misses, rays,
+                          integrator=stats.integrator)
         last.image = (weighted_sum / last.spp).astype(np.float32)
         checkpoints.append(last)
         if final:

@@ -353,8 +353,9 @@ def progressive_row(task: PointTask, seed: int, sizes, checkpoints: list[Checkpo
                      "kernel_s": cp.kernel_s, "compile_s": cp.compile_s, "cache_misses": cp.cache_misses,
                      "rays": cp.rays, **measure(cp.image, task.reference_image, task.regions, optional)})
     final = {k: v for k, v in rows[-1].items() if k not in ("point", "budget_s")}
+    # (a chain estimator's last pass reports its chains since the first: b, acceptance, mutations)
     row = {**run_row(task, seed, checkpoints[-1].spp), **final, "progressive": True, "pass_spp": list(sizes),
-           "checkpoints": rows}
+           "integrator_stats": checkpoints[-1].integrator, "checkpoints": rows}
     return row, [cp.image for cp in checkpoints]
 
 
