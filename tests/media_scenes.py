@@ -105,8 +105,26 @@ def chromatic_smoke() -> dict:
     return scene
 
 
+def spot_into_smoke() -> dict:
+    """``smoke`` without its masked card: the spot light and the environment through the plume."""
+    scene = smoke()
+    del scene["card"]
+    return scene
+
+
+def point_in_smoke() -> dict:
+    """``smoke`` lit by a point light inside the plume's box, off its dense core, and a dim
+    environment."""
+    scene = smoke()
+    del scene["card"], scene["spot"]
+    scene["environment"]["radiance"] = rgb(0.1)
+    scene["light"] = {"type": "point", "position": [0.45, 1.2, 0.4], "intensity": rgb(3)}
+    return scene
+
+
 SCENES = {"fog_box": fog_box, "point_in_fog": point_in_fog, "chromatic_in_glass": chromatic_in_glass,
-          "smoke": smoke, "chromatic_smoke": chromatic_smoke}
+          "smoke": smoke, "chromatic_smoke": chromatic_smoke, "spot_into_smoke": spot_into_smoke,
+          "point_in_smoke": point_in_smoke}
 
 
 def fog_box_point() -> dict:
@@ -114,3 +132,4 @@ def fog_box_point() -> dict:
     scene = fog_box()
     scene["light"] = {"type": "point", "position": [0.3, 2.0, 0.5], "intensity": rgb(10)}
     return scene
+

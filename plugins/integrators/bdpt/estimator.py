@@ -25,12 +25,23 @@ def reachable(traits, techniques: Technique) -> Technique:
     return techniques
 
 
+#: Why light tracing is left out in heterogeneous media (one line, for refusals).
+HETEROGENEOUS_NO_LIGHT = ("light tracing (t = 1) through heterogeneous media disagrees with volpath (an open "
+                          "bias), so lab_bdpt leaves it out there")
+
+
+def usable_techniques(techniques: Technique, traits) -> Technique:
+    """``techniques`` less those lab_bdpt leaves out on the scene: light tracing (t = 1) in
+    heterogeneous media (``HETEROGENEOUS_NO_LIGHT``; the weights renormalise over the rest)."""
+    return techniques & ~Technique.LIGHT if traits.heterogeneous_media else techniques
+
+
 class Bidirectional(Estimator):
     """lab_bdpt's estimator: bidirectional path tracing with MIS over the enabled strategies."""
     plugin_name = "lab_bdpt"
     PARAMETERS = declarations.LAB_BDPT
     OWN_PARAMETERS = ("heuristic", "beta", "strategies", "max_vertices", "only_strategy")
-    #: Both subpaths scatter in homogeneous media (``media_paths``); heterogeneous ones are refused.
+    #: Both subpaths scatter in media, homogeneous and heterogeneous (``media_paths``).
     RENDERS_MEDIA = True
 
     def techniques(self) -> Technique:
@@ -41,7 +52,6 @@ class Bidirectional(Estimator):
     def applicability(cls, traits, params: dict) -> tuple[bool, str]:
         """Left out of scenes it cannot render correctly, with the reason:
 
-        * heterogeneous participating media (refused: only homogeneous media so far);
         * emitters whose emission densities ``endpoints.py`` does not know (any plugin of
           unknown kind);
         * sensors other than ``perspective``, ``thinlens`` and ``orthographic`` (on an
@@ -58,7 +68,10 @@ class Bidirectional(Estimator):
         problem = cls.media_problem(traits) or cls.unsupported(traits)
         if problem:
             return False, problem
-        missing = cls._subset_problem(traits, parse_techniques(params.get("strategies", "all")) or NONE)
+        techniques = usable_techniques(parse_techniques(params.get("strategies", "all")) or NONE, traits)
+        if not techniques:
+            return False, f"lab_bdpt with strategies={params['strategies']}: {HETEROGENEOUS_NO_LIGHT}"
+        missing = cls._subset_problem(traits, techniques)
         if missing:
             return False, f"lab_bdpt with strategies={params['strategies']} {missing}"
         return True, ""
@@ -66,11 +79,7 @@ class Bidirectional(Estimator):
     @classmethod
     def unsupported(cls, traits) -> str:
         """Why lab_bdpt cannot run on the scene at all ('' if it can): an emitter or sensor
-        whose densities it does not know, or a heterogeneous medium (its subpaths scatter in
-        homogeneous media only so far). (Strategy subsets only leave light out.)"""
-        if traits.media and traits.heterogeneous_media and cls.RENDERS_MEDIA:
-            return (f"{cls.plugin_name} does not support heterogeneous participating media yet (homogeneous "
-                    f"ones only): use lab_mis or Mitsuba's volpath")
+        whose densities it does not know. (Strategy subsets only leave light out.)"""
         if traits.other_emitters:
             return ("lab_bdpt does not support emitters of unknown kind (only area, point, spot, "
                     "projector, directional, constant and envmap)")
