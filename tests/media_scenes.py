@@ -106,17 +106,20 @@ def chromatic_smoke() -> dict:
 
 
 def spot_into_smoke() -> dict:
-    """``smoke`` without its masked card: the spot light and the environment through the plume."""
+    """``smoke`` without its masked card, its box lifted 0.05 off the floor (a null boundary on
+    the floor's plane is ambiguous): the spot light and the environment through the plume."""
     scene = smoke()
     del scene["card"]
+    scene["box"]["to_world"] = T().translate([0, 0.85, 0]).scale(0.8)
+    scene["box"]["interior"]["sigma_t"]["to_world"] = T().translate([-0.8, 0.05, -0.8]).scale(1.6)
     return scene
 
 
 def point_in_smoke() -> dict:
     """``smoke`` lit by a point light inside the plume's box, off its dense core, and a dim
     environment."""
-    scene = smoke()
-    del scene["card"], scene["spot"]
+    scene = spot_into_smoke()
+    del scene["spot"]
     scene["environment"]["radiance"] = rgb(0.1)
     scene["light"] = {"type": "point", "position": [0.45, 1.2, 0.4], "intensity": rgb(3)}
     return scene

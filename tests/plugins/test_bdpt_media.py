@@ -8,9 +8,9 @@ spot light into the smoke plume under an environment (rgb, global majorants) and
 inside it (mono, the majorant grid). Scenes without media keep the surface-only kernels
 (checked bit for bit outside the suite, see the commit message); lab_vcm still ignores media.
 
-Light tracing (t = 1) is left out in heterogeneous media: alone it disagrees with volpath by up
-to 40% in the plume's dense core (single scattering, spot light; null collisions are needed to
-show it, an open bias), so the weights there renormalise over the other strategies.
+The smoke's box is lifted off the floor in these scenes: on the floor's plane its null boundary
+is ambiguous, and there light tracing disagreed with the camera strategies (an open issue,
+homogeneous media included: experiments/results/2026-11-28-bdpt-hetero-media.md).
 
 Tolerance: |z| <= Z_BOUND (tests/agreement.py) for every 8x8 block mean and every image channel
 mean, 16 seeds a side (Welch, about 30 degrees of freedom), fixed seeds. Power: a medium vertex
@@ -127,11 +127,6 @@ def test_the_planner_runs_lab_bdpt_on_media():
     assert not applies and "participating media" in reason
     smoke = SceneTraits.from_scene(mi.load_dict(media_scenes.smoke()))
     assert strategy_applicability(smoke, "lab_bdpt", {}) == (True, "")
-    # light tracing is left out in heterogeneous media (HETEROGENEOUS_NO_LIGHT): alone, it is refused
-    applies, reason = strategy_applicability(smoke, "lab_bdpt", {"strategies": "light"})
-    assert not applies and "heterogeneous" in reason
-    with pytest.raises(ValueError, match="heterogeneous"):
-        make_integrator("lab_bdpt", {"strategies": "light"}).render(mi.load_dict(media_scenes.smoke()), spp=1)
     with pytest.raises(ValueError, match="hide_emitters is not supported in scenes with participating media"):
         make_integrator("lab_bdpt", {"hide_emitters": True}).render(mi.load_dict(fog_box()), spp=1)
 

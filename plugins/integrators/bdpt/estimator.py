@@ -25,17 +25,6 @@ def reachable(traits, techniques: Technique) -> Technique:
     return techniques
 
 
-#: Why light tracing is left out in heterogeneous media (one line, for refusals).
-HETEROGENEOUS_NO_LIGHT = ("light tracing (t = 1) through heterogeneous media disagrees with volpath (an open "
-                          "bias), so lab_bdpt leaves it out there")
-
-
-def usable_techniques(techniques: Technique, traits) -> Technique:
-    """``techniques`` less those lab_bdpt leaves out on the scene: light tracing (t = 1) in
-    heterogeneous media (``HETEROGENEOUS_NO_LIGHT``; the weights renormalise over the rest)."""
-    return techniques & ~Technique.LIGHT if traits.heterogeneous_media else techniques
-
-
 class Bidirectional(Estimator):
     """lab_bdpt's estimator: bidirectional path tracing with MIS over the enabled strategies."""
     plugin_name = "lab_bdpt"
@@ -68,10 +57,7 @@ class Bidirectional(Estimator):
         problem = cls.media_problem(traits) or cls.unsupported(traits)
         if problem:
             return False, problem
-        techniques = usable_techniques(parse_techniques(params.get("strategies", "all")) or NONE, traits)
-        if not techniques:
-            return False, f"lab_bdpt with strategies={params['strategies']}: {HETEROGENEOUS_NO_LIGHT}"
-        missing = cls._subset_problem(traits, techniques)
+        missing = cls._subset_problem(traits, parse_techniques(params.get("strategies", "all")) or NONE)
         if missing:
             return False, f"lab_bdpt with strategies={params['strategies']} {missing}"
         return True, ""

@@ -21,7 +21,7 @@ from mitsuba_lab.plugins.scene_traits import SceneTraits
 from . import splats
 from .camera_subpath import CameraPass, sensor_constants, trace_camera_subpaths
 from .endpoints import direction_is_delta
-from .estimator import HETEROGENEOUS_NO_LIGHT, Bidirectional, usable_techniques
+from .estimator import Bidirectional
 from .light_subpath import LightTracer, check_variant
 from .media_paths import trace_camera, trace_light
 from .media_vertices import Tracking
@@ -86,9 +86,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     channel per sample, the phase function at medium vertices, null boundaries passed without a
     vertex), every strategy's connecting segment carries its transmittance, and the MIS weights
     use the distance-sampling densities (``media_paths``). Heterogeneous media: delta tracking
-    (``majorants``: ``global`` or ``grid``), ratio-tracked connections, deterministic stand-in
-    densities in the weights, and light tracing (t = 1) left out (an open bias there);
-    ``hide_emitters`` with media is refused in one line. Light-subpath seeds come from the
+    (``majorants``: ``global`` or ``grid``), ratio-tracked connections and deterministic
+    stand-in densities in the weights; ``hide_emitters`` with media is refused in one line. Light-subpath seeds come from the
     render's seed; each pass has its own.
 
     Statistics of the last render: ``bdpt_stats()``.
@@ -110,7 +109,6 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         self.values = values
         self.estimator = self.ESTIMATOR(values)
         self.techniques = self.estimator.techniques()   # the enabled techniques (flags)
-        self.render_techniques = self.techniques        # those the current scene allows (``usable_techniques``)
         only = values.get("only_strategy", "")
         self.only = Strategy.parse(only) if only else None   # the one strategy rendered, or None
         self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
@@ -170,10 +168,6 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         tracer.media = trace_light if media else False
         # heterogeneous media: delta tracking in both subpaths (majorants = grid: its grid, built once per scene)
         tracer.tracking = Tracking(majorants.of_integrator(self, scene)) if media and traits.heterogeneous_media else None
-        # light tracing (t = 1) through heterogeneous media disagrees with volpath (open): left out there
-        self.render_techniques = usable_techniques(self.techniques, traits) if media else self.techniques
-        if not self.render_techniques:
-            raise self.error(f"{HETEROGENEOUS_NO_LIGHT}: choose strategies other than 'light'")
         inv_area, axis = sensor_constants(sensor, self.ESTIMATOR.plugin_name)
         passes = self.passes
         self.stats = stats = passes.stats_class()
@@ -247,7 +241,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         """The MIS weights of a pass."""
         v, passes = self.values, self.passes
         ratio = plan.light_subpaths / plan.camera_lanes
-        weights = (passes.weights_class or BdptWeights)(v["heuristic"], v["beta"], self.render_techniques, light_paths=ratio,
+        weights = (passes.weights_class or BdptWeights)(v["heuristic"], v["beta"], self.techniques, light_paths=ratio,
                                                         merge_area=passes.merge_area(plan),
                                                         merge_from=passes.merge_from,
                                                         caustic_merges=passes.caustic_merges)

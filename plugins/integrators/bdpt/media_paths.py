@@ -52,8 +52,7 @@ its midpoint, capped), deterministic and symmetric in the piece's ends. Unbiased
 a path's strategies, computed from the same positive values, still sum to 1 (tests/plugins/
 test_bdpt_hetero_weights.py), and each strategy's contribution stays an unbiased estimate of f / p
 with its own true density (delta tracking's weight and ratio tracking's T are), so their sum
-estimates f. Light tracing (t = 1) is left out there (``estimator.HETEROGENEOUS_NO_LIGHT``): it
-disagrees with volpath where null collisions occur (open). ``hide_emitters`` with media is refused.
+estimates f. ``hide_emitters`` with media is refused.
 """
 from __future__ import annotations
 
