@@ -182,7 +182,7 @@ LAB_BDPT = (
           "(Veach's per-strategy images); empty = every strategy",
           check=lambda v: v == "" or _techniques().Strategy.parse(v) is not None,
           expected="empty or 's,t' with s >= 0, t >= 1 and s + t >= 2"),
-) + AIM + (
+) + tuple(p for p in _media("distance") if p.name in ("majorants", "majorant_resolution")) + AIM + (
     Param("count_rays", bool, True, "count camera, extension, shadow (NEE), connection, light-subpath and sensor "
           "(light tracing's) rays (ray_counts())"),
 )

@@ -133,8 +133,29 @@ def point_in_smoke(albedo: float = 0.3) -> dict:
     return scene
 
 
+def spot_into_smoke() -> dict:
+    """``smoke`` without its masked card, its box lifted 0.05 off the floor (a null boundary on
+    the floor's plane is ambiguous): the spot light and the environment through the plume."""
+    scene = smoke()
+    del scene["card"]
+    scene["box"]["to_world"] = T().translate([0, 0.85, 0]).scale(0.8)
+    scene["box"]["interior"]["sigma_t"]["to_world"] = T().translate([-0.8, 0.05, -0.8]).scale(1.6)
+    return scene
+
+
+def point_in_plume() -> dict:
+    """``smoke`` lit by a point light inside the plume's box, off its dense core, and a dim
+    environment."""
+    scene = spot_into_smoke()
+    del scene["spot"]
+    scene["environment"]["radiance"] = rgb(0.1)
+    scene["light"] = {"type": "point", "position": [0.45, 1.2, 0.4], "intensity": rgb(3)}
+    return scene
+
+
 SCENES = {"fog_box": fog_box, "point_in_fog": point_in_fog, "chromatic_in_glass": chromatic_in_glass,
-          "smoke": smoke, "chromatic_smoke": chromatic_smoke, "point_in_smoke": point_in_smoke}
+          "smoke": smoke, "chromatic_smoke": chromatic_smoke, "point_in_smoke": point_in_smoke,
+          "spot_into_smoke": spot_into_smoke, "point_in_plume": point_in_plume}
 
 
 def fog_box_point() -> dict:
@@ -142,3 +163,4 @@ def fog_box_point() -> dict:
     scene = fog_box()
     scene["light"] = {"type": "point", "position": [0.3, 2.0, 0.5], "intensity": rgb(10)}
     return scene
+

@@ -1,20 +1,29 @@
-"""lab_bdpt in homogeneous participating media (``bdpt/media_paths.py``) agrees with Mitsuba's
-`volpath` in expectation on the medium scenes of tests/media_scenes.py: fog behind a null
-boundary under an area light (at sigma_t = 2.5, so that a missing or doubled sigma_t shows), a
-point light and the camera inside forward-scattering fog (sigma_t = 0.15), and a chromatic
-medium inside glass (every channel's own sigma_t); so do its strategy subsets (light tracing alone, the camera's
-strategies alone). Scenes without media keep the surface-only kernels (checked bit for bit
-outside the suite, see the commit message); lab_vcm still ignores media.
+"""lab_bdpt in participating media (``bdpt/media_paths.py``) agrees with Mitsuba's `volpath` in
+expectation on the medium scenes of tests/media_scenes.py: fog behind a null boundary under an
+area light (at sigma_t = 2.5, so that a missing or doubled sigma_t shows), a point light and the
+camera inside forward-scattering fog (sigma_t = 0.15), and a chromatic medium inside glass
+(every channel's own sigma_t); so do its strategy subsets (light tracing alone, the camera's
+strategies alone). Heterogeneous media (delta tracking, stand-in densities in the weights): a
+spot light into the smoke plume under an environment (rgb, global majorants) and a point light
+inside it (mono, the majorant grid). Scenes without media keep the surface-only kernels
+(checked bit for bit outside the suite, see the commit message); lab_vcm still ignores media.
+
+The smoke's box is lifted off the floor in these scenes: on the floor's plane its null boundary
+is ambiguous, and there light tracing disagreed with the camera strategies (an open issue,
+homogeneous media included: experiments/results/2026-11-28-bdpt-hetero-media.md).
 
 Tolerance: |z| <= Z_BOUND (tests/agreement.py) for every 8x8 block mean and every image channel
 mean, 16 seeds a side (Welch, about 30 degrees of freedom), fixed seeds. Power: a medium vertex
-whose forward density leaves out sigma_t (p_A = p_W T / d^2) passes the bound.
+whose forward density leaves out sigma_t (p_A = p_W T / d^2) passes the bound; so does a delta-
+tracked flight whose weight is 4% low.
 """
 import numpy as np
 import pytest
 
 import mitsuba as mi
+import backend
 import media_scenes
+import mitsuba_lab
 from agreement import SEEDS_LAB, SEEDS_REF, Z_BOUND, assert_agrees, renders, z_scores
 from mitsuba_lab.scene import SceneTraits, make_integrator, strategy_applicability
 
@@ -35,7 +44,8 @@ def fog_box_point():
 
 
 SCENES = {"fog_box": fog_box, "fog_box_point": fog_box_point, "point_in_fog": media_scenes.point_in_fog,
-          "chromatic_in_glass": media_scenes.chromatic_in_glass}
+          "chromatic_in_glass": media_scenes.chromatic_in_glass, "spot_into_smoke": media_scenes.spot_into_smoke,
+          "point_in_plume": media_scenes.point_in_plume}
 
 
 def reference(scene):
@@ -79,18 +89,44 @@ def test_a_medium_density_without_sigma_t_is_caught(monkeypatch):
     assert result.max_abs_z > Z_BOUND
 
 
-def test_the_planner_runs_lab_bdpt_on_homogeneous_media_only():
-    """Homogeneous media: lab_bdpt applies; heterogeneous smoke: refused in one line (and so is
-    hide_emitters with media); lab_vcm still leaves media out (it ignores them)."""
+@pytest.mark.parametrize("kind, name, params", [("ad_rgb", "spot_into_smoke", {}),
+                                                 ("ad_mono", "point_in_plume", {"majorants": "grid"})])
+def test_lab_bdpt_agrees_with_volpath_in_heterogeneous_media(kind, name, params):
+    variant = backend.variant(kind)
+    mitsuba_lab.use_variant(variant)
+    try:
+        scene = mi.load_dict(SCENES[name]())
+        assert_agrees(bdpt(scene, **params), reference(scene), f"lab_bdpt {params} on {name} in {variant}")
+    finally:
+        mitsuba_lab.use_variant(backend.HOME)
+
+
+def test_a_biased_delta_tracked_flight_is_caught(monkeypatch):
+    """Power: every delta-tracked flight's weight x 0.96 (its transmittance over its density 4% low)."""
+    from mitsuba_lab.plugins.integrators.bdpt import media_paths
+
+    original = media_paths.tracked_flight
+
+    def biased(*args):
+        mei, scattered, weight, T_c = original(*args)
+        return mei, scattered, 0.96 * weight, T_c
+
+    monkeypatch.setattr(media_paths, "tracked_flight", biased)
+    scene = mi.load_dict(SCENES["spot_into_smoke"]())
+    result = z_scores(bdpt(scene), reference(scene))
+    print(f"flights 4% low: max |z| {result.max_abs_z:.1f}, relative difference {result.rel_diff.round(4)}")
+    assert result.max_abs_z > Z_BOUND
+
+
+def test_the_planner_runs_lab_bdpt_on_media():
+    """Homogeneous and heterogeneous media: lab_bdpt applies; hide_emitters with media is refused
+    in one line; lab_vcm still leaves media out (it ignores them)."""
     fog = SceneTraits.from_scene(mi.load_dict(fog_box()))
     assert strategy_applicability(fog, "lab_bdpt", {}) == (True, "")
     applies, reason = strategy_applicability(fog, "lab_vcm", {})
     assert not applies and "participating media" in reason
     smoke = SceneTraits.from_scene(mi.load_dict(media_scenes.smoke()))
-    applies, reason = strategy_applicability(smoke, "lab_bdpt", {})
-    assert not applies and "heterogeneous" in reason
-    with pytest.raises(ValueError, match="heterogeneous"):
-        make_integrator("lab_bdpt", {}).render(mi.load_dict(media_scenes.smoke()), spp=1)
+    assert strategy_applicability(smoke, "lab_bdpt", {}) == (True, "")
     with pytest.raises(ValueError, match="hide_emitters is not supported in scenes with participating media"):
         make_integrator("lab_bdpt", {"hide_emitters": True}).render(mi.load_dict(fog_box()), spp=1)
 

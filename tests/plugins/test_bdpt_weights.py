@@ -91,8 +91,10 @@ def recursive_weights(g, mis, wrong=None):
     k = g["d2"].shape[0]
     d2, cl, cc, fw, rv, delta = g["d2"], g["cos_l"], g["cos_c"], g["to_cam"], g["to_light"], g["delta"]
     # media: each segment's T goes to after_hit and, on a connecting segment, with its cosines
+    # (heterogeneous media: the camera subpath's and the connections' own evaluations of it)
     tr = g.get("T")
-    T = np.ones((k, N)) if tr is None else tr
+    T_light = np.ones((k, N)) if tr is None else tr
+    T_cam, T = g.get("T_camera", tr), g.get("T_connect", T_light)
     pdf_emit = g["pos"] * fw[0]
     light = {}
     state = mis.start_light(pdf_emit, g["nee"], cc[0], delta[0])
@@ -107,7 +109,7 @@ def recursive_weights(g, mis, wrong=None):
     camera = {}
     state = mis.start_camera(rv[k], delta[k])            # (delta[k]: an orthographic sensor)
     for i in range(k - 1, -1, -1):
-        state = mis.after_hit(state, d2[i], cc[i], None if tr is None else tr[i])
+        state = mis.after_hit(state, d2[i], cc[i], None if tr is None else T_cam[i])
         camera[i] = state
         if i > 0:                          # (x_i lies k - i segments from the sensor)
             state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i], depth=k - i)

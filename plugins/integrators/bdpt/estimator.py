@@ -30,7 +30,7 @@ class Bidirectional(Estimator):
     plugin_name = "lab_bdpt"
     PARAMETERS = declarations.LAB_BDPT
     OWN_PARAMETERS = ("heuristic", "beta", "strategies", "max_vertices", "only_strategy")
-    #: Both subpaths scatter in homogeneous media (``media_paths``); heterogeneous ones are refused.
+    #: Both subpaths scatter in media, homogeneous and heterogeneous (``media_paths``).
     RENDERS_MEDIA = True
 
     def techniques(self) -> Technique:
@@ -41,7 +41,6 @@ class Bidirectional(Estimator):
     def applicability(cls, traits, params: dict) -> tuple[bool, str]:
         """Left out of scenes it cannot render correctly, with the reason:
 
-        * heterogeneous participating media (refused: only homogeneous media so far);
         * emitters whose emission densities ``endpoints.py`` does not know (any plugin of
           unknown kind);
         * sensors other than ``perspective``, ``thinlens`` and ``orthographic`` (on an
@@ -66,11 +65,7 @@ class Bidirectional(Estimator):
     @classmethod
     def unsupported(cls, traits) -> str:
         """Why lab_bdpt cannot run on the scene at all ('' if it can): an emitter or sensor
-        whose densities it does not know, or a heterogeneous medium (its subpaths scatter in
-        homogeneous media only so far). (Strategy subsets only leave light out.)"""
-        if traits.media and traits.heterogeneous_media and cls.RENDERS_MEDIA:
-            return (f"{cls.plugin_name} does not support heterogeneous participating media yet (homogeneous "
-                    f"ones only): use lab_mis or Mitsuba's volpath")
+        whose densities it does not know. (Strategy subsets only leave light out.)"""
         if traits.other_emitters:
             return ("lab_bdpt does not support emitters of unknown kind (only area, point, spot, "
                     "projector, directional, constant and envmap)")

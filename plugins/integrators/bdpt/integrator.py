@@ -9,7 +9,7 @@ import mitsuba as mi
 
 from mitsuba_lab.plugins import interrupts
 from mitsuba_lab.plugins.param_docs import documented
-from mitsuba_lab.plugins.integrators.common import spawn, spectral
+from mitsuba_lab.plugins.integrators.common import majorants, spawn, spectral
 from mitsuba_lab.plugins.integrators.common.aim import AimedEmission
 from mitsuba_lab.plugins.integrators.common.counters import RayCounters
 from mitsuba_lab.plugins.integrators.common.support import base_render, render_arguments, warn_if_unsupported
@@ -24,6 +24,7 @@ from .endpoints import direction_is_delta
 from .estimator import Bidirectional
 from .light_subpath import LightTracer, check_variant
 from .media_paths import trace_camera, trace_light
+from .media_vertices import Tracking
 from .passes import PassPlan, Passes, pass_seed
 from .techniques import Strategy, Technique
 from .vertices import NONE, LightVertices, vertex_bytes
@@ -84,8 +85,9 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     Homogeneous participating media: both subpaths scatter in them (free flights in one colour
     channel per sample, the phase function at medium vertices, null boundaries passed without a
     vertex), every strategy's connecting segment carries its transmittance, and the MIS weights
-    use the distance-sampling densities (``media_paths``); heterogeneous media and
-    ``hide_emitters`` with media are refused in one line. Light-subpath seeds come from the
+    use the distance-sampling densities (``media_paths``). Heterogeneous media: delta tracking
+    (``majorants``: ``global`` or ``grid``), ratio-tracked connections and deterministic
+    stand-in densities in the weights; ``hide_emitters`` with media is refused in one line. Light-subpath seeds come from the
     render's seed; each pass has its own.
 
     Statistics of the last render: ``bdpt_stats()``.
@@ -110,6 +112,9 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         only = values.get("only_strategy", "")
         self.only = Strategy.parse(only) if only else None   # the one strategy rendered, or None
         self.max_depth = DEPTH_UNBOUNDED if values["max_depth"] == UNBOUNDED else values["max_depth"]
+        # (read by ``majorants.of_integrator``; lab_vcm has no such parameters: global majorants)
+        self.majorants = values.get("majorants", "global")
+        self.majorant_resolution = values.get("majorant_resolution", 16)
         #: what the driver does beyond lab_bdpt's parameters (``passes.Passes``: lab_bdpt's own)
         self.passes = Passes()
         self.stats = self.passes.stats_class()
@@ -161,6 +166,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         if media and v["hide_emitters"]:
             raise self.error("hide_emitters is not supported in scenes with participating media yet")
         tracer.media = trace_light if media else False
+        # heterogeneous media: delta tracking in both subpaths (majorants = grid: its grid, built once per scene)
+        tracer.tracking = Tracking(majorants.of_integrator(self, scene)) if media and traits.heterogeneous_media else None
         inv_area, axis = sensor_constants(sensor, self.ESTIMATOR.plugin_name)
         passes = self.passes
         self.stats = stats = passes.stats_class()
@@ -195,7 +202,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                                     traits.hittable_emitters, only, count,
                                     passes.grid(vertices, stored, plan, stats), passes.connect_share,
                                     passes.connect_one, counters, direction_is_delta(sensor), media, light_seed,
-                                    sensor.get_medium() if media else None)
+                                    sensor.get_medium() if media else None, tracking=tracer.tracking)
             start = time.perf_counter()
             try:
                 if u is None:

@@ -138,6 +138,8 @@ class LightTracer:
         self.media = False
         #: the pass's key of each light subpath's sampling channel in media (``media_paths.path_channel``)
         self.channel_key = 0
+        #: heterogeneous media: delta tracking in them (``media_vertices.Tracking``), else None
+        self.tracking = None
 
     @dr.syntax
     def _visible(self, it, ds, active):

@@ -1,6 +1,6 @@
-"""lab_bdpt in homogeneous participating media: both subpaths scatter in media, every strategy
-carries the transmittance of its connecting segment, and the MIS weights see the densities of
-distance sampling.
+"""lab_bdpt in participating media: both subpaths scatter in media, every strategy carries the
+transmittance of its connecting segment, and the MIS weights see the densities of distance
+sampling (exact in homogeneous media, deterministic stand-ins in heterogeneous ones).
 
 Compiled only for scenes with media (``LightTracer.media``, ``CameraPass.media``); scenes
 without keep the surface-only loops of ``light_subpath`` and ``camera_subpath`` unchanged.
@@ -42,8 +42,17 @@ given c: the estimator is unbiased with c random. A connection's contribution ca
 spectrum's T (exact: Beer-Lambert in homogeneous media through null boundaries,
 ``common.media.transmittance``), its weight only T_c.
 
-Heterogeneous media are refused (``estimator.Bidirectional.unsupported``); so is
-``hide_emitters`` with media.
+**Heterogeneous media** (``media_vertices.Tracking``, compiled only where the scene has one).
+The subpaths' flights there are the path family's delta tracking (``common.media.free_flight``,
+global majorants or ``majorants = grid``) and every connection's T is ratio tracking
+(``common.media.transmittance``); the distance densities are then unknown. The weights instead
+use, for every strategy alike, g = sigma_t,c(x) at a medium vertex and ``media_vertices.stand_in``
+for each piece of a segment in a heterogeneous medium (exp of minus its length times sigma_t,c at
+its midpoint, capped), deterministic and symmetric in the piece's ends. Unbiased: the weights of
+a path's strategies, computed from the same positive values, still sum to 1 (tests/plugins/
+test_bdpt_hetero_weights.py), and each strategy's contribution stays an unbiased estimate of f / p
+with its own true density (delta tracking's weight and ratio tracking's T are), so their sum
+estimates f. ``hide_emitters`` with media is refused.
 """
 from __future__ import annotations
 
@@ -60,10 +69,21 @@ from . import splats
 from .endpoints import nee_density
 from .media_vertices import (  # noqa: F401 (homogeneous_flight: the tests patch it here)
     _AUX_KEY, RngSampler, Sides, homogeneous_flight, medium_vertex, origin_medium, path_channel,
-    phase_reverse_pdf, sigma_t_channel, vertex_eval)
+    phase_reverse_pdf, sigma_t_channel, tracked_flight, vertex_eval)
+from .media_vertices import transmittance as through
 from .techniques import Technique
 from .vertices import NONE
 from .weights import SubpathMis
+
+def flight(medium, ray, t_max, u, sampler, channel, active, tracking):
+    """A free flight (mei, scattered, weight, T_c for the weights): ``homogeneous_flight``, and
+    in a scene with heterogeneous media (``tracking``) delta tracking in their lanes."""
+    if tracking is None:
+        return homogeneous_flight(medium, ray, t_max, u, channel, active)
+    tracked = active & ~medium.is_homogeneous()
+    exact = homogeneous_flight(medium, ray, t_max, u, channel, active & ~tracked)
+    return tracked_flight(medium, ray, t_max, sampler, channel, tracked, tracking, exact)
+
 
 @dr.syntax
 def trace_light(tracer, st, block, vertices, store_lanes):
@@ -98,10 +118,10 @@ def trace_light(tracer, st, block, vertices, store_lanes):
         si0.wi = si0.to_local(ds0.d)
         cos0 = mi.Frame3f.cos_theta(si0.wi)
         active0 &= cos0 > 0
-        T0 = media.transmittance(scene, medium, si0, ds0.p, aux, channel, floor, active0)
+        T0, T0_c = through(scene, medium, si0, ds0.p, aux, channel, floor, active0, tracer.tracking)
         active0 &= dr.max(T0) > 0
         le0 = emitter.eval(si0, active0)
-        w0 = w.emitter_to_camera(sensor_pdf(ds0, we0), cos0 * media.channel_value(T0, channel), dr.square(ds0.dist),
+        w0 = w.emitter_to_camera(sensor_pdf(ds0, we0), cos0 * T0_c, dr.square(ds0.dist),
                                  pdf_pos, st.delta_pos)
         value0 = le0 * cos0 * st.pos_weight * st.sel_weight * we0 * mi.Spectrum(T0) * float_or_zero(w0) * scale
         splats.splat(block, ds0.uv, si0.wavelengths, value0, active0)
@@ -129,8 +149,8 @@ def trace_light(tracer, st, block, vertices, store_lanes):
         si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
         tally(tracer.counters, "light", active)
         in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
-        mei, scattered, w_flight, p_flight = homogeneous_flight(medium, ray, si.t, rng.next_float32(), channel,
-                                                                in_medium)
+        mei, scattered, w_flight, p_flight = flight(medium, ray, si.t, rng.next_float32(), aux, channel, in_medium,
+                                                    tracer.tracking)
         beta[in_medium] *= w_flight
         seg[in_medium] *= p_flight
         surface = active & ~scattered & si.is_valid()
@@ -185,14 +205,14 @@ def trace_light(tracer, st, block, vertices, store_lanes):
             connect = splat_on & (ds.pdf > 0)
             tally(tracer.counters, "sensor", connect)
             sides = Sides(si.n, dr.dot(si.n, ray.d), scattered, medium, beyond)
-            T = media.transmittance(scene, sides.toward(ds.d), v, ds.p, aux, channel, floor, connect)
+            T, T_c = through(scene, sides.toward(ds.d), v, ds.p, aux, channel, floor, connect, tracer.tracking)
             connect &= dr.max(T) > 0
             f_surface, rev_surface = transported(bsdf, si, si.to_local(ds.d), connect & ~scattered)
             f_phase, _ = phase.eval_pdf(phase_ctx, mei, ds.d, connect & scattered)
             rev_phase = phase_reverse_pdf(phase, phase_ctx, mei, ds.d, connect & scattered)
             f_cam = dr.select(scattered, mi.Spectrum(f_phase), f_surface)
             g_cam = dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, ds.d)))
-            w_cam = w.light_to_camera(mis, sensor_pdf(ds, we), g_cam * media.channel_value(T, channel),
+            w_cam = w.light_to_camera(mis, sensor_pdf(ds, we), g_cam * T_c,
                                       dr.square(ds.dist), dr.select(scattered, rev_phase, rev_surface))
             value = beta * f_cam * we * mi.Spectrum(T) * float_or_zero(w_cam) * scale
             splats.splat(block, ds.uv, v.wavelengths, value, connect)
@@ -274,8 +294,7 @@ def connection(scene, cp, x, si, bsdf, mei, phase, scattered, sides, beta, mis: 
     value = spectrum_or_zero(beta * f_x * f_y * beta_y / dist2)
     use &= dr.max(mi.unpolarized_spectrum(value)) > 0
     tally(cp.counters, "connection", use)
-    T = media.transmittance(scene, sides.toward(d), x, y.p, sampler, channel, floor, use)
-    T_c = media.channel_value(T, channel)
+    T, T_c = through(scene, sides.toward(d), x, y.p, sampler, channel, floor, use, cp.tracking)
     weight = w.connect(mis_y, mis, dr.select(y_in_medium, pdf_y_fwd_p, pdf_y_fwd_s),
                        dr.select(y_in_medium, pdf_y_rev_p, pdf_y_rev_s), pdf_x_fwd, pdf_x_rev,
                        g_y * T_c, g_x * T_c, dist2, depth)
@@ -346,8 +365,8 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
     while dr.hint(active, max_iterations=-1, label="lab_bdpt camera subpath in media"):
         si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
         in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
-        mei, scattered, w_flight, p_flight = homogeneous_flight(medium, ray, si.t, sampler.next_1d(), channel,
-                                                                in_medium)
+        mei, scattered, w_flight, p_flight = flight(medium, ray, si.t, sampler.next_1d(), sampler, channel,
+                                                    in_medium, cp.tracking)
         beta[in_medium] *= w_flight
         seg[in_medium] *= p_flight
         arrived = active & ~scattered
@@ -389,8 +408,7 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         ds, em_weight = scene.sample_emitter_direction(v, sampler.next_2d(), False, nee_on)
         tally(cp.counters, "shadow", nee_on)
         nee_on &= ds.pdf > 0
-        T = media.transmittance(scene, sides.toward(ds.d), v, ds.p, sampler, channel, floor, nee_on)
-        T_c = media.channel_value(T, channel)
+        T, T_c = through(scene, sides.toward(ds.d), v, ds.p, sampler, channel, floor, nee_on, cp.tracking)
         f, pdf_fwd, pdf_rev = vertex_eval(ctx, ctx_imp, phase_ctx, si, bsdf, mei, phase, scattered, ds.d, nee_on)
         infinite = table.at_infinity(ds.emitter, nee_on)
         dist2 = dr.select(infinite, 1.0, dr.square(ds.dist))

@@ -1,7 +1,8 @@
-"""The pieces of lab_bdpt's subpaths in homogeneous media (``media_paths`` traces them): the
-path's sampling channel, the analytic free flight in it, the medium a light subpath starts in,
-a medium vertex as a surface interaction, and a vertex's BSDF-or-phase evaluation. The
-densities and the channel are explained in ``media_paths``."""
+"""The pieces of lab_bdpt's subpaths in media (``media_paths`` traces them): the path's sampling
+channel, the analytic free flight in it, delta tracking and the weights' stand-in transmittance
+in heterogeneous media, the medium a light subpath starts in, a medium vertex as a surface
+interaction, and a vertex's BSDF-or-phase evaluation. The densities, the channel and the
+stand-ins are explained in ``media_paths``."""
 from __future__ import annotations
 
 import drjit as dr
@@ -75,6 +76,59 @@ def origin_medium(scene: mi.Scene, ray: mi.Ray3f, floor: float, active) -> mi.Me
         going = hit & ~transition
         ray[going] = spawn.spawn_ray(si, ray.d, floor)
     return found
+
+
+#: The optical depth past which the stand-in transmittance stops falling: 1 / T_det enters the
+#: weights squared (power heuristic) and once per segment, and must stay within float range.
+TAU_CAP = 10.0
+
+
+class Tracking:
+    """A scene with heterogeneous media: lab_bdpt's subpaths sample distances in them by delta
+    tracking (``common.media.free_flight``) against ``grid`` (a ``majorants.MajorantGrid``) or,
+    where None, the media's global majorants."""
+
+    def __init__(self, grid=None):
+        self.grid = grid
+
+
+def stand_in(medium, start, end, wavelengths, channel, active):
+    """The deterministic stand-in for the transmittance, in ``channel``, of the straight piece
+    ``start``-``end`` inside the heterogeneous ``medium``: exp(-|end - start| sigma_t,c(midpoint)),
+    its optical depth capped at TAU_CAP (and taken as TAU_CAP on an unbounded piece). Symmetric
+    in its ends, so both subpaths and every connection give a segment the same value."""
+    mei = dr.zeros(mi.MediumInteraction3f)
+    mei.p, mei.wavelengths = 0.5 * (start + end), wavelengths
+    tau = dr.norm(end - start) * sigma_t_channel(medium, mei, channel, active)
+    tau = dr.select(dr.isfinite(tau), dr.minimum(tau, TAU_CAP), TAU_CAP)
+    return dr.select(active, dr.exp(-tau), 1.0)
+
+
+def tracked_flight(medium, ray: mi.Ray3f, t_max, sampler, channel, active, tracking: Tracking, exact):
+    """``homogeneous_flight``'s (mei, scattered, weight, T_c) with, in the ``active`` lanes (a
+    heterogeneous medium), ``exact`` replaced by delta tracking: ``common.media.free_flight``'s
+    collision and weight (unbiased: T / p per channel, sigma_s at the collision), and for the MIS
+    weights ``stand_in`` of the piece flown in place of T_c, the unknown escape probability."""
+    mei, scattered, weight, T_c = exact
+    mei_h, scattered_h, weight_h, _, _ = media.free_flight(medium, ray, t_max, sampler, channel, active,
+                                                           tracking.grid)
+    end = dr.select(scattered_h, mei_h.p, ray(t_max))
+    mei[active] = mei_h
+    scattered = dr.select(active, scattered_h, scattered)
+    weight = dr.select(active, weight_h, weight)
+    T_c = dr.select(active, stand_in(medium, ray.o, end, ray.wavelengths, channel, active), T_c)
+    return mei, scattered, weight, T_c
+
+
+def transmittance(scene, medium, it, target, sampler, channel, floor, active, tracking):
+    """(T, T_c for the weights) from ``it`` to ``target`` (``common.media.transmittance``): T_c
+    T's own value in ``channel`` in homogeneous media (exact), else with ``stand_in`` for the
+    pieces in heterogeneous media, while T is ratio tracking's unbiased estimate."""
+    if tracking is None:
+        T = media.transmittance(scene, medium, it, target, sampler, channel, floor, active)
+        return T, media.channel_value(T, channel)
+    return media.transmittance(scene, medium, it, target, sampler, channel, floor, active, grid=tracking.grid,
+                               stand_in=stand_in)
 
 
 def sigma_t_channel(medium, mei, channel, active):

@@ -212,15 +212,22 @@ def global_segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: m
 
 @dr.syntax
 def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, target: mi.Point3f,
-                  sampler: mi.Sampler, channel, floor: float, active, tracking_kind: str = "ratio", grid=None):
+                  sampler: mi.Sampler, channel, floor: float, active, tracking_kind: str = "ratio", grid=None,
+                  stand_in=None):
     """T from the vertex ``it`` (inside ``medium``, which a surface vertex has already switched
     to the side facing ``target``) to the point ``target``: through media, and through the
     surfaces between whose BSDFs let light pass unscattered (``null`` boundaries, a mask's clear
     part: ``eval_null_transmission``); every other surface blocks it. Rays start and stop at
-    the lab's offsets (``spawn``). ``tracking_kind``, ``grid``: ``segment_transmittance``'s."""
+    the lab's offsets (``spawn``). ``tracking_kind``, ``grid``: ``segment_transmittance``'s.
+
+    ``stand_in``: None, or a deterministic value for each piece inside a heterogeneous medium,
+    ``stand_in(medium, start, end, wavelengths, channel, active)``; then returns (T, T_det): T_det
+    the product in ``channel`` of the exact factors (homogeneous pieces, null boundaries) and of
+    the stand-ins (lab_bdpt's MIS weights need a transmittance that no random draw changes)."""
     ray = spawn.spawn_ray_to(it, target, floor)
     medium = mi.MediumPtr(medium)
     T = mi.UnpolarizedSpectrum(1.0)
+    T_det = mi.Float(1.0)
     going = mi.Bool(active)
     while going:
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=going)
@@ -228,14 +235,23 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
         segment = mi.Ray3f(ray)
         segment.maxt = dr.select(crossing, si.t, ray.maxt)
         inside = going & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
-        T[inside] *= segment_transmittance(medium, segment, sampler, channel, inside, tracking_kind, grid)[0]
+        T_seg = segment_transmittance(medium, segment, sampler, channel, inside, tracking_kind, grid)[0]
+        T[inside] *= T_seg
         bsdf = si.bsdf(ray)
-        T[crossing] *= bsdf.eval_null_transmission(si, crossing)
+        T_null = bsdf.eval_null_transmission(si, crossing)
+        T[crossing] *= T_null
+        if dr.hint(stand_in is not None, mode="scalar"):
+            # (the last piece ends at the target itself, not where the shortened shadow ray stops)
+            tracked = inside & ~medium.is_homogeneous()
+            end = dr.select(crossing, segment(segment.maxt), target)
+            T_det[inside] *= dr.select(tracked, stand_in(medium, segment.o, end, ray.wavelengths, channel, tracked),
+                                       channel_value(T_seg, channel))
+            T_det[crossing] *= channel_value(T_null, channel)
         medium[crossing & si.is_medium_transition()] = si.target_medium(ray.d)
         # on past the surface, towards the same target
         ray[crossing] = spawn.spawn_ray_to(si, target, floor)
         going = crossing & (dr.max(mi.unpolarized_spectrum(T)) > 0)
-    return T
+    return T if stand_in is None else (T, T_det)
 
 
 def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, scattered, medium, channel,
