@@ -100,8 +100,9 @@ class LabPathIntegrator(mi.SamplingIntegrator):
     Participating media (any phase function, behind ``null`` boundaries, inside dielectrics,
     around the sensor) as ``volpath`` renders them (``common.media``): free flights by delta
     tracking, max_depth counting medium vertices, not null boundaries; in polarized variants
-    the media's weights scale the path's Mueller matrix and a null boundary passes light
-    unpolarized, as ``volpath`` does. lab_nee and lab_mis declare the medium parameters (``params._media``):
+    the media's weights scale the path's Mueller matrix, as in ``volpath``; a shadow ray takes a
+    null-transmitting boundary by its unpolarized part (exact for ``null`` and ``mask``; volpath
+    keeps a ``thindielectric``'s Mueller matrix). lab_nee and lab_mis declare the medium parameters (``params._media``):
     ``medium_sampling``, ``transmittance``, ``majorants`` and ``spectral_mis``.
     """
     #: The estimator class (weights, own parameters, what it knows about scenes).

@@ -238,7 +238,7 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
         T_seg = segment_transmittance(medium, segment, sampler, channel, inside, tracking_kind, grid)[0]
         T[inside] *= T_seg
         bsdf = si.bsdf(ray)
-        # (the unpolarized part: null and mask boundaries scale light, they do not polarize it)
+        # (its unpolarized part: exact for null and mask boundaries, which scale light)
         T_null = mi.unpolarized_spectrum(bsdf.eval_null_transmission(si, crossing))
         T[crossing] *= T_null
         if dr.hint(stand_in is not None, mode="scalar"):
