@@ -99,8 +99,10 @@ class LabPathIntegrator(mi.SamplingIntegrator):
 
     Participating media (any phase function, behind ``null`` boundaries, inside dielectrics,
     around the sensor) as ``volpath`` renders them (``common.media``): free flights by delta
-    tracking, max_depth counting medium vertices, not null boundaries; not in polarized
-    variants. lab_nee and lab_mis declare the medium parameters (``params._media``):
+    tracking, max_depth counting medium vertices, not null boundaries; in polarized variants
+    the media's weights scale the path's Mueller matrix, as in ``volpath``; a shadow ray takes a
+    null-transmitting boundary by its unpolarized part (exact for ``null`` and ``mask``; volpath
+    keeps a ``thindielectric``'s Mueller matrix). lab_nee and lab_mis declare the medium parameters (``params._media``):
     ``medium_sampling``, ``transmittance``, ``majorants`` and ``spectral_mis``.
     """
     #: The estimator class (weights, own parameters, what it knows about scenes).
@@ -141,11 +143,6 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         # would split the render into several kernels.
         traits = SceneTraits.from_scene(scene)
         warn_if_unsupported(self, traits)         # never an image silently missing light
-        if traits.media and mi.is_polarized:
-            variant = mi.variant()
-            raise ValueError(f"{self.ESTIMATOR.plugin_name}: participating media in the polarized variant "
-                             f"'{variant}' are not supported yet: use {variant.replace('_polarized', '')} "
-                             f"or Mitsuba's volpath")
         if traits.media:
             majorants.of_integrator(self, scene)     # majorants = grid: built once per scene, or refused
         bind_film_layout(scene, sensor)           # samplers that order pixels learn the film's shape
@@ -234,7 +231,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                     n_shadow += dr.select(ea_lanes, 1, 0)
                 mei, scattered, w_flight, ratios_next, nulls = media.free_flight(
                     medium, ray, si.t, sampler, channel, in_medium, grid, ratios if spectral else None)
-                beta[in_medium] *= w_flight
+                beta[in_medium] *= mi.Spectrum(w_flight)      # (a diagonal Mueller matrix in polarized variants)
                 on_surface = active & ~scattered
 
             # ----------------------- Direct emission -----------------------

@@ -206,5 +206,5 @@ def equiangular_scatter(scene, sampler, phase_ctx, medium, segment: Segment, wav
     p_e = pdf_t * pdf_y
     w = equiangular_weight(Densities(bsdf=p_d * pdf_phase, emitter=p_d * n_L * pdf_nee if nee else 0.0 * p_d,
                                      delta=ds.delta, equiangular=p_e))
-    value = beta * (T_ray * sigma_s * w / p_e) * f * emitted * T_light
+    value = beta * mi.Spectrum(T_ray * sigma_s * w / p_e * T_light) * f * emitted
     return dr.select(ok & (p_e > 0) & dr.isfinite(p_e), spectrum_or_zero(value), 0.0)

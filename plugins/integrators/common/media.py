@@ -238,7 +238,8 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
         T_seg = segment_transmittance(medium, segment, sampler, channel, inside, tracking_kind, grid)[0]
         T[inside] *= T_seg
         bsdf = si.bsdf(ray)
-        T_null = bsdf.eval_null_transmission(si, crossing)
+        # (its unpolarized part: exact for null and mask boundaries, which scale light)
+        T_null = mi.unpolarized_spectrum(bsdf.eval_null_transmission(si, crossing))
         T[crossing] *= T_null
         if dr.hint(stand_in is not None, mode="scalar"):
             # (the last piece ends at the target itself, not where the shortened shadow ray stops)
@@ -283,6 +284,6 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
         if equiangular is not None:
             d = equiangular.densities(scene, d, it, ds, sampled, nee)
         w = sample_weight(d)
-        L = L + emitter_sample_contribution(beta, ds, em_weight * T, f, w / n_L, sampled)
+        L = L + emitter_sample_contribution(beta, ds, em_weight * mi.Spectrum(T), f, w / n_L, sampled)
     return L
 
