@@ -122,7 +122,11 @@ def main(argv=None) -> int:
                 integrator = make_integrator(plugin, {"max_depth": depth, **params})
                 start = time.perf_counter()
                 counts = [args.spp] if unbiased else [max(1, args.spp // 4), args.spp, 4 * args.spp]
-                stacks = [renders(scene, integrator, spp, lab_seeds) for spp in counts]
+                if plugin == "lab_photon":      # (its count is passes, each one camera sample per pixel)
+                    stacks = [renders(scene, make_integrator(plugin, {"max_depth": depth, **params, "passes": n}), 1,
+                                      lab_seeds) for n in counts]
+                else:
+                    stacks = [renders(scene, integrator, spp, lab_seeds) for spp in counts]
                 results = [block_test(stack, ref) for stack in stacks]
                 seconds = time.perf_counter() - start
                 last = results[-1]
