@@ -96,13 +96,9 @@ def main(argv=None) -> int:
 
     import mitsuba_lab
     import numpy as np
-    from agreement import BLOCK_SIZE, block_means, block_test, renders
+    from agreement import block_test, grey_block_means, renders
     from mitsuba_lab.scene import load_scene, make_integrator
     import user_scenes
-
-    def grey_blocks(stack):
-        grey = stack[..., : min(3, stack.shape[-1])].mean(axis=-1)[..., None]
-        return np.stack([block_means(img, BLOCK_SIZE)[..., 0] for img in grey])
 
     assets = user_scenes.write_assets(os.path.join(ROOT, "out", "block_agreement_assets"))
     lab_seeds, ref_seeds = range(args.seeds), range(10_000, 10_000 + args.seeds)
@@ -135,7 +131,7 @@ def main(argv=None) -> int:
                     failures += verdict == "FAIL"
                 else:
                     rng = np.random.default_rng(0)
-                    biases = [block_bias(grey_blocks(stack), grey_blocks(ref), rng) for stack in stacks]
+                    biases = [block_bias(grey_block_means(stack), grey_block_means(ref), rng) for stack in stacks]
                     verdict = trend(biases) + ": bias " + " -> ".join(
                         f"{b:.4f} +- {s:.4f} at {c}" for (b, s), c in zip(biases, counts)) + "; |z| " + " -> ".join(
                         f"{r.max_abs_z:.1f}" for r in results)

@@ -169,14 +169,16 @@ def sidak_bound(blocks: int, alpha: float = BLOCK_ALPHA) -> float:
     return NormalDist().inv_cdf(1.0 - per_block / 2.0)
 
 
+def grey_block_means(stack: np.ndarray, block: int = BLOCK_SIZE) -> np.ndarray:
+    """(seeds, blocks_y, blocks_x): each render's block means, its colour channels averaged."""
+    grey = stack[..., : min(3, stack.shape[-1])].mean(axis=-1)[..., None]
+    return np.stack([block_means(img, block)[..., 0] for img in grey])
+
+
 def block_test(lab: np.ndarray, ref: np.ndarray, block: int = BLOCK_SIZE, alpha: float = BLOCK_ALPHA) -> BlockTest:
     """The block test of two stacks of renders (seeds, height, width, channels); blocks whose
     reference and lab images are both constant over the seeds (black background) have z = 0."""
-    def means(stack):
-        grey = stack[..., : min(3, stack.shape[-1])].mean(axis=-1)[..., None]
-        return np.stack([block_means(img, block)[..., 0] for img in grey])
-
-    a, b = means(lab), means(ref)
+    a, b = grey_block_means(lab, block), grey_block_means(ref, block)
     ma, mb = a.mean(axis=0), b.mean(axis=0)
     z = z_score(ma, a.var(axis=0, ddof=1) / len(a), 1, mb, b.var(axis=0, ddof=1) / len(b), 1)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -144,17 +144,22 @@ def test_medium_modes_pass_the_block_test(kind, name, config):
     assert problem == "" and not result.failing, f"{name} {variant} {config}: {result.summary()} {problem}"
 
 
-def test_a_three_percent_error_in_a_medium_estimator_fails_the_block_test(monkeypatch):
-    """Power: the weight of every free flight x 0.97 (a transmittance over its density 3% low)."""
+def bias_free_flights(monkeypatch, factor: float):
+    """Every free flight's weight times ``factor`` (a power proof's deliberate bias)."""
     from mitsuba_lab.plugins.integrators.common import media
 
     original = media.free_flight
 
     def biased(*args, **kwargs):
         mei, scattered, weight, ratios, nulls = original(*args, **kwargs)
-        return mei, scattered, 0.97 * weight, ratios, nulls
+        return mei, scattered, factor * weight, ratios, nulls
 
     monkeypatch.setattr(media, "free_flight", biased)
+
+
+def test_a_three_percent_error_in_a_medium_estimator_fails_the_block_test(monkeypatch):
+    """Power: the weight of every free flight x 0.97 (a transmittance over its density 3% low)."""
+    bias_free_flights(monkeypatch, 0.97)
     result, _ = check("fog_box", "mis", SEEDS_LAB, SEEDS_REF)
     assert result.failing, result.summary()
 

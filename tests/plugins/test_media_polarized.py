@@ -12,6 +12,7 @@ import media_scenes
 import mitsuba_lab
 from agreement import block_test, pixel_problem, renders
 from mitsuba_lab.scene import make_integrator
+from test_media_block import bias_free_flights
 
 pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier
 
@@ -55,15 +56,7 @@ def test_lab_mis_agrees_with_volpath_in_a_polarized_variant(polarized):
 
 
 def test_a_three_percent_error_fails_it_in_a_polarized_variant(polarized, monkeypatch):
-    from mitsuba_lab.plugins.integrators.common import media
-
-    original = media.free_flight
-
-    def biased(*args, **kwargs):
-        mei, scattered, weight, ratios, nulls = original(*args, **kwargs)
-        return mei, scattered, 0.97 * weight, ratios, nulls
-
-    monkeypatch.setattr(media, "free_flight", biased)
+    bias_free_flights(monkeypatch, 0.97)
     result = block_test(render("lab_mis", SEEDS_LAB), polarized)
     print(f"free flights x 0.97: {result.summary()}")
     assert result.failing, result.summary()
