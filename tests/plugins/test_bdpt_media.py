@@ -6,7 +6,8 @@ camera inside forward-scattering fog (sigma_t = 0.15), and a chromatic medium in
 strategies alone). Heterogeneous media (delta tracking, stand-in densities in the weights): a
 spot light into the smoke plume under an environment (rgb, global majorants) and a point light
 inside it (mono, the majorant grid). Scenes without media keep the surface-only kernels
-(checked bit for bit outside the suite, see the commit message); lab_vcm still ignores media.
+(checked bit for bit outside the suite, see the commit message); lab_vcm's modes without merging
+render the same images (test_vcm_media.py).
 
 The smoke's box is lifted off the floor in these scenes: on the floor's plane its null boundary
 is ambiguous, and there light tracing disagreed with the camera strategies (an open issue,
@@ -120,7 +121,7 @@ def test_a_biased_delta_tracked_flight_is_caught(monkeypatch):
 
 def test_the_planner_runs_lab_bdpt_on_media():
     """Homogeneous and heterogeneous media: lab_bdpt applies; hide_emitters with media is refused
-    in one line; lab_vcm still leaves media out (it ignores them)."""
+    in one line; lab_vcm's default mode (vcm, merging) still refuses them."""
     fog = SceneTraits.from_scene(mi.load_dict(fog_box()))
     assert strategy_applicability(fog, "lab_bdpt", {}) == (True, "")
     applies, reason = strategy_applicability(fog, "lab_vcm", {})

@@ -30,8 +30,7 @@ def render_error(scene, integrator) -> str:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind, params", [("lab_vcm", {"pilot": False}),
-                                          ("lab_photon", {"photons_per_pass": 1000, "passes": 1})])
+@pytest.mark.parametrize("kind, params", [("lab_photon", {"photons_per_pass": 1000, "passes": 1})])
 def test_participating_media_render_with_one_logged_warning(kind, params, capfd):
     """As a plugin in a user's scene: it renders (media ignored) and says so once, through
     Mitsuba's logger, naming the plugin and the reason."""

@@ -26,8 +26,9 @@ def merges_first(params: dict) -> bool:
 class VertexMerging(Bidirectional):
     """lab_vcm's estimator: the techniques of its ``mode`` (``MODES``) under one MIS."""
     plugin_name = "lab_vcm"
-    #: lab_vcm ignores participating media (lab_bdpt's media loops have no merging yet)
-    RENDERS_MEDIA = False
+    #: Modes without merging scatter in media through lab_bdpt's media loops (``media_problem``:
+    #: the merging modes refuse them)
+    RENDERS_MEDIA = True
     PARAMETERS = declarations.LAB_VCM
     OWN_PARAMETERS = ("mode", "radius", "alpha", "light_paths", "kernel", "merge_first", "merge_vertices", "connections", "pilot", "light_paths_max", "heuristic", "beta",
                       "max_vertices")
@@ -44,14 +45,22 @@ class VertexMerging(Bidirectional):
         return ""
 
     @classmethod
+    def mode_media_problem(cls, traits, mode: str) -> str:
+        """Why mode ``mode`` cannot render the scene's participating media ('' if it can)."""
+        if traits.media and Technique.MERGE in MODES.get(mode, Technique.MERGE):
+            return (f"lab_vcm mode={mode} does not support participating media yet (no merging at medium "
+                    f"vertices): use mode bpt, lt or pt, lab_bdpt, lab_mis or Mitsuba's volpath")
+        return ""
+
+    @classmethod
     def applicability(cls, traits, params: dict) -> tuple[bool, str]:
-        """As lab_bdpt's (media, unknown emitters and sensors, light a mode cannot reach, light
+        """As lab_bdpt's (media in the merging modes, unknown emitters and sensors, light a mode cannot reach, light
         tracing, mode lt, on an orthographic sensor);
         merging reaches any light that arrives at a smooth surface the camera sees."""
-        problem = cls.media_problem(traits) or cls.unsupported(traits)
+        mode = params.get("mode", "vcm")
+        problem = cls.mode_media_problem(traits, mode) or cls.unsupported(traits)
         if problem:
             return False, problem
-        mode = params.get("mode", "vcm")
         techniques = MODES[mode]
         missing = cls._subset_problem(traits, techniques)
         if missing:

@@ -181,7 +181,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     vertices). Supports what lab_bdpt supports (projector emitters; orthographic sensors, where
     light tracing cannot reach the sensor: no t = 1 technique there, in any mode or MIS sum,
     and mode ``lt`` renders nothing; RGB, mono and spectral variants; spectral: one iteration
-    per pass). Statistics of the
+    per pass; participating media in modes ``bpt``, ``lt`` and ``pt``, through lab_bdpt's media
+    loops, the merging modes refuse them in one line). Statistics of the
     last render (``bdpt_stats()``): light, grid and camera time, the radii; with ``pilot`` the
     pilot's time, whether it chose path tracing alone, the light subpaths it chose, each
     choice's score (relative variance x seconds per iteration) and ``pilot_costs``, its iterations
@@ -273,6 +274,13 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                                 connect_one=self.values["connections"] == "one" and Technique.CONNECT in self.techniques,
                                 caustic_merges=caustic_merges, ppm=ppm)
         self.stats = VcmStats()
+
+    def refuse_unsupported(self, scene: mi.Scene):
+        traits = super().refuse_unsupported(scene)
+        problem = VertexMerging.mode_media_problem(traits, self.values["mode"])
+        if problem:
+            raise ValueError(problem)
+        return traits
 
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
