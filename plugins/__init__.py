@@ -42,7 +42,7 @@ _ORDER = (
     "integrators.bdpt.endpoints", "integrators.bdpt.splats", "integrators.bdpt.vertices",
     "integrators.bdpt.media_vertices", "integrators.bdpt.media_paths", "integrators.bdpt.light_subpath", "integrators.bdpt.camera_subpath", "integrators.bdpt.passes",
     "integrators.bdpt.integrator",
-    "integrators.vcm.merging", "integrators.vcm.pilot", "integrators.vcm.integrator",
+    "integrators.vcm.merging", "integrators.vcm.volume_merging", "integrators.vcm.pilot", "integrators.vcm.integrator",
     # the samplers
     "samplers.common", "samplers.halton", "samplers.independent", "samplers.sobol",
     "samplers.stratified", "samplers.zsobol",

@@ -240,6 +240,10 @@ LAB_VCM = (
     Param("radius", float, 0.0, "first iteration's merging radius r_1 in scene units; 0 = automatic "
           "(one pixel's width at the first surfaces the camera sees)",
           check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
+    Param("radius_volume", float, 0.0, "first iteration's radius r_v,1 of the ball medium vertices merge in "
+          "(scenes with participating media), in scene units; 0 = automatic (the surfaces' r_1); "
+          "r_v,i = r_v,1 i^((alpha - 1) / 3)",
+          check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
     Param("alpha", float, 0.75, "radius schedule r_i = r_1 i^((alpha - 1) / 2), iteration i = sample i",
           check=lambda v: 0.0 < v < 1.0, expected="a number in (0, 1)"),
     Param("light_paths", float, 1.0, "light subpaths traced per camera subpath in each iteration: all of "

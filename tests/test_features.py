@@ -69,7 +69,7 @@ def test_features_and_the_default_reference():
     assert ignored_features(medium, "direct") == ("media", "indirect light")
     assert ignored_features(medium, "lab_mis") == ()
     assert ignored_features(medium, "lab_bdpt") == ()               # homogeneous media: rendered
-    assert ignored_features(medium, "lab_vcm") == ()                # (bpt, lt, pt; the merging modes refuse)
+    assert ignored_features(medium, "lab_vcm") == ()                # (merging at medium vertices too)
     assert ignored_features(medium, "lab_photon") == ("media",)
     assert ignored_features(medium, "volpath") == ()
     assert ignored_features(medium, "aov", {"aovs": "d:depth", "inner": {"type": "volpath"}}) == ()

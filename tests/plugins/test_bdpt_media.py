@@ -121,11 +121,10 @@ def test_a_biased_delta_tracked_flight_is_caught(monkeypatch):
 
 def test_the_planner_runs_lab_bdpt_on_media():
     """Homogeneous and heterogeneous media: lab_bdpt applies; hide_emitters with media is refused
-    in one line; lab_vcm's default mode (vcm, merging) still refuses them."""
+    in one line; lab_vcm renders them too (merging at medium vertices: test_vcm_media.py)."""
     fog = SceneTraits.from_scene(mi.load_dict(fog_box()))
     assert strategy_applicability(fog, "lab_bdpt", {}) == (True, "")
-    applies, reason = strategy_applicability(fog, "lab_vcm", {})
-    assert not applies and "participating media" in reason
+    assert strategy_applicability(fog, "lab_vcm", {}) == (True, "")
     smoke = SceneTraits.from_scene(mi.load_dict(media_scenes.smoke()))
     assert strategy_applicability(smoke, "lab_bdpt", {}) == (True, "")
     with pytest.raises(ValueError, match="hide_emitters is not supported in scenes with participating media"):

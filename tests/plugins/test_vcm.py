@@ -310,12 +310,12 @@ def test_merging_roulette_keeps_the_estimate_where_it_skips_most_merges(monkeypa
     scene = load_scene(scene_path("caustic.xml"), res=RES)
     params = {"radius": 0.1, "light_paths": 4, "merge_first": True}
     right = merging.merge_roulette
-    monkeypatch.setattr(merging, "merge_roulette", lambda w, camera, u: (True, 1.0))
+    monkeypatch.setattr(merging, "merge_roulette", lambda w, camera, u, medium=None: (True, 1.0))
     every = renders(scene, vcm(**params), 16, SEEDS_REF)
     monkeypatch.setattr(merging, "merge_roulette", right)
     monkeypatch.setattr(merging, "MERGE_ROULETTE", 4.0)
     assert_agrees(renders(scene, vcm(**params), 16, SEEDS_LAB), every, "merges run with probability bound / 4")
-    monkeypatch.setattr(merging, "merge_roulette", lambda w, camera, u: (right(w, camera, u)[0], 1.0))
+    monkeypatch.setattr(merging, "merge_roulette", lambda w, camera, u, medium=None: (right(w, camera, u)[0], 1.0))
     z = z_scores(renders(scene, vcm(**params), 16, SEEDS_LAB), every).max_abs_z
     print(f"merges run with probability bound / 4, counted once: max |z| {z:.2f}")
     assert z > Z_BOUND

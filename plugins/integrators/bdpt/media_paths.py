@@ -213,7 +213,7 @@ def trace_light(tracer, st, block, vertices, store_lanes):
             f_cam = dr.select(scattered, mi.Spectrum(f_phase), f_surface)
             g_cam = dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, ds.d)))
             w_cam = w.light_to_camera(mis, sensor_pdf(ds, we), g_cam * T_c,
-                                      dr.square(ds.dist), dr.select(scattered, rev_phase, rev_surface))
+                                      dr.square(ds.dist), dr.select(scattered, rev_phase, rev_surface), scattered)
             value = beta * f_cam * we * mi.Spectrum(T) * float_or_zero(w_cam) * scale
             splats.splat(block, ds.uv, v.wavelengths, value, connect)
 
@@ -230,7 +230,8 @@ def trace_light(tracer, st, block, vertices, store_lanes):
         beta[going] *= dr.select(scattered, mi.Spectrum(phase_weight), surface_weight)
         scattered_mis = w.scatter_light(mis, dr.select(scattered, phase_pdf, bs.pdf),
                                         dr.select(scattered, rev_phase, rev_surface),
-                                        dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, wo_world))), delta_lobe)
+                                        dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, wo_world))), delta_lobe,
+                                        scattered)
         dvcm = dr.select(vertex, float_or_zero(scattered_mis.dvcm), dvcm)
         dvc = dr.select(vertex, float_or_zero(scattered_mis.dvc), dvc)
         first = dr.select(vertex, mi.Float(scattered_mis.first), first)
@@ -297,7 +298,7 @@ def connection(scene, cp, x, si, bsdf, mei, phase, scattered, sides, beta, mis: 
     T, T_c = through(scene, sides.toward(d), x, y.p, sampler, channel, floor, use, cp.tracking)
     weight = w.connect(mis_y, mis, dr.select(y_in_medium, pdf_y_fwd_p, pdf_y_fwd_s),
                        dr.select(y_in_medium, pdf_y_rev_p, pdf_y_rev_s), pdf_x_fwd, pdf_x_rev,
-                       g_y * T_c, g_x * T_c, dist2, depth)
+                       g_y * T_c, g_x * T_c, dist2, depth, y_in_medium, scattered)
     value = spectrum_or_zero(value * mi.Spectrum(T) * float_or_zero(weight))
     return dr.select(use, value, 0.0), prev
 
@@ -324,7 +325,7 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
     trace_camera_subpaths``'s strategies, t >= 2), starting in the sensor's ``medium``."""
     from dataclasses import replace
 
-    from .light_subpath import float_or_zero, reverse_pdf, strategy_mask
+    from .light_subpath import carried, float_or_zero, reverse_pdf, strategy_mask
 
     lanes = dr.width(ray)
     lane = dr.arange(mi.UInt32, lanes)
@@ -336,6 +337,8 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
     max_depth = dr.opaque(mi.UInt32, cp.max_depth)
     rr_depth = dr.opaque(mi.UInt32, cp.rr_depth)
     emitter_hits = cp.emitter_hits and Technique.HIT in w.techniques
+    merging = cp.grid is not None                      # (lab_vcm: surface and medium vertices merge)
+    iteration = w.lane_iteration(lane)                 # (lab_vcm: the lane's merging iteration)
 
     if dr.hint(cp.light_count < lanes, mode="scalar"):
         lane = lane % dr.opaque(mi.UInt32, cp.light_count)
@@ -347,6 +350,7 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
     cos_cam = dr.dot(ray.d, mi.Vector3f(*cp.axis))
     start = w.start_camera(dr.opaque(mi.Float, cp.inv_image_area) / (cos_cam * dr.square(cos_cam)), cp.sensor_delta)
     dvcm, dvc, first = mi.Float(start.dvcm), mi.Float(start.dvc), mi.Float(start.first)
+    dvm = mi.Float(start.dvm) if merging else 0.0
     L = mi.Spectrum(0)
     beta = mi.Spectrum(1)
     eta = mi.Float(1)
@@ -359,7 +363,7 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
     pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
     tally(cp.counters, "camera", active)
 
-    if dr.hint(not w.techniques & (Technique.HIT | Technique.NEE | Technique.CONNECT), mode="scalar"):
+    if dr.hint(not w.techniques & (Technique.HIT | Technique.NEE | Technique.CONNECT | Technique.MERGE), mode="scalar"):
         return mi.Spectrum(0), valid_ray | (active & pi.is_valid())
 
     while dr.hint(active, max_iterations=-1, label="lab_bdpt camera subpath in media"):
@@ -383,7 +387,7 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         phase[~scattered] = dr.zeros(mi.PhaseFunctionPtr)
         sigma_c = media.channel_value(mei.sigma_t, channel)
         g_in = dr.select(scattered, sigma_c, dr.select(escaped, 1.0, dr.abs(dr.dot(si.n, ray.d))))
-        mis = w.after_hit(SubpathMis(dvcm, dvc, first), dr.select(escaped, 1.0, dr.squared_norm(v.p - prev_p)),
+        mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dr.select(escaped, 1.0, dr.squared_norm(v.p - prev_p)),
                           g_in, seg)
 
         # ---------------- s = 0: the camera subpath reaches an emitter ----------------
@@ -417,13 +421,20 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         pdf_pos, pdf_dir, delta = table.emission(ds.emitter, cos_light, pdf_nee, nee_on, ds.p, -ds.d)
         g_cam = dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, ds.d)))
         w_nee = w.nee(mis, pdf_nee, pdf_pos * pdf_dir, cos_light * T_c, g_cam * T_c, dist2, pdf_fwd, pdf_rev,
-                      delta, here)
+                      delta, here, scattered)
         L += dr.select(nee_on, spectrum_or_zero(beta * f * em_weight * mi.Spectrum(T) * float_or_zero(w_nee)), 0.0)
 
         # ---------------- s >= 2: connections to the light subpath ----------------
         if dr.hint(Technique.CONNECT in w.techniques, mode="scalar"):
             L += connect_to_light_subpath(scene, cp, v, si, bsdf, mei, phase, scattered, sides, beta, mis, here,
                                           head, smooth & (here + 2 <= max_depth), sampler, channel, phase_ctx)
+
+        # ---------------- merging: light vertices on the surface or in the ball around (lab_vcm) ----------------
+        if dr.hint(merging, mode="scalar"):
+            merge_on = smooth & (here < max_depth) & w.merges_at(here)
+            u_merge = sampler.next_1d() if w.merge_bounded else None
+            L += cp.grid.merge(cp, si, bsdf, beta, mis, here, iteration, merge_on & ~scattered, u_merge)
+            L += cp.grid.volume.merge(cp, mei, phase, beta, mis, here, iteration, merge_on & scattered, u_merge)
 
         # ---------------- the next direction: the BSDF sample, or the phase function ----------------
         wo_phase, phase_weight, phase_pdf = phase.sample(phase_ctx, mei, sampler.next_1d(), sampler.next_2d(),
@@ -435,10 +446,11 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         scattered_mis = w.scatter_camera(mis, dr.select(scattered, phase_pdf, bs.pdf),
                                          dr.select(scattered, rev_phase, rev_surface),
                                          dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, wo_world))),
-                                         delta_lobe, here)
+                                         delta_lobe, here, scattered)
         dvcm = dr.select(vertex, float_or_zero(scattered_mis.dvcm), dvcm)
         dvc = dr.select(vertex, float_or_zero(scattered_mis.dvc), dvc)
         first = dr.select(vertex, mi.Float(scattered_mis.first), first)
+        dvm = carried(merging, dr.select(vertex, scattered_mis.dvm, dvm), dvm)
         beta[going] *= dr.select(scattered, mi.Spectrum(phase_weight), bsdf_weight)
         eta[going & ~scattered] *= bs.eta
         valid_ray |= vertex
@@ -458,6 +470,9 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         active_next &= (beta_max != 0) & dr.isfinite(beta_max)
         beta, survives = russian_roulette(beta, sampler.next_1d(), vertex & (depth >= rr_depth), eta=eta)
         active_next &= survives
+        if dr.hint(merging and cp.grid.first_only, mode="scalar"):
+            # lab_vcm's ppm: the merge took the smooth lobes' (and the phase function's) light
+            active_next &= ~smooth | delta_lobe
         pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
         tally(cp.counters, "extension", active_next)
         active = active_next

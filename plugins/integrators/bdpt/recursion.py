@@ -78,7 +78,7 @@ class Recursion:
     connect_weight = 1.0
 
     def __init__(self, beta: float = 2.0, light_paths: float = 1.0, merging: bool = False,
-                 merge_area: float = 0.0):
+                 merge_area: float = 0.0, merge_volume: float = 0.0):
         self.beta = float(beta)
         self.light_paths = float(light_paths)
         self.merging = merging
@@ -86,6 +86,22 @@ class Recursion:
         # the merge terms are left out entirely without merging (as if eta = 0)
         self.eta = self._m(float(merge_area)) if merging else 0.0
         self.inv_eta = self._m(1.0 / float(merge_area)) if merging else 0.0
+        # at a medium vertex: 4/3 pi r_v^3 N_light, the ball's volume (Krivanek et al. 2014's point-point
+        # estimator); 0: no medium vertex merges (``merge_volume`` unknown, scenes without media)
+        self.eta_volume = self._m(float(merge_volume)) if merging else 0.0
+
+    def _eta_at(self, medium):
+        """eta of merging at a vertex: the ball's where ``medium`` (a mask; None: a surface vertex)."""
+        if medium is None or not self.merging:
+            return self.eta
+        return select(medium, self.eta_volume, self.eta)
+
+    def _volume_ratio(self, medium):
+        """eta at the vertex over the surfaces' eta: ``dvm`` counts every term in units of
+        ``dvc`` / (surface eta), so a merge at a medium vertex rescales its sums by this."""
+        if medium is None or not self.merging:
+            return 1.0
+        return select(medium, self.eta_volume * self.inv_eta, 1.0)
 
     def _m(self, x):
         """x^beta (the heuristic applied to a density ratio)."""
@@ -194,10 +210,11 @@ class Recursion:
             dvcm = dvcm * self._m(1.0 / transmittance)
         return SubpathMis(dvcm, state.dvc * inv_cos, state.first, state.dvm * inv_cos, state.merges, pending)
 
-    def _scatter(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta, start_kind, merges=1.0):
+    def _scatter(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta, start_kind, merges=1.0, medium=None):
         """Shared by both sides; only the kind of the subpath's first ratio differs (``merges``:
-        merging at this vertex, as a factor)."""
+        merging at this vertex, as a factor; ``medium``: where this vertex is a medium vertex)."""
         ratio, rev, inner = self._m(cos_out / pdf_fwd_W), self._m(pdf_rev_W), self._inner(state, start_kind)
+        merges = merges * self._volume_ratio(medium)                    # (in units of the surfaces' eta)
         folded = ratio * (state.dvc * rev + inner + self.eta * merges)   # eta: merging at this vertex
         cos_m = self._m(cos_out)
         dvc = select(delta, state.dvc * cos_m, folded)          # (a delta lobe passes dvc, dvm on)
@@ -208,16 +225,20 @@ class Recursion:
             dvm = select(delta, state.dvm * cos_m, folded_vm)
         return SubpathMis(dvcm, dvc, 0.0 * state.first, dvm, 1.0, 0.0)
 
-    def scatter_light(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta=False) -> SubpathMis:
+    def scatter_light(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta=False, medium=None) -> SubpathMis:
         """State after sampling the next direction at a light-subpath vertex: ``pdf_fwd_W`` the
         sampled direction's density (adjoint BSDF), ``pdf_rev_W`` the density of sampling the
         reverse (towards the previous vertex, coming from the new direction), ``cos_out`` |cos|
-        of the new direction at this vertex, ``delta`` a delta lobe sampled."""
-        return self._scatter(state, pdf_fwd_W, pdf_rev_W, cos_out, delta, Technique.NEE, self._light_merges(state))
+        of the new direction at this vertex, ``delta`` a delta lobe sampled; ``medium``: a
+        medium vertex (phase function; cos_out is then sigma_t), whose merge counts the ball."""
+        return self._scatter(state, pdf_fwd_W, pdf_rev_W, cos_out, delta, Technique.NEE, self._light_merges(state),
+                             medium)
 
-    def scatter_camera(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta=False, depth=None) -> SubpathMis:
+    def scatter_camera(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta=False, depth=None,
+                       medium=None) -> SubpathMis:
         """``scatter_light`` for a camera-subpath vertex ``depth`` segments from the sensor."""
-        return self._scatter(state, pdf_fwd_W, pdf_rev_W, cos_out, delta, Technique.LIGHT, self._camera_merges(depth))
+        return self._scatter(state, pdf_fwd_W, pdf_rev_W, cos_out, delta, Technique.LIGHT, self._camera_merges(depth),
+                             medium)
 
     # -- the weights of each technique ------------------------------------------------------
 
@@ -230,46 +251,47 @@ class Recursion:
         return self._own(Technique.HIT) / (1.0 + w_camera)
 
     def nee(self, camera: SubpathMis, pdf_direct_A, pdf_emit_W, cos_light, cos_cam, dist2,
-            pdf_cam_fwd_W, pdf_cam_rev_W, delta=False, depth=None):
+            pdf_cam_fwd_W, pdf_cam_rev_W, delta=False, depth=None, medium=None):
         """s = 1, t >= 2: emitter sampling at a camera vertex. ``cos_light``, ``cos_cam``: |cos|
         at the emitter point and at the camera vertex along the segment, ``dist2`` its squared
         length (1, 1 for an infinite emitter); ``pdf_cam_fwd_W``: BSDF density at the camera
         vertex of the direction to the emitter, ``pdf_cam_rev_W``: of the direction back along
         the camera subpath given the emitter's; ``delta``: delta emitter (it cannot be hit);
-        ``depth``: the camera vertex's, in segments from the sensor."""
+        ``depth``: the camera vertex's, in segments from the sensor; ``medium``: a medium vertex."""
         p_cam0 = pdf_cam_fwd_W * cos_light / dist2
         w_light = select(delta, 0.0 * p_cam0, self._term(Technique.HIT, self._m(p_cam0 / pdf_direct_A)))
-        inner = (self.eta * self._joined_merges(depth) + self._inner(camera, Technique.LIGHT)
+        inner = (self._eta_at(medium) * self._joined_merges(depth) + self._inner(camera, Technique.LIGHT)
                  + camera.dvc * self._m(pdf_cam_rev_W))
         w_camera = self._m(pdf_emit_W * cos_cam / (dist2 * pdf_direct_A)) * inner
         return self._own(Technique.NEE) / (w_light + 1.0 + w_camera)
 
     def connect(self, light: SubpathMis, camera: SubpathMis, pdf_light_fwd_W, pdf_light_rev_W,
-                pdf_cam_fwd_W, pdf_cam_rev_W, cos_light, cos_cam, dist2, depth=None):
+                pdf_cam_fwd_W, pdf_cam_rev_W, cos_light, cos_cam, dist2, depth=None, light_medium=None,
+                camera_medium=None):
         """s >= 2, t >= 2: a connection between a light vertex and a camera vertex (neither a
         delta lobe). ``pdf_light_fwd_W``: density at the light vertex of the direction to the
         camera vertex, ``pdf_light_rev_W``: of the direction back along the light subpath given
         that one; ``pdf_cam_*`` likewise; ``cos_*``: |cos| at each end; ``dist2``; ``depth``:
-        the camera vertex's, in segments from the sensor."""
+        the camera vertex's, in segments from the sensor; ``*_medium``: each end a medium vertex."""
         w_light = self._m(pdf_cam_fwd_W * cos_light / dist2) * (
-            self.eta * self._light_merges(light) + self._inner(light, Technique.NEE)
+            self._eta_at(light_medium) * self._light_merges(light) + self._inner(light, Technique.NEE)
             + light.dvc * self._m(pdf_light_rev_W))
         w_camera = self._m(pdf_light_fwd_W * cos_cam / dist2) * (
-            self.eta * self._joined_merges(depth) + self._inner(camera, Technique.LIGHT)
+            self._eta_at(camera_medium) * self._joined_merges(depth) + self._inner(camera, Technique.LIGHT)
             + camera.dvc * self._m(pdf_cam_rev_W))
         if not self._own(Technique.CONNECT):
             return 0.0 * w_light
         # (this technique's term is its count n_c^beta, as each term of the sums carries its own)
         return self.connect_weight / (w_light + self.connect_weight + w_camera)
 
-    def light_to_camera(self, light: SubpathMis, pdf_cam_W, cos_light, dist2, pdf_light_rev_W):
+    def light_to_camera(self, light: SubpathMis, pdf_cam_W, cos_light, dist2, pdf_light_rev_W, medium=None):
         """t = 1, s >= 2: a light vertex (not a delta lobe) joined to the sensor. ``pdf_cam_W``:
         the sensor's direction density towards it (as in ``start_camera``), ``cos_light`` |cos|
         at the light vertex, ``pdf_light_rev_W``: density at the light vertex of the direction
         back along the light subpath given the sensor's. (The light vertex is the camera's
-        first.)"""
+        first; ``medium``: a medium vertex.)"""
         w_light = self._m(pdf_cam_W * cos_light / (dist2 * self.light_paths)) * (
-            self.eta * self._sensor_merges(light) + self._inner(light, Technique.NEE)
+            self._eta_at(medium) * self._sensor_merges(light) + self._inner(light, Technique.NEE)
             + light.dvc * self._m(pdf_light_rev_W))
         return self._own(Technique.LIGHT) / (1.0 + w_light)
 
@@ -281,16 +303,19 @@ class Recursion:
         w_light = select(delta, 0.0 * ratio, self._term(Technique.HIT, self._m(ratio)))
         return self._own(Technique.LIGHT) / (1.0 + w_light)
 
-    def merge_bound(self, camera: SubpathMis):
+    def merge_bound(self, camera: SubpathMis, medium=None):
         """An upper bound on ``merge`` at a camera vertex, whatever light vertex it merges with:
         its weight without the terms that depend on the light vertex (all of them >= 0)."""
-        return self._own(Technique.MERGE) / (1.0 + self._inner(camera, Technique.LIGHT) * self.inv_eta)
+        return self._own(Technique.MERGE) / (
+            1.0 + self._inner(camera, Technique.LIGHT) * self.inv_eta / self._volume_ratio(medium))
 
-    def merge(self, light: SubpathMis, camera: SubpathMis, pdf_cam_fwd_W, pdf_cam_rev_W):
+    def merge(self, light: SubpathMis, camera: SubpathMis, pdf_cam_fwd_W, pdf_cam_rev_W, medium=None):
         """Merging a light vertex with a camera vertex at (about) the same point x_i, neither a
         delta lobe (``light`` and ``camera``: their states after ``after_hit``). The camera
-        vertex's BSDF stands for both: ``pdf_cam_fwd_W`` its density of the light vertex's
-        incoming direction (towards x_{i-1}) given the camera's, ``pdf_cam_rev_W`` the reverse."""
+        vertex's BSDF (phase function at a medium vertex, ``medium``) stands for both:
+        ``pdf_cam_fwd_W`` its density of the light vertex's incoming direction (towards x_{i-1})
+        given the camera's, ``pdf_cam_rev_W`` the reverse. Every other technique's term is
+        relative to the surfaces' eta in ``dvm``; a merge in a ball divides them by its own."""
         w_light = self._inner(light, Technique.NEE) * self.inv_eta + light.dvm * self._m(pdf_cam_fwd_W)
         w_camera = self._inner(camera, Technique.LIGHT) * self.inv_eta + camera.dvm * self._m(pdf_cam_rev_W)
-        return self._own(Technique.MERGE) / (w_light + 1.0 + w_camera)
+        return self._own(Technique.MERGE) / ((w_light + w_camera) / self._volume_ratio(medium) + 1.0)

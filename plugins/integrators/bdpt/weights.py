@@ -155,20 +155,21 @@ class CausticMerges(MergeFrom):
     def _pending_after_hit(self, pending, inv_cos):
         return pending * inv_cos if self.caustic else pending
 
-    def scatter_light(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta=False) -> SubpathMis:
+    def scatter_light(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta=False, medium=None) -> SubpathMis:
         """With ``caustic_merges`` the new state's ``merges`` (for the next vertex) is ``delta``."""
-        out = super().scatter_light(state, pdf_fwd_W, pdf_rev_W, cos_out, delta)
+        out = super().scatter_light(state, pdf_fwd_W, pdf_rev_W, cos_out, delta, medium)
         if self.caustic:
             out = out._replace(merges=select(delta, 1.0, 0.0))
         return out
 
-    def scatter_camera(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta=False, depth=None) -> SubpathMis:
+    def scatter_camera(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta=False, depth=None,
+                       medium=None) -> SubpathMis:
         """With ``caustic_merges`` this vertex's merge term waits in ``pending``, and the one
         pending from the last vertex counts where this vertex is a delta lobe: the sums a delta
         lobe passes on gain it, the others do not (the recursion with no merge here, twice)."""
         if not self.caustic:
-            return super().scatter_camera(state, pdf_fwd_W, pdf_rev_W, cos_out, delta, depth)
-        merges = self._camera_merges(depth)
+            return super().scatter_camera(state, pdf_fwd_W, pdf_rev_W, cos_out, delta, depth, medium)
+        merges = self._camera_merges(depth) * self._volume_ratio(medium)
         kept = self._scatter(state, pdf_fwd_W, pdf_rev_W, cos_out, delta, Technique.LIGHT, 0.0)
         through = self._scatter(state._replace(dvc=state.dvc + self.eta * state.pending, dvm=state.dvm + state.pending),
                                 pdf_fwd_W, pdf_rev_W, cos_out, delta, Technique.LIGHT, 0.0)
@@ -183,6 +184,8 @@ class LaneTables(CausticMerges):
     #: lab_vcm: (eta table, 1 / eta table, iterations), one entry per iteration of a pass, each
     #: to the power beta (Dr.Jit arrays; see ``at_lanes``); None: ``eta`` holds for every lane.
     lane_tables = None
+    #: lab_vcm in media: each iteration's merge_volume, to the power beta (None: ``eta_volume``)
+    volume_table = None
 
     def at_lanes(self, lane):
         """These weights for the lanes ``lane`` (Dr.Jit UInt32) of a pass: with ``lane_tables``,
@@ -198,6 +201,8 @@ class LaneTables(CausticMerges):
         k = self.lane_iteration(lane)
         lanes = copy.copy(self)
         lanes.eta, lanes.inv_eta = dr.gather(type(eta), eta, k), dr.gather(type(inv_eta), inv_eta, k)
+        if self.volume_table is not None:
+            lanes.eta_volume = dr.gather(type(eta), self.volume_table, k)
         lanes.lane_tables = None
         return lanes
 
@@ -219,13 +224,14 @@ class BdptWeights(LaneTables):
     kinds joined by '+'; or an iterable of kind names), parsed once here; ``light_paths``: the
     number of light subpaths each camera subpath competes with in the t = 1 strategy (SmallVCM's
     light-subpath count: light tracing splats one light subpath into many pixels);
-    ``merge_area``: pi r^2 N_light, with merging among the techniques; ``merge_from``,
+    ``merge_area``: pi r^2 N_light, with merging among the techniques, and ``merge_volume``:
+    4/3 pi r_v^3 N_light, merging's at medium vertices (0: none merges there); ``merge_from``,
     ``connect_count``, ``caustic_merges``: the layers above (the module docstring).
     """
 
     def __init__(self, heuristic: str = "power", beta: float = 2.0, strategies="all",
                  light_paths: float = 1.0, merge_area: float = 0.0, merge_from: int = 1,
-                 connect_count: float = 1.0, caustic_merges: bool = False):
+                 connect_count: float = 1.0, caustic_merges: bool = False, merge_volume: float = 0.0):
         if heuristic not in ("balance", "power"):
             raise ValueError(f"lab_bdpt: heuristic must be 'balance' or 'power', got '{heuristic}'")
         if heuristic == "power" and not beta > 0:
@@ -247,7 +253,7 @@ class BdptWeights(LaneTables):
             raise ValueError(f"lab_vcm: merge_from must be 1 (every camera vertex merges) or 2 (all but the "
                              f"first), got {merge_from!r}")
         merging = Technique.MERGE in kinds
-        super().__init__(1.0 if heuristic == "balance" else beta, light_paths, merging, merge_area)
+        super().__init__(1.0 if heuristic == "balance" else beta, light_paths, merging, merge_area, merge_volume)
         #: the enabled techniques, and each one's enable factor (1.0 or 0.0)
         self.techniques = kinds
         self.e = {kind: 1.0 if kind in kinds else 0.0 for kind in ORDER}
@@ -276,7 +282,8 @@ def feasible(delta):
 
 def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies="all",
                         p_nee=None, light_paths: float = 1.0, merge_area: float = 0.0,
-                        merge_from: int = 1, connect_count: float = 1.0, caustic_merges: bool = False):
+                        merge_from: int = 1, connect_count: float = 1.0, caustic_merges: bool = False,
+                        merge_volume: float = 0.0, medium=None):
     """The weights of every technique computed directly from the path's densities (numpy).
 
     ``p_light[i]``: area density of x_i generated from the light side (``p_light[0]`` the
@@ -289,7 +296,9 @@ def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies=
     light subpath builds x_0 .. x_i, the camera subpath x_k .. x_i, density
     p_light[0..i] p_camera[i..k] ``merge_area`` (pi r^2 N_light), where x_i is at least
     ``merge_from`` segments from the sensor (k - i >= merge_from; else weight 0) and, with
-    ``caustic_merges``, x_{i-1} is an interior delta vertex (i >= 2). Returns p^beta / sum over the
+    ``caustic_merges``, x_{i-1} is an interior delta vertex (i >= 2); at a medium vertex
+    (``medium[i]``, numpy bools like ``delta``) ``merge_volume`` (4/3 pi r_v^3 N_light, with
+    volume densities there) stands for ``merge_area``. Returns p^beta / sum over the
     enabled feasible techniques of p^beta, 0 for a disabled or infeasible one: rows s = 0 .. k,
     then (with merging) rows for merging at x_1 .. x_{k-1}. Computed in logarithms, so densities
     may span any range.
@@ -317,7 +326,8 @@ def brute_force_weights(p_light, p_camera, delta, beta: float = 1.0, strategies=
     if Technique.MERGE in enabled:
         delta = np.asarray(delta, dtype=bool)
         for i in range(1, k):
-            log_p = log_l[:i + 1].sum(axis=0) + log_c[i:].sum(axis=0) + np.log(merge_area)
+            size = merge_area if medium is None else np.where(medium[i], merge_volume, merge_area)
+            log_p = log_l[:i + 1].sum(axis=0) + log_c[i:].sum(axis=0) + np.log(size)
             allowed = ~delta[i] & (k - i >= merge_from)
             if caustic_merges:
                 allowed = allowed & delta[i - 1] & (i >= 2)

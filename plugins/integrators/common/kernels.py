@@ -20,11 +20,12 @@ import drjit as dr
 NORMAL_COS = 0.8
 
 
-def kernel(name: str, t2):
+def kernel(name: str, t2, dimension: int = 2):
     """K(t) for t^2 = ``t2`` in [0, 1) (callers reject t >= 1): the kernel ``name`` times r^2
-    (a plain number where it does not depend on t)."""
+    (a plain number where it does not depend on t); ``dimension`` 3: over the ball, times r^3
+    (int_0^1 K(t) 4 pi t^2 dt = 1: (15 / (8 pi)) (1 - t^2), or 3 / (4 pi))."""
     if name == "epanechnikov":
-        return (2.0 / dr.pi) * (1.0 - t2)
+        return (2.0 / dr.pi if dimension == 2 else 15.0 / (8.0 * dr.pi)) * (1.0 - t2)
     if name == "constant":
-        return 1.0 / dr.pi
+        return 1.0 / dr.pi if dimension == 2 else 3.0 / (4.0 * dr.pi)
     raise ValueError(f"unknown kernel {name!r}")     # (``params.KERNELS`` lists the names)

@@ -26,11 +26,11 @@ def merges_first(params: dict) -> bool:
 class VertexMerging(Bidirectional):
     """lab_vcm's estimator: the techniques of its ``mode`` (``MODES``) under one MIS."""
     plugin_name = "lab_vcm"
-    #: Modes without merging scatter in media through lab_bdpt's media loops (``media_problem``:
-    #: the merging modes refuse them)
+    #: Every mode scatters in media through lab_bdpt's media loops, merging at medium vertices too
+    #: (``volume_merging``)
     RENDERS_MEDIA = True
     PARAMETERS = declarations.LAB_VCM
-    OWN_PARAMETERS = ("mode", "radius", "alpha", "light_paths", "kernel", "merge_first", "merge_vertices", "connections", "pilot", "light_paths_max", "heuristic", "beta",
+    OWN_PARAMETERS = ("mode", "radius", "radius_volume", "alpha", "light_paths", "kernel", "merge_first", "merge_vertices", "connections", "pilot", "light_paths_max", "heuristic", "beta",
                       "max_vertices")
 
     def techniques(self) -> Technique:
@@ -45,20 +45,26 @@ class VertexMerging(Bidirectional):
         return ""
 
     @classmethod
-    def mode_media_problem(cls, traits, mode: str) -> str:
-        """Why mode ``mode`` cannot render the scene's participating media ('' if it can)."""
-        if traits.media and Technique.MERGE in MODES.get(mode, Technique.MERGE):
-            return (f"lab_vcm mode={mode} does not support participating media yet (no merging at medium "
-                    f"vertices): use mode bpt, lt or pt, lab_bdpt, lab_mis or Mitsuba's volpath")
+    def media_settings_problem(cls, traits, params: dict) -> str:
+        """Why these settings cannot render the scene's participating media ('' if they can):
+        lab_bdpt's media loops connect to every light vertex and keep no caustic-merge state."""
+        if not traits.media:
+            return ""
+        if params.get("connections", "all") == "one":
+            return ("lab_vcm: connections = 'one' is not supported in scenes with participating media yet "
+                    "(use connections = 'all')")
+        if params.get("merge_vertices", "all") == "caustic":
+            return ("lab_vcm: merge_vertices = 'caustic' is not supported in scenes with participating media "
+                    "yet (use merge_vertices = 'all')")
         return ""
 
     @classmethod
     def applicability(cls, traits, params: dict) -> tuple[bool, str]:
-        """As lab_bdpt's (media in the merging modes, unknown emitters and sensors, light a mode cannot reach, light
+        """As lab_bdpt's (unknown emitters and sensors, light a mode cannot reach, light
         tracing, mode lt, on an orthographic sensor);
         merging reaches any light that arrives at a smooth surface the camera sees."""
         mode = params.get("mode", "vcm")
-        problem = cls.mode_media_problem(traits, mode) or cls.unsupported(traits)
+        problem = cls.media_settings_problem(traits, params) or cls.unsupported(traits)
         if problem:
             return False, problem
         techniques = MODES[mode]

@@ -18,6 +18,7 @@ from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
 from .estimator import VertexMerging, merges_first
 from .merging import VertexGrid, table
 from .pilot import Pilot
+from .volume_merging import MediumGrid, volume_radius
 
 
 def vcm_radius(r1: float, iteration: int, alpha: float) -> float:
@@ -50,7 +51,7 @@ class PpmWeights(BdptWeights):
     def hit(self, camera, pdf_nee, pdf_emit, pdf_pos):
         return self.e[Technique.HIT]
 
-    def merge(self, light, camera, pdf_cam_fwd, pdf_cam_rev):
+    def merge(self, light, camera, pdf_cam_fwd, pdf_cam_rev, medium=None):
         return self.e[Technique.MERGE]
 
 
@@ -61,6 +62,9 @@ class VcmStats(BdptStats):
     merging_vertices: int = 0         # light vertices in the grids (merge_vertices: all or caustic)
     radius_first: float = 0.0         # the merging radius of the first and last pass
     radius_last: float = 0.0
+    medium_merging_vertices: int = 0  # of them, light vertices in media (their own grid; scenes with media)
+    radius_volume_first: float = 0.0  # the ball's radius in media, of the first and last pass
+    radius_volume_last: float = 0.0
     pilot_s: float = 0.0              # pilot: the pilot's time
     chose_path_tracing: bool = False  # pilot: the pilot chose path tracing alone
     light_paths_chosen: float = 0.0   # pilot: the light subpaths per camera subpath chosen (0: none)
@@ -83,12 +87,19 @@ class VcmPasses(Passes):
         self.plugin, self.merging, self.ppm = plugin, merging, ppm
         self.merge_from, self.connect_share, self.connect_one = merge_from, connect_share, connect_one
         self.caustic_merges = caustic_merges
+        #: whether the render's scene has media (merging at medium vertices too; set by ``render``)
+        self.media = False
         if ppm:
             self.weights_class = PpmWeights
 
     def radii(self, plan) -> list[float]:
         """The merging radius of each iteration of a pass (iterations done + 1 .. done + spp)."""
         return [vcm_radius(self.plugin.first_radius, plan.done + k + 1, self.plugin.values["alpha"])
+                for k in range(plan.spp)]
+
+    def volume_radii(self, plan) -> list[float]:
+        """The ball's radius in media of each iteration of a pass (``volume_merging``)."""
+        return [volume_radius(self.plugin.first_volume_radius, plan.done + k + 1, self.plugin.values["alpha"])
                 for k in range(plan.spp)]
 
     def spp_limit(self, film_pixels: int, stats) -> int:
@@ -130,6 +141,10 @@ class VcmPasses(Passes):
             iterations = mi.UInt32(plan.spp)
             dr.make_opaque(iterations)
             weights.lane_tables = (table(etas), table([1.0 / e for e in etas]), iterations)
+            if self.media:
+                # at medium vertices: the ball's volume, 4/3 pi r_k^3 N_k
+                weights.volume_table = table([weights._m(4.0 / 3.0 * math.pi * r ** 3 * n)
+                                              for r, n in zip(self.volume_radii(plan), sizes)])
         return weights
 
     def merge_area(self, plan) -> float:
@@ -140,9 +155,19 @@ class VcmPasses(Passes):
             return None
         radii = self.radii(plan)
         start = time.perf_counter()
-        grid = VertexGrid(vertices, stored, radii, self.iteration_light_subpaths(plan), self.plugin.values["kernel"])
+        sizes, kernel = self.iteration_light_subpaths(plan), self.plugin.values["kernel"]
+        grid = VertexGrid(vertices, stored, radii, sizes, kernel)
         grid.first_only = self.ppm
         dr.eval(grid.buckets, grid.order, grid.points, grid.records)
+        if vertices.media:
+            volume_radii = self.volume_radii(plan)
+            grid.volume = MediumGrid(vertices, stored, volume_radii, sizes, kernel)
+            dr.eval(grid.volume.buckets, grid.volume.order, grid.volume.points, grid.volume.records)
+            stats.merging_vertices += grid.volume.count
+            stats.medium_merging_vertices += grid.volume.count
+            if plan.index == 0:
+                stats.radius_volume_first = volume_radii[0]
+            stats.radius_volume_last = volume_radii[-1]
         dr.sync_thread()
         stats.grid_s += time.perf_counter() - start
         stats.merging_vertices += grid.count
@@ -181,8 +206,12 @@ class LabVCMIntegrator(LabBDPTIntegrator):
     vertices). Supports what lab_bdpt supports (projector emitters; orthographic sensors, where
     light tracing cannot reach the sensor: no t = 1 technique there, in any mode or MIS sum,
     and mode ``lt`` renders nothing; RGB, mono and spectral variants; spectral: one iteration
-    per pass; participating media in modes ``bpt``, ``lt`` and ``pt``, through lab_bdpt's media
-    loops, the merging modes refuse them in one line). Statistics of the
+    per pass). Participating media, homogeneous and heterogeneous, in every mode: lab_bdpt's media
+    loops, and camera vertices in a medium merge with the light vertices stored in media inside a
+    ball of radius r_v,i = r_v,1 i^((alpha - 1) / 3) (``radius_volume``; default the surfaces'
+    r_1), counted by the MIS with the ball's volume (``volume_merging.py``; Krivanek et al. 2014's
+    point-to-point estimator); ``connections = one`` and ``merge_vertices = caustic`` are refused
+    with media in one line. Statistics of the
     last render (``bdpt_stats()``): light, grid and camera time, the radii; with ``pilot`` the
     pilot's time, whether it chose path tracing alone, the light subpaths it chose, each
     choice's score (relative variance x seconds per iteration) and ``pilot_costs``, its iterations
@@ -246,8 +275,10 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         if ppm and "merge_first" in props and not self.values["merge_first"]:
             raise ValueError("lab_vcm: mode 'ppm' merges only at the first smooth camera vertex: "
                              "merge_first = false does not apply to it")
-        #: r_1, the first iteration's merging radius (set by ``render``: ``radius``, or automatic)
+        #: r_1, the first iteration's merging radius (set by ``render``: ``radius``, or automatic), and
+        #: the ball's in media (``radius_volume``, or r_1)
         self.first_radius = 0.0
+        self.first_volume_radius = 0.0
         #: the pilot's choice and the renders it makes (``pilot.Pilot``)
         self.pilot = Pilot(self)
         if self.values["light_paths_max"] and not self.values["pilot"]:
@@ -277,9 +308,10 @@ class LabVCMIntegrator(LabBDPTIntegrator):
 
     def refuse_unsupported(self, scene: mi.Scene):
         traits = super().refuse_unsupported(scene)
-        problem = VertexMerging.mode_media_problem(traits, self.values["mode"])
+        problem = VertexMerging.media_settings_problem(traits, self.values)
         if problem:
             raise ValueError(problem)
+        self.passes.media = bool(traits.media)
         return traits
 
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
@@ -290,6 +322,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
                 chosen = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
                 r1 = pixel_footprint(scene, chosen)
             self.first_radius = r1
+            self.first_volume_radius = self.values["radius_volume"] or r1
         if self._pass is None and self.values["pilot"]:
             self.refuse_undeveloped(develop)
             self.refuse_unsupported(scene)         # (the pilot may choose path tracing, which would not)
