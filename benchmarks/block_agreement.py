@@ -1,8 +1,9 @@
 """The block test over the agreement scenes, for the bidirectional family and lab_photon.
 
 For every scene of tests/plugins/test_bdpt.py's agreement lists (the lab's scenes, the stiff
-ones where `path` is right, tests/user_scenes.py's users' scenes) and every variant asked for:
---seeds renders of each estimator against --seeds renders of Mitsuba's `path` (other seeds,
+ones where `path` is right, tests/user_scenes.py's users' scenes; on request the media scenes of
+``MEDIA_SCENES``) and every variant asked for: --seeds renders of each estimator against --seeds
+renders of Mitsuba's `path` (`volpath` or lab_bdpt in media: ``MEDIA_SCENES``; other seeds,
 --ref-scale x the samples), compared by tests/agreement.py's ``block_test`` (6x6-pixel block
 means, Welch z over the seeds, Sidak-corrected alpha 0.01 over the blocks). Unbiased
 estimators (lab_bdpt, lab_vcm mode bpt) must pass; consistent ones (lab_vcm modes vcm and ppm,
@@ -36,6 +37,10 @@ SCENES = ["cornell_box.xml", "caustic.xml", "veach_mis.xml", "glossy_small_light
           "stiff/all_specular.xml", "stiff/delta_lights_only.xml", "stiff/environment_only.xml",
           "stiff/grazing_camera.xml", "stiff/huge_dim_light.xml", "stiff/light_in_glass.xml",
           "stiff/scaled_1e4.xml"]
+#: Scenes with participating media, and their reference: volpath, or lab_bdpt on the volumetric
+#: caustic, whose light no Mitsuba integrator renders (lab_bdpt agrees with volpath where both apply:
+#: tests/plugins/test_bdpt_media.py). fog_box: tests/media_scenes.py's, sigma_t 2.5.
+MEDIA_SCENES = {"fog_box": "volpath", "volumetric_caustic.xml": "lab_bdpt"}
 USER_SCENES = ["textured_mesh_room", "principled_and_blend", "spot_and_directional", "normal_bump_maps",
                "thinlens_envmap", "mixed_lights_crop"]
 #: name -> (plugin, parameters, unbiased)
@@ -90,7 +95,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=64)
     parser.add_argument("--spp", type=int, default=16, help="samples (passes: lab_photon) per render")
     parser.add_argument("--ref-scale", type=int, default=4)
-    parser.add_argument("--scenes", default=",".join(SCENES + USER_SCENES))
+    parser.add_argument("--scenes", default=",".join(SCENES + USER_SCENES),
+                        help=f"also (media, not by default): {', '.join(MEDIA_SCENES)}")
     parser.add_argument("--estimators", default=",".join(ESTIMATORS))
     args = parser.parse_args(argv)
 
@@ -98,6 +104,8 @@ def main(argv=None) -> int:
     import numpy as np
     from agreement import block_test, grey_block_means, renders
     from mitsuba_lab.scene import load_scene, make_integrator
+    import media_scenes
+    import mitsuba as mi
     import user_scenes
 
     assets = user_scenes.write_assets(os.path.join(ROOT, "out", "block_agreement_assets"))
@@ -110,9 +118,12 @@ def main(argv=None) -> int:
         for name in args.scenes.split(","):
             if name in USER_SCENES:
                 scene, depth = user_scenes.load(assets, name), user_scenes.max_depth(name)
+            elif name == "fog_box":
+                scene, depth = mi.load_dict(media_scenes.fog_box(sigma_t=2.5)), MAX_DEPTH
             else:
                 scene, depth = load_scene(os.path.join(ROOT, "scenes", name), res=RES), MAX_DEPTH
-            ref = renders(scene, make_integrator("path", {"max_depth": depth}), args.spp * args.ref_scale, ref_seeds)
+            reference = MEDIA_SCENES.get(name, "path")
+            ref = renders(scene, make_integrator(reference, {"max_depth": depth}), args.spp * args.ref_scale, ref_seeds)
             for key in args.estimators.split(","):
                 plugin, params, unbiased = ESTIMATORS[key]
                 integrator = make_integrator(plugin, {"max_depth": depth, **params})
