@@ -142,7 +142,7 @@ def test_fog_shafts_regions_show_lit_air_and_a_lit_floor(scenes):
     facing = dr.dot(si.n, light - si.p) > 0
     hit_lit = np.array(_lit(scene, si.p + 1e-3 * si.n, light) & facing)
     assert not hit_lit.any()                                          # the surfaces behind are dark
-    assert np.all(np.array(si.p.x) > -1.0 - 1e-4)                     # in the room, not the alcove
+    assert np.all(np.array(si.p.x) > -1.0 - 1e-4)                     # in the room, not the housing
     steps = 64                                                        # the air in front of them is lit
     frac = np.repeat((np.arange(steps) + 0.5) / steps, dr.width(ray))      # every step of every ray at once
     index = mi.UInt32(np.tile(np.arange(dr.width(ray)), steps))
