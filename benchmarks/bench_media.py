@@ -1,6 +1,6 @@
 """Speed of the path family in participating media as a ratio to Mitsuba's `volpath`, in one run.
 
-scenes/fog_shafts.xml (a point light in thin homogeneous fog) at 128x128, 16 spp, max_depth 16 by
+scenes/fog_shafts.xml (a point light shining into thin homogeneous fog) at 128x128, 16 spp, max_depth 16 by
 default. Each integrator is warmed up once (kernel compilation), then the renders alternate
 between `volpath` and the lab's for --rounds rounds, so that machine noise hits all of them
 alike; each time is taken after dr.eval and dr.sync_thread (mitsuba_lab.render). Prints the median

@@ -164,3 +164,12 @@ def fog_box_point() -> dict:
     scene["light"] = {"type": "point", "position": [0.3, 2.0, 0.5], "intensity": rgb(10)}
     return scene
 
+
+def fog_box_sky() -> dict:
+    """``fog_box_point`` under a dim constant sky and a low sun (``directional``) as well: lights
+    at infinity beside a point light, which equi-angular sampling cannot aim at."""
+    scene = fog_box_point()
+    scene["sky"] = environment(0.3)
+    scene["sun"] = {"type": "directional", "direction": [-0.6, -1.0, -0.4], "irradiance": rgb(1.5)}
+    return scene
+

@@ -87,32 +87,49 @@ def test_regions_parse_to_whole_pixels_inside_the_image(name):
 # -- fog_shafts ---------------------------------------------------------------------------------
 
 ROOM = (np.array([-2.0, 0.0, -2.0]), np.array([2.0, 3.0, 2.0]))     # as in fog_shafts.xml
+HOUSING_X = -1.0                     # the partition: the lamp housing (clear air) behind it, the fog before it
 
 
-def test_fog_shafts_light_and_camera_are_in_thin_fog(scenes):
+def test_fog_shafts_camera_is_in_thin_fog_and_the_light_in_a_clear_housing(scenes):
     scene = scenes["fog_shafts"]
     params = _params(scene)
     light = _value(params, "light.position")
     assert len(scene.emitters()) == 1 and "PointLight" in str(scene.emitters()[0])
-    assert np.all(light > ROOM[0]) and np.all(light < ROOM[1])
+    assert np.all(light > ROOM[0]) and np.all(light < ROOM[1]) and light[0] < HOUSING_X
     assert scene.sensors()[0].get_medium() is not None                # the camera is in the fog
     sigma_t = _value(params, "fog.sigma_t.value.value") * _value(params, "fog.scale")
     albedo = _value(params, "fog.albedo.value.value")
-    width = ROOM[1][0] - ROOM[0][0]
+    width = ROOM[1][0] - HOUSING_X
     assert 0.3 <= float(sigma_t.max()) * width <= 1.0                # 0.3 to 1 mean free paths across
     assert np.allclose(albedo, 0.8)
-    for shape in scene.shapes():               # the room's inside (the cube's exterior), both sides of the rest
-        assert shape.exterior_medium() is not None
-        assert shape.id() == "room" or shape.interior_medium() is not None
+    # the fog is on the room's side of every surface that has it; the housing's lining has none
+    assert all(shape.interior_medium() is None for shape in scene.shapes())
+    fogged = [shape.exterior_medium() is not None for shape in scene.shapes()]
+    assert any(fogged) and not all(fogged)
+    # from the light: through a gap of the louvre into the fog, and to the housing's back in clear air
+    o = mi.Point3f(*(float(v) for v in light))
+    for target, fog in (([HOUSING_X, 1.73, -0.3], True), ([-1.5, 1.5, -2.0], False)):
+        d = dr.normalize(mi.Vector3f(*target) - o)
+        si = scene.ray_intersect(mi.Ray3f(o, d))
+        assert (si.target_medium(d)[0] is not None) == fog, target
+        assert float(si.p.x[0]) < HOUSING_X + 1e-3
 
 
 def _lit(scene, points, light):
-    """Points with an unblocked segment to the point light."""
+    """Points with an unblocked segment to the point light (null surfaces, where the fog ends in
+    the window, let it through)."""
     d = light - points
     dist = dr.norm(d)
-    ray = mi.Ray3f(points, d / dist)
-    ray.maxt = dist * (1 - 1e-4)
-    return ~scene.ray_test(ray)
+    d /= dist
+    start, blocked = mi.Float(0.0), mi.Bool(False)
+    for _ in range(4):                                   # (the window is the one null surface)
+        ray = mi.Ray3f(points + start * d, d)
+        ray.maxt = dist * (1 - 1e-4) - start
+        si = scene.ray_intersect(ray)
+        null = si.is_valid() & mi.has_flag(si.bsdf().flags(), mi.BSDFFlags.Null)
+        blocked |= si.is_valid() & ~null
+        start = dr.select(null, start + si.t + 1e-4, mi.Float(dist))
+    return ~blocked
 
 
 def test_fog_shafts_regions_show_lit_air_and_a_lit_floor(scenes):
@@ -125,9 +142,13 @@ def test_fog_shafts_regions_show_lit_air_and_a_lit_floor(scenes):
     facing = dr.dot(si.n, light - si.p) > 0
     hit_lit = np.array(_lit(scene, si.p + 1e-3 * si.n, light) & facing)
     assert not hit_lit.any()                                          # the surfaces behind are dark
-    assert np.all(np.array(si.p.x) > -1.0 - 1e-4)                     # in the room, not the alcove
+    assert np.all(np.array(si.p.x) > -1.0 - 1e-4)                     # in the room, not the housing
     steps = 64                                                        # the air in front of them is lit
-    lit_air = sum(np.array(_lit(scene, ray(si.t * (k + 0.5) / steps), light)) for k in range(steps))
+    frac = np.repeat((np.arange(steps) + 0.5) / steps, dr.width(ray))      # every step of every ray at once
+    index = mi.UInt32(np.tile(np.arange(dr.width(ray)), steps))
+    points = dr.gather(mi.Point3f, ray.o, index) + dr.gather(mi.Vector3f, ray.d, index) * (
+        dr.gather(mi.Float, si.t, index) * mi.Float(frac))
+    lit_air = np.array(_lit(scene, points, light)).reshape(steps, -1).sum(axis=0)
     assert np.all(lit_air >= 4), lit_air
 
     si = scene.ray_intersect(_pixel_rays(scene, rects["floor_light"]))

@@ -1,7 +1,8 @@
 """Power proofs that left tests/plugins/test_media.py (each renders a stack of its own; the suite
 keeps the free-flight x 1.03 proof, which shares fog_box's reference, and the majorant grid at 0.4
 against quadrature, which renders nothing). Same code as the suite's before 2026-11-28 round 2;
-each prints its max |z| (recorded in experiments/results/2026-11-28-power-proofs.md).
+each prints its max |z| (recorded in experiments/results/2026-11-28-power-proofs.md; the NEE at
+infinity proof's in 2026-11-28-media-shafts-clear-housing.md).
 
     PYTHONPATH=src .venv/bin/python -m pytest -q -s -p no:cacheprovider benchmarks/power/test_media_power.py
 """
@@ -61,5 +62,21 @@ def test_spectral_mis_without_the_carried_ratios_is_caught(monkeypatch):
     scene = mi.load_dict(media_scenes.chromatic_in_glass())
     result = z_scores(lab(scene, max_depth=16, spectral_mis=True), reference(scene, 16, "volpathmis"))
     print(f"spectral MIS without carried ratios: max |z| {result.max_abs_z:.1f}, "
+          f"relative difference {result.rel_diff.round(4)}")
+    assert result.max_abs_z > Z_BOUND
+
+
+@pytest.mark.parametrize("kind", ["lab_nee", "lab_mis"])
+def test_equiangular_mode_without_nee_for_lights_at_infinity_is_caught(monkeypatch, kind):
+    """tests/plugins/test_media.py's ``test_equiangular_mode_keeps_nee_for_lights_at_infinity``
+    with the bug it guards against put back: the scene taken to have no light at infinity, so that
+    in mode equiangular NEE at medium vertices is dropped (lab_nee loses the sky's and the sun's
+    scattered light; lab_mis still weighs its phase-sampled hits of the sky against that NEE)."""
+    from mitsuba_lab.plugins.integrators.common import equiangular
+
+    monkeypatch.setattr(equiangular, "lights_at_infinity", lambda scene: False)
+    scene = mi.load_dict(media_scenes.fog_box_sky())
+    result = z_scores(lab(scene, kind, medium_sampling="equiangular"), reference(scene, name="fog_box_sky"))
+    print(f"{kind} equiangular without NEE at infinity: max |z| {result.max_abs_z:.1f}, "
           f"relative difference {result.rel_diff.round(4)}")
     assert result.max_abs_z > Z_BOUND

@@ -173,7 +173,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         # equi-angular sampling of the light in media (medium_sampling equiangular or mis), and whether NEE at free-flight collisions is a technique beside it (mis)
         equiangular_on = has_media and emitter_sampling and self.medium_sampling != "distance"
         nee_in_media = self.medium_sampling != "equiangular"
-        at_infinity = any(mi.has_flag(e.flags(), mi.EmitterFlags.Infinite) for e in scene.emitters())
+        at_infinity = equiangular.lights_at_infinity(scene)
         spectral = has_media and self.spectral_mis and not mi.is_monochromatic   # (media.free_flight)
         tracking = self.tracking_kind
         estimator = self.estimator

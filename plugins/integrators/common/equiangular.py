@@ -54,6 +54,13 @@ class Segment:
         return Segment(mi.Point3f(ray.o + t0 * ray.d), mi.Vector3f(ray.d), length)
 
 
+def lights_at_infinity(scene) -> bool:
+    """Whether ``scene`` has an emitter at infinity (an environment map, ``constant``,
+    ``directional``). Equi-angular sampling has no point of it to aim at, so where there is one,
+    NEE at medium vertices must sample it even in mode ``equiangular``."""
+    return any(mi.has_flag(e.flags(), mi.EmitterFlags.Infinite) for e in scene.emitters())
+
+
 def _angles(segment: Segment, y):
     """(t0, D, theta_a, theta_b): the foot t0 of the perpendicular from ``y`` to the segment's
     line, its length D, and the angles under which ``y`` sees the segment's ends."""
