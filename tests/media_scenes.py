@@ -153,9 +153,23 @@ def point_in_plume() -> dict:
     return scene
 
 
+def masked_card_in_fog() -> dict:
+    """A ``mask``ed red diffuse card (opacity 0.4) inside a null box of thin homogeneous fog (lifted
+    off the floor), lit by a point light outside it: a 16x12 film."""
+    scene = base(res=(16, 12))
+    scene["box"] = {"type": "cube", "to_world": T().translate([0, 0.8, 0]).scale(0.7), "bsdf": {"type": "null"},
+                    "interior": {"type": "homogeneous", "albedo": 0.8, "sigma_t": 0.3}}
+    scene["card"] = {"type": "rectangle", "to_world": T().translate([0, 0.7, 0]).rotate([1, 0, 0], 30).scale(0.5),
+                     "bsdf": {"type": "mask", "opacity": 0.4,
+                              "bsdf": {"type": "diffuse", "reflectance": rgb(0.8, 0.2, 0.2)}}}
+    scene["light"] = {"type": "point", "position": [0.3, 2.5, 2.0], "intensity": rgb(10)}
+    return scene
+
+
 SCENES = {"fog_box": fog_box, "point_in_fog": point_in_fog, "chromatic_in_glass": chromatic_in_glass,
           "smoke": smoke, "chromatic_smoke": chromatic_smoke, "point_in_smoke": point_in_smoke,
-          "spot_into_smoke": spot_into_smoke, "point_in_plume": point_in_plume}
+          "spot_into_smoke": spot_into_smoke, "point_in_plume": point_in_plume,
+          "masked_card_in_fog": masked_card_in_fog}
 
 
 def fog_box_point() -> dict:
