@@ -143,6 +143,15 @@ def spot_into_smoke() -> dict:
     return scene
 
 
+def smoke_sunk() -> dict:
+    """``smoke`` with its box sunk 0.05 into the floor (the fog above the floor unchanged): the box
+    standing on the floor without a null face on the floor's plane, where the ray tracer breaks the
+    tie between the two surfaces either way, so that light leaks through the floor (both ways)."""
+    scene = smoke()
+    scene["box"]["to_world"] = T().translate([0, 0.775, 0]).scale([0.8, 0.825, 0.8])
+    return scene
+
+
 def point_in_plume() -> dict:
     """``smoke`` lit by a point light inside the plume's box, off its dense core, and a dim
     environment."""
@@ -169,7 +178,7 @@ def masked_card_in_fog() -> dict:
 SCENES = {"fog_box": fog_box, "point_in_fog": point_in_fog, "chromatic_in_glass": chromatic_in_glass,
           "smoke": smoke, "chromatic_smoke": chromatic_smoke, "point_in_smoke": point_in_smoke,
           "spot_into_smoke": spot_into_smoke, "point_in_plume": point_in_plume,
-          "masked_card_in_fog": masked_card_in_fog}
+          "masked_card_in_fog": masked_card_in_fog, "smoke_sunk": smoke_sunk}
 
 
 def fog_box_point() -> dict:
