@@ -150,6 +150,7 @@ def trace_light(tracer, st, block, vertices, store_lanes):
     active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_depth > 1)
     while dr.hint(active, max_iterations=-1, label="lab_bdpt light subpath in media"):
         si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
+        si = spawn.behind_null_face(scene, ray, si, floor, active)
         tally(tracer.counters, "light", active)
         in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
         mei, scattered, w_flight, p_flight = flight(medium, ray, si.t, rng.next_float32(), aux, channel, in_medium,
@@ -375,6 +376,7 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
 
     while dr.hint(active, max_iterations=-1, label="lab_bdpt camera subpath in media"):
         si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
+        si = spawn.behind_null_face(scene, ray, si, floor, active)
         in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
         mei, scattered, w_flight, p_flight = flight(medium, ray, si.t, sampler.next_1d(), sampler, channel,
                                                     in_medium, cp.tracking)
