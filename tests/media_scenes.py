@@ -152,6 +152,14 @@ def smoke_sunk() -> dict:
     return scene
 
 
+def fog_on_floor() -> dict:
+    """``smoke`` with homogeneous fog (sigma_t 1.5, albedo 0.9) in its box, which stands on the
+    floor (its null bottom face on the floor's plane), with the masked card."""
+    scene = smoke()
+    scene["box"]["interior"] = {"type": "homogeneous", "albedo": 0.9, "sigma_t": 1.5}
+    return scene
+
+
 def point_in_plume() -> dict:
     """``smoke`` lit by a point light inside the plume's box, off its dense core, and a dim
     environment."""
@@ -178,7 +186,8 @@ def masked_card_in_fog() -> dict:
 SCENES = {"fog_box": fog_box, "point_in_fog": point_in_fog, "chromatic_in_glass": chromatic_in_glass,
           "smoke": smoke, "chromatic_smoke": chromatic_smoke, "point_in_smoke": point_in_smoke,
           "spot_into_smoke": spot_into_smoke, "point_in_plume": point_in_plume,
-          "masked_card_in_fog": masked_card_in_fog, "smoke_sunk": smoke_sunk}
+          "masked_card_in_fog": masked_card_in_fog, "smoke_sunk": smoke_sunk,
+          "fog_on_floor": fog_on_floor}
 
 
 def fog_box_point() -> dict:
