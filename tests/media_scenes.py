@@ -134,8 +134,9 @@ def point_in_smoke(albedo: float = 0.3) -> dict:
 
 
 def spot_into_smoke() -> dict:
-    """``smoke`` without its masked card, its box lifted 0.05 off the floor (a null boundary on
-    the floor's plane is ambiguous): the spot light and the environment through the plume."""
+    """``smoke`` without its masked card, its box lifted 0.05 off the floor (standing on it, the
+    smoke's light tracing differs on the floor, issue 46): the spot light and the environment
+    through the plume."""
     scene = smoke()
     del scene["card"]
     scene["box"]["to_world"] = T().translate([0, 0.85, 0]).scale(0.8)
@@ -157,6 +158,13 @@ def fog_on_floor() -> dict:
     floor (its null bottom face on the floor's plane), with the masked card."""
     scene = smoke()
     scene["box"]["interior"] = {"type": "homogeneous", "albedo": 0.9, "sigma_t": 1.5}
+    return scene
+
+
+def fog_on_floor_sunk() -> dict:
+    """``fog_on_floor`` with its box sunk 0.05 into the floor (no null face on the floor's plane)."""
+    scene = fog_on_floor()
+    scene["box"]["to_world"] = smoke_sunk()["box"]["to_world"]
     return scene
 
 
@@ -187,7 +195,7 @@ SCENES = {"fog_box": fog_box, "point_in_fog": point_in_fog, "chromatic_in_glass"
           "smoke": smoke, "chromatic_smoke": chromatic_smoke, "point_in_smoke": point_in_smoke,
           "spot_into_smoke": spot_into_smoke, "point_in_plume": point_in_plume,
           "masked_card_in_fog": masked_card_in_fog, "smoke_sunk": smoke_sunk,
-          "fog_on_floor": fog_on_floor}
+          "fog_on_floor": fog_on_floor, "fog_on_floor_sunk": fog_on_floor_sunk}
 
 
 def fog_box_point() -> dict:
