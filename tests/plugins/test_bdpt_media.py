@@ -9,9 +9,9 @@ inside it (mono, the majorant grid); a ``mask``ed card inside fog (its mean only
 (checked bit for bit outside the suite, see the commit message); lab_vcm's modes without merging
 render the same images (test_vcm_media.py).
 
-The smoke's box is lifted off the floor in these scenes: a null boundary on the floor's plane is
-ambiguous for every renderer (rays that meet the null face before the floor leave through the
-floor, not the same ones both ways: experiments/results/2026-11-28-bdpt-media-defects.md).
+The smoke's box is lifted off the floor in these scenes: standing on it, light tracing still
+renders the floor under the smoke darker than the camera strategies (open:
+experiments/results/2026-11-28-bdpt-media-defects.md).
 
 Tolerance: |z| <= Z_BOUND (tests/agreement.py) for every 8x8 block mean and every image channel
 mean, 16 seeds a side (Welch, about 30 degrees of freedom), fixed seeds. Power: a medium vertex
