@@ -134,12 +134,37 @@ def point_in_smoke(albedo: float = 0.3) -> dict:
 
 
 def spot_into_smoke() -> dict:
-    """``smoke`` without its masked card, its box lifted 0.05 off the floor (a null boundary on
-    the floor's plane is ambiguous): the spot light and the environment through the plume."""
+    """``smoke`` without its masked card, its box lifted 0.05 off the floor (standing on it, the
+    smoke's light tracing differs on the floor, issue 46): the spot light and the environment
+    through the plume."""
     scene = smoke()
     del scene["card"]
     scene["box"]["to_world"] = T().translate([0, 0.85, 0]).scale(0.8)
     scene["box"]["interior"]["sigma_t"]["to_world"] = T().translate([-0.8, 0.05, -0.8]).scale(1.6)
+    return scene
+
+
+def smoke_sunk() -> dict:
+    """``smoke`` with its box sunk 0.05 into the floor (the fog above the floor unchanged): the box
+    standing on the floor without a null face on the floor's plane, where the ray tracer breaks the
+    tie between the two surfaces either way, so that light leaks through the floor (both ways)."""
+    scene = smoke()
+    scene["box"]["to_world"] = T().translate([0, 0.775, 0]).scale([0.8, 0.825, 0.8])
+    return scene
+
+
+def fog_on_floor() -> dict:
+    """``smoke`` with homogeneous fog (sigma_t 1.5, albedo 0.9) in its box, which stands on the
+    floor (its null bottom face on the floor's plane), with the masked card."""
+    scene = smoke()
+    scene["box"]["interior"] = {"type": "homogeneous", "albedo": 0.9, "sigma_t": 1.5}
+    return scene
+
+
+def fog_on_floor_sunk() -> dict:
+    """``fog_on_floor`` with its box sunk 0.05 into the floor (no null face on the floor's plane)."""
+    scene = fog_on_floor()
+    scene["box"]["to_world"] = smoke_sunk()["box"]["to_world"]
     return scene
 
 
@@ -153,9 +178,24 @@ def point_in_plume() -> dict:
     return scene
 
 
+def masked_card_in_fog() -> dict:
+    """A ``mask``ed red diffuse card (opacity 0.4) inside a null box of thin homogeneous fog (lifted
+    off the floor), lit by a point light outside it: a 16x12 film."""
+    scene = base(res=(16, 12))
+    scene["box"] = {"type": "cube", "to_world": T().translate([0, 0.8, 0]).scale(0.7), "bsdf": {"type": "null"},
+                    "interior": {"type": "homogeneous", "albedo": 0.8, "sigma_t": 0.3}}
+    scene["card"] = {"type": "rectangle", "to_world": T().translate([0, 0.7, 0]).rotate([1, 0, 0], 30).scale(0.5),
+                     "bsdf": {"type": "mask", "opacity": 0.4,
+                              "bsdf": {"type": "diffuse", "reflectance": rgb(0.8, 0.2, 0.2)}}}
+    scene["light"] = {"type": "point", "position": [0.3, 2.5, 2.0], "intensity": rgb(10)}
+    return scene
+
+
 SCENES = {"fog_box": fog_box, "point_in_fog": point_in_fog, "chromatic_in_glass": chromatic_in_glass,
           "smoke": smoke, "chromatic_smoke": chromatic_smoke, "point_in_smoke": point_in_smoke,
-          "spot_into_smoke": spot_into_smoke, "point_in_plume": point_in_plume}
+          "spot_into_smoke": spot_into_smoke, "point_in_plume": point_in_plume,
+          "masked_card_in_fog": masked_card_in_fog, "smoke_sunk": smoke_sunk,
+          "fog_on_floor": fog_on_floor, "fog_on_floor_sunk": fog_on_floor_sunk}
 
 
 def fog_box_point() -> dict:

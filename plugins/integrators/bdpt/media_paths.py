@@ -13,7 +13,10 @@ probability T_c. The throughput is weighted per channel as the path family weigh
 at the flight and sigma_s at a collision. A surface whose BSDF samples its null lobe (a ``null``
 boundary, a mask's clear part) is passed without a vertex (Mitsuba's ``volpath`` counting of
 ``max_depth``), with probability P_null (the null lobe's sampling probability, 1 for ``null``),
-and the medium is tracked across medium transitions. Light subpaths start in the emitter's
+and the medium is tracked across medium transitions. A surface with a smooth lobe is nonetheless
+a vertex for the strategies that end there (NEE, connections, splats, merges) on every arrival,
+as ``volpath`` samples emitters at a mask before its lobe is chosen: its f holds the opacity,
+and only how the subpath goes on depends on the lobe sampled. Light subpaths start in the emitter's
 medium where the scene gives it one (``<ref id="fog"/>`` inside the emitter), else in the medium
 behind the first medium transition the emitted ray meets (``origin_medium``: an area light or a
 point light in a null-bounded fog names none). The camera subpath starts in the sensor's medium.
@@ -147,6 +150,7 @@ def trace_light(tracer, st, block, vertices, store_lanes):
     active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_depth > 1)
     while dr.hint(active, max_iterations=-1, label="lab_bdpt light subpath in media"):
         si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
+        si = spawn.behind_null_face(scene, ray, si, floor, active)
         tally(tracer.counters, "light", active)
         in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
         mei, scattered, w_flight, p_flight = flight(medium, ray, si.t, rng.next_float32(), aux, channel, in_medium,
@@ -160,8 +164,13 @@ def trace_light(tracer, st, block, vertices, store_lanes):
         passing = surface & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
         vertex = scattered | (surface & ~passing)
         vertices_reached += dr.select(vertex, 1, 0)
+        # A surface with a smooth lobe is x_at for the strategies that end here (splat, stored for
+        # connections) whichever lobe was sampled: a mask's f holds its opacity, and the pass
+        # (null lobe) only decides how the subpath goes on.
+        smooth = scattered | (surface & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
+        at = depth + 1
 
-        # ---------- the vertex x_depth: a surface point or a medium point ----------
+        # ---------- the vertex x_at: a surface point or a medium point ----------
         v = mi.SurfaceInteraction3f(si)
         v[scattered] = medium_vertex(mei, ray.wavelengths)
         phase = mei.medium.phase_function()
@@ -169,7 +178,7 @@ def trace_light(tracer, st, block, vertices, store_lanes):
         sigma_c = media.channel_value(mei.sigma_t, channel)
         g_in = dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, ray.d)))
         dist2 = dr.squared_norm(v.p - prev_p)
-        start_here = vertex & (depth == 0)
+        start_here = (vertex | smooth) & (depth == 0)
         # x_0's emitter-sampling density, from x_1 (no transmittance: emitter sampling picks it)
         ds_0.d = dr.select(infinite, -d_0, dr.normalize(ds_0.p - v.p))
         ds_0.dist = dr.select(infinite, dr.inf, dr.norm(ds_0.p - v.p))
@@ -179,26 +188,25 @@ def trace_light(tracer, st, block, vertices, store_lanes):
         dvcm = dr.select(start_here, start.dvcm, dvcm)
         dvc = dr.select(start_here, start.dvc, dvc)
         dist2 = dr.select(start_here & infinite, 1.0, dist2)    # x_0 is a direction: no distance
-        depth[vertex] += 1
+        depth[vertex] = at
         mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dist2, g_in, seg)
-        smooth = scattered | (vertex & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
-        splat_on = smooth & strategy_mask(only, depth + 1, 1)
+        splat_on = smooth & strategy_mask(only, at + 1, 1)
         # the medium on the far side of a surface vertex (a medium transition's other side)
         beyond = dr.select(surface & si.is_medium_transition(), si.target_medium(ray.d), medium)
 
-        # ---------- store x_depth for connections with camera vertices ----------
+        # ---------- store x_at for connections with camera vertices ----------
         if dr.hint(storing, mode="scalar"):
-            store = smooth & (depth + camera_segments <= max_depth)
+            store = smooth & (at + camera_segments <= max_depth)
             if dr.hint(store_lanes is not None and store_lanes < count, mode="scalar"):
                 store &= index < dr.opaque(mi.UInt32, store_lanes)
             slot = dr.scatter_inc(stores, mi.UInt32(0), store)
             kept = store & (slot < capacity)
-            vertices.store(slot, v, -ray.d, beta, mis, depth, last, kept, tracer.weights.lane_iteration(index),
+            vertices.store(slot, v, -ray.d, beta, mis, at, last, kept, tracer.weights.lane_iteration(index),
                            bsdf=dr.select(scattered, dr.zeros(mi.BSDFPtr), bsdf))
             vertices.store_media(slot, medium, beyond, kept)
             last = dr.select(kept, slot, last)
 
-        # ---------- t = 1: join x_depth to the sensor, through the media ----------
+        # ---------- t = 1: join x_at to the sensor, through the media ----------
         u_sensor = mi.Point2f(rng.next_float32(), rng.next_float32())
         if dr.hint(tracing, mode="scalar"):
             ds, we = sensor.sample_direction(v, u_sensor, splat_on)
@@ -368,6 +376,7 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
 
     while dr.hint(active, max_iterations=-1, label="lab_bdpt camera subpath in media"):
         si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
+        si = spawn.behind_null_face(scene, ray, si, floor, active)
         in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
         mei, scattered, w_flight, p_flight = flight(medium, ray, si.t, sampler.next_1d(), sampler, channel,
                                                     in_medium, cp.tracking)
@@ -402,13 +411,15 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
             w_hit = w.hit(mis, pdf_nee, pdf_pos * pdf_dir, dr.select(infinite, 0.0, pdf_pos))
             L += beta * float_or_zero(w_hit) * emitter.eval(si, hit)
 
-        smooth = scattered | (vertex & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
+        # a surface with a smooth lobe is x_here for NEE, connections and merges whichever lobe
+        # was sampled (as at a light vertex: the mask's f holds its opacity)
+        smooth = scattered | (surface & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
         going = vertex & (here < max_depth)
         beyond = dr.select(surface & si.is_medium_transition(), si.target_medium(ray.d), medium)
         sides = Sides(si.n, dr.dot(si.n, ray.d), scattered, medium, beyond)
 
         # ---------------- s = 1: next-event estimation, through the media ----------------
-        nee_on = smooth & going & strategy_mask(cp.only, 1, here + 1) & (Technique.NEE in w.techniques)
+        nee_on = smooth & (here < max_depth) & strategy_mask(cp.only, 1, here + 1) & (Technique.NEE in w.techniques)
         ds, em_weight = scene.sample_emitter_direction(v, sampler.next_2d(), False, nee_on)
         tally(cp.counters, "shadow", nee_on)
         nee_on &= ds.pdf > 0
@@ -472,7 +483,7 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         active_next &= survives
         if dr.hint(merging and cp.grid.first_only, mode="scalar"):
             # lab_vcm's ppm: the merge took the smooth lobes' (and the phase function's) light
-            active_next &= ~smooth | delta_lobe
+            active_next &= passing | ~smooth | delta_lobe
         pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active_next)
         tally(cp.counters, "extension", active_next)
         active = active_next

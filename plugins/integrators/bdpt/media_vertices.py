@@ -123,12 +123,13 @@ def tracked_flight(medium, ray: mi.Ray3f, t_max, sampler, channel, active, track
 def transmittance(scene, medium, it, target, sampler, channel, floor, active, tracking):
     """(T, T_c for the weights) from ``it`` to ``target`` (``common.media.transmittance``): T_c
     T's own value in ``channel`` in homogeneous media (exact), else with ``stand_in`` for the
-    pieces in heterogeneous media, while T is ratio tracking's unbiased estimate."""
+    pieces in heterogeneous media, while T is ratio tracking's unbiased estimate. A surface on a
+    passed null face's plane blocks, as the subpaths meet it (``spawn.behind_null_face``)."""
     if tracking is None:
-        T = media.transmittance(scene, medium, it, target, sampler, channel, floor, active)
+        T = media.transmittance(scene, medium, it, target, sampler, channel, floor, active, coplanar=True)
         return T, media.channel_value(T, channel)
     return media.transmittance(scene, medium, it, target, sampler, channel, floor, active, grid=tracking.grid,
-                               stand_in=stand_in)
+                               stand_in=stand_in, coplanar=True)
 
 
 def sigma_t_channel(medium, mei, channel, active):

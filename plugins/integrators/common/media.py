@@ -213,7 +213,7 @@ def global_segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: m
 @dr.syntax
 def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, target: mi.Point3f,
                   sampler: mi.Sampler, channel, floor: float, active, tracking_kind: str = "ratio", grid=None,
-                  stand_in=None):
+                  stand_in=None, coplanar: bool = False):
     """T from the vertex ``it`` (inside ``medium``, which a surface vertex has already switched
     to the side facing ``target``) to the point ``target``: through media, and through the
     surfaces between whose BSDFs let light pass unscattered (``null`` boundaries, a mask's clear
@@ -223,7 +223,8 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
     ``stand_in``: None, or a deterministic value for each piece inside a heterogeneous medium,
     ``stand_in(medium, start, end, wavelengths, channel, active)``; then returns (T, T_det): T_det
     the product in ``channel`` of the exact factors (homogeneous pieces, null boundaries) and of
-    the stand-ins (lab_bdpt's MIS weights need a transmittance that no random draw changes)."""
+    the stand-ins (lab_bdpt's MIS weights need a transmittance that no random draw changes).
+    ``coplanar``: a surface on a passed null face's plane blocks too (``spawn.behind_null_face``)."""
     ray = spawn.spawn_ray_to(it, target, floor)
     medium = mi.MediumPtr(medium)
     T = mi.UnpolarizedSpectrum(1.0)
@@ -231,6 +232,8 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
     going = mi.Bool(active)
     while going:
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=going)
+        if dr.hint(coplanar, mode="scalar"):
+            si = spawn.behind_null_face(scene, ray, si, floor, going)
         crossing = going & si.is_valid()
         segment = mi.Ray3f(ray)
         segment.maxt = dr.select(crossing, si.t, ray.maxt)

@@ -91,3 +91,25 @@ def pass_through_emitters(scene: mi.Scene, ray: mi.Ray3f, pi: mi.PreliminaryInte
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=through)
         through &= pi.is_valid() & (pi.shape.emitter() != None)  # noqa: E711
     return ray, pi
+
+
+def behind_null_face(scene: mi.Scene, ray: mi.Ray3f, si: mi.SurfaceInteraction3f, floor: float,
+                     active) -> mi.SurfaceInteraction3f:
+    """``si`` (``ray``'s hit), or where it is a surface with a null lobe and another surface lies
+    on its far side within the offset a ray passing it would start at (a fog box's null face on
+    the floor's plane), that other surface, met along ``ray`` (``wi`` and ``t`` from ``ray``).
+
+    The two surfaces tie to rounding; a ray that meets the null face first and then starts past
+    the offset would leave through the floor. A probe from that offset back to the face, along
+    its normal, meets whichever of the two lies nearer that side: the other one, where the ray
+    met the null face first by the surfaces' rounding (the floor's tilt), so both directions see
+    the same floor."""
+    probe_on = active & si.is_valid() & mi.has_flag(si.bsdf().flags(), mi.BSDFFlags.Null)
+    origin = offset_point(si, ray.d, floor)
+    back = dr.mulsign(si.n, -dr.dot(si.n, ray.d))          # the normal, towards the side the ray came from
+    probe = mi.Ray3f(origin, back, 2.0 * dr.norm(origin - si.p), si.time, si.wavelengths)
+    other = scene.ray_intersect(probe, mi.RayFlags.All, coherent=False, active=probe_on)
+    found = probe_on & other.is_valid() & (other.shape != si.shape)
+    other.wi = other.to_local(-ray.d)
+    other.t = si.t
+    return dr.select(found, other, si)
