@@ -105,7 +105,10 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     mean is lab_bdpt's image at the same ``max_depth``. No Russian roulette (pbrt-v4's MMLT has
     none). Each side is traced only as far as the picked strategy needs (the camera subpath t - 1
     segments, the light subpath s, one more than needed so that its last needed vertex is stored),
-    and only that strategy's contribution is kept.
+    and only that strategy's contribution is kept. The full lock-step rounds of a render are
+    recorded once with Dr.Jit's ``dr.freeze`` and replayed (``mlt/frozen.py``: the same image for
+    the same seed, without a traced round's Python per round; scenes with a projector trace every
+    round).
 
     Variants: RGB and mono; spectral, polarized, crop windows, participating media and
     ``render(develop=False)`` are refused in one line. A scene whose bootstrap finds no light
