@@ -54,7 +54,11 @@ class FrozenRounds:
         chains = self.chains
         steps = chains.steps
         try:
-            chains.set_state(self._frozen(chains.state(), chains.step_index()))
+            # (blocking launches: the round's small host-made arrays, dr.opaque of Python values in
+            # the BDPT code, are then copied at once; with kernels still queued the copy would be
+            # queued too, which a recording cannot hold: the process aborts)
+            with dr.scoped_set_flag(dr.JitFlag.LaunchBlocking, True):
+                chains.set_state(self._frozen(chains.state(), chains.step_index()))
         except RuntimeError as err:
             # (no fallback: a failed recording has run the round, splats included, so stepping it
             # again would splat it twice)
