@@ -18,6 +18,8 @@ projector, whose emission tables are not traversable.
 """
 from __future__ import annotations
 
+import gc
+
 import drjit as dr
 
 from . import chain
@@ -53,16 +55,20 @@ class FrozenRounds:
     def __call__(self) -> None:
         chains = self.chains
         steps = chains.steps
+        # (no cyclic garbage collection inside: one that frees arrays of earlier rounds or renders
+        # while a round is recorded queues the release, which a recording cannot hold, and the
+        # process aborts, as it did in a sweep on the Cornell box)
+        collecting = gc.isenabled()
+        gc.disable()
         try:
-            # (blocking launches: the round's small host-made arrays, dr.opaque of Python values in
-            # the BDPT code, are then copied at once; with kernels still queued the copy would be
-            # queued too, which a recording cannot hold: the process aborts)
-            with dr.scoped_set_flag(dr.JitFlag.LaunchBlocking, True):
-                chains.set_state(self._frozen(chains.state(), chains.step_index()))
+            chains.set_state(self._frozen(chains.state(), chains.step_index()))
         except RuntimeError as err:
             # (no fallback: a failed recording has run the round, splats included, so stepping it
             # again would splat it twice)
             raise RuntimeError(f"{self.plugin}: its lock-step round could not be frozen (a value it reads is "
                                f"not among the frozen function's inputs): set mlt.mmlt.FREEZE_ROUNDS = False "
                                f"to trace every round") from err
+        finally:
+            if collecting:
+                gc.enable()
         chains.steps = steps + 1
