@@ -47,7 +47,7 @@ _ORDER = (
     "samplers.common", "samplers.halton", "samplers.independent", "samplers.sobol",
     "samplers.stratified", "samplers.zsobol",
     # lab_pssmlt (its chains read numbers through samplers.common's hash)
-    "integrators.mlt.chain", "integrators.mlt.sampler", "integrators.mlt.integrator",
+    "integrators.mlt.chain", "integrators.mlt.frozen", "integrators.mlt.sampler", "integrators.mlt.integrator",
     # lab_mmlt: lab_pssmlt's chains over lab_bdpt's subpaths
     "integrators.mlt.mmlt",
 )

@@ -114,7 +114,7 @@ class LightTracer:
 
     def __init__(self, scene: mi.Scene, sensor: mi.Sensor, max_depth: int = -1, rr_depth: int = 5,
                  weights: BdptWeights | None = None, offset_floor: float = 1.0, only: Strategy | None = None,
-                 hide_emitters: bool = False, aim=None, plugin: str = "lab_bdpt"):
+                 hide_emitters: bool = False, aim=None, plugin: str = "lab_bdpt", table: EmitterTable | None = None):
         if not isinstance(max_depth, int) or max_depth < -1 or max_depth == 0:
             raise ValueError(f"{plugin}: max_depth must be -1 (unbounded) or >= 1, got {max_depth!r}")
         if not isinstance(rr_depth, int) or rr_depth < 1:
@@ -126,7 +126,8 @@ class LightTracer:
         self.rr_depth = rr_depth
         self.weights = weights if weights is not None else BdptWeights(strategies="light")
         self.floor = offset_floor
-        self.table = EmitterTable(scene, aim)     # (aim: aim.AimedEmission, or None)
+        # (aim: aim.AimedEmission, or None; ``table``: one the caller made once for many passes)
+        self.table = table if table is not None else EmitterTable(scene, aim)
         self.only = only                     # None or the one strategy (s, t) to splat
         self.hide_emitters = hide_emitters   # camera rays pass through area emitters
         self.reaches_sensor = not direction_is_delta(sensor)   # (orthographic: t = 1 is impossible)

@@ -314,22 +314,27 @@ class MarkovChains:
 
     # -- one step ---------------------------------------------------------------------
 
-    def step_key(self, step: int):
-        return key_of(self.key, P_STEP, dr.opaque(mi.UInt32, step))
+    def step_index(self):
+        """This step's number as an opaque UInt32 (one kernel for every step)."""
+        return dr.opaque(mi.UInt32, self.steps)
+
+    def step_key(self, index):
+        """The key of the step numbered ``index`` (a UInt32, ``step_index``)."""
+        return key_of(self.key, P_STEP, index)
 
     def tail_keys(self, key):
         """Per chain, the key of the unstored dimensions' numbers of this step's proposal."""
         return key_of(key, P_TAIL, self.lane)
 
-    def propose(self, key):
-        """(samples, large): the proposal as ``PrimarySamples`` for ``evaluate`` and which chains
-        take a large step. Eager: every stored number moved here (``eager_proposal``); lazy: as
-        the path reads them (``LazyProposal``)."""
+    def propose(self, key, index):
+        """(samples, large): the proposal of step ``index`` as ``PrimarySamples`` for ``evaluate``
+        and which chains take a large step. Eager: every stored number moved here
+        (``eager_proposal``); lazy: as the path reads them (``LazyProposal``)."""
         large = self.large_steps(key)
         if not self.lazy:
             return self.samples(self.eager_proposal(key), key), large
         lazy = LazyProposal(self.chains, self.sigma, key, self.iteration + 1, self.last_large, large, self.last,
-                            self.proposal, self.stamps, dr.opaque(mi.UInt32, self.steps + 1))
+                            self.proposal, self.stamps, index + 1)
         return PrimarySamples(self.chains, self.tail_keys(key), self.u, self.dims, lazy), large
 
     def large_steps(self, key):
@@ -393,6 +398,17 @@ class MarkovChains:
     def arrays(self) -> tuple:
         return (self.u, self.value, *self.payload, *self.counts.arrays(), self.iteration, self.last_large, self.last)
 
+    #: Every attribute holding Dr.Jit arrays that a step reads or writes (``frozen.FrozenRounds``).
+    STATE = ("key", "u", "value", "payload", "counts", "lane", "flat", "iteration", "last_large", "last",
+             "proposal", "stamps")
+
+    def state(self) -> dict:
+        return {name: getattr(self, name, None) for name in self.STATE}
+
+    def set_state(self, state: dict) -> None:
+        for name, value in state.items():
+            setattr(self, name, value)
+
 
 def run(chains: MarkovChains, steps: int, evaluate, splat, proposal=None, checkpoint=None) -> None:
     """``steps`` steps of every chain (``step``); ``checkpoint()`` runs after each."""
@@ -402,17 +418,19 @@ def run(chains: MarkovChains, steps: int, evaluate, splat, proposal=None, checkp
             checkpoint()
 
 
-def step(chains: MarkovChains, evaluate, splat, proposal=None, active=None) -> None:
+def step(chains: MarkovChains, evaluate, splat, proposal=None, active=None, index=None) -> None:
     """One step of the chains in lock-step: propose, ``evaluate(samples, active)`` -> (I, payload) of
     the proposal (``samples``: ``PrimarySamples``; ``active`` None or a Bool per chain), splat the
     current (``splat(payload, (1 - a) / I(u))``) and the proposal (``splat(payload, a / I(v))``),
     accept. ``proposal(chains, key)`` -> (v, large, q_ratio), v flat like ``chains.u``, replaces
     the lab's symmetric steps (a test's non-symmetric proposal). ``active`` (a Bool per chain):
     the chains that take this step; the others splat nothing and stay as they are (a partial
-    step: ``run_mutations``). Dr.Jit evaluates the state (and the splats) once per step."""
-    key = chains.step_key(chains.steps)
+    step: ``run_mutations``). ``index``: the step's number as a UInt32 (default: ``step_index``).
+    Dr.Jit evaluates the state (and the splats) once per step."""
+    index = chains.step_index() if index is None else index
+    key = chains.step_key(index)
     if proposal is None:
-        samples, large = chains.propose(key)
+        samples, large = chains.propose(key, index)
         q_ratio = None
     else:
         v, large, q_ratio = proposal(chains, key)
@@ -443,15 +461,20 @@ def rounds(start: int, count: int, chains: int) -> list[tuple[int, int]]:
     return out
 
 
-def run_mutations(chains: MarkovChains, start: int, count: int, evaluate, splat, checkpoint=None) -> None:
+def run_mutations(chains: MarkovChains, start: int, count: int, evaluate, splat, checkpoint=None,
+                  full_step=None) -> None:
     """Mutations start .. start + count - 1 (``rounds``): full rounds step every chain
-    (``step``), a partial one the lanes of its range only (``active``)."""
+    (``step``, or ``full_step()`` where given: ``frozen.FrozenRounds``), a partial one the lanes
+    of its range only (``active``)."""
     for first, stop in rounds(start, count, chains.chains):
-        active = None
-        if (first, stop) != (0, chains.chains):
+        if (first, stop) == (0, chains.chains) and full_step is not None:
+            full_step()
+        elif (first, stop) == (0, chains.chains):
+            step(chains, evaluate, splat)
+        else:
             # (opaque: the bounds change from pass to pass, the kernels do not)
             active = (chains.lane >= dr.opaque(mi.UInt32, first)) & (chains.lane < dr.opaque(mi.UInt32, stop))
-        step(chains, evaluate, splat, active=active)
+            step(chains, evaluate, splat, active=active)
         if checkpoint is not None:
             checkpoint()
 

@@ -51,6 +51,7 @@ class MLTStats:
     bootstrap_s: float = 0.0
     chains_s: float = 0.0
     seconds_per_mutation: float = 0.0   # chains_s / mutations (with the splats)
+    frozen_recordings: int = 0          # lab_mmlt: recordings of its frozen round (0: rounds not frozen)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -245,8 +246,10 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
             splats.splat(block, payload[1], wavelengths, payload[0] * weight, weight > 0)
 
         steps_before = chains.steps
+        full_step = self._frozen_rounds(chains, evaluate, splat, [scene, sensor, block])
         chain.run_mutations(chains, held.mutations, mutations, evaluate, splat,
-                            checkpoint=lambda: interrupts.checkpoint(self))
+                            checkpoint=lambda: interrupts.checkpoint(self), full_step=full_step)
+        stats.frozen_recordings = 0 if full_step is None else full_step.recordings
         held.mutations += mutations
         stats.steps = chains.steps - steps_before
         stats.mutations = mutations
@@ -258,6 +261,11 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         stats.seconds_per_mutation = stats.chains_s / max(mutations, 1)
         self._held = held
         return image
+
+    def _frozen_rounds(self, chains, evaluate, splat, captured: list):
+        """``frozen.FrozenRounds`` for the full rounds of a render (``captured``: the Dr.Jit values
+        ``evaluate`` and ``splat`` read besides the chains'), or None to trace every round."""
+        return None
 
     def _count(self, chains: chain.MarkovChains) -> None:
         """The acceptance statistics of every step the chains took so far (continued renders

@@ -9,7 +9,7 @@ import numpy as np
 
 from mitsuba_lab.plugins import interrupts
 from mitsuba_lab.plugins.integrators.bdpt.camera_subpath import CameraPass, sensor_constants, trace_camera_subpaths
-from mitsuba_lab.plugins.integrators.bdpt.endpoints import direction_is_delta
+from mitsuba_lab.plugins.integrators.bdpt.endpoints import EmitterTable, direction_is_delta
 from mitsuba_lab.plugins.integrators.bdpt.light_subpath import LightTracer
 from mitsuba_lab.plugins.integrators.bdpt.techniques import Strategy
 from mitsuba_lab.plugins.integrators.bdpt.vertices import LightVertices
@@ -22,11 +22,14 @@ from mitsuba_lab.plugins.variant import plugin_settings
 
 from . import chain
 from .estimator import MMLT
+from .frozen import FrozenRounds
 from .integrator import LabPSSMLTIntegrator, target
 from .sampler import PrimarySampleSampler
 
 #: Russian roulette never starts (pbrt-v4's MLTIntegrator has none: the state picks the length).
 NO_ROULETTE = 1 << 30
+#: Full lock-step rounds recorded once and replayed (``frozen.FrozenRounds``); False traces every round.
+FREEZE_ROUNDS = True
 #: The primary sample's streams, interleaved (``PrimarySampleSampler``): the camera's (the
 #: strategy, the film position, the camera subpath and its NEE) and the light's.
 CAMERA_STREAM, LIGHT_STREAM, STREAMS = 0, 1, 2
@@ -102,7 +105,10 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     mean is lab_bdpt's image at the same ``max_depth``. No Russian roulette (pbrt-v4's MMLT has
     none). Each side is traced only as far as the picked strategy needs (the camera subpath t - 1
     segments, the light subpath s, one more than needed so that its last needed vertex is stored),
-    and only that strategy's contribution is kept.
+    and only that strategy's contribution is kept. The full lock-step rounds of a render are
+    recorded once with Dr.Jit's ``dr.freeze`` and replayed (``mlt/frozen.py``: the same image for
+    the same seed, without a traced round's Python per round; scenes with a projector trace every
+    round).
 
     Variants: RGB and mono; spectral, polarized, crop windows, participating media and
     ``render(develop=False)`` are refused in one line. A scene whose bootstrap finds no light
@@ -152,6 +158,12 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         self._lengths = held.lengths
         return super()._continue(scene, sensor, held, spp)
 
+    def _frozen_rounds(self, chains, evaluate, splat, captured: list):
+        if not FREEZE_ROUNDS or self._scene.table.projectors:
+            return None
+        captured = captured + [self._lengths, vars(self._scene.table)]
+        return FrozenRounds(chains, evaluate, splat, captured, self.ESTIMATOR.plugin_name)
+
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
         self.refuse(develop)
@@ -169,7 +181,7 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         name = self.ESTIMATOR.plugin_name
         inv_area, axis = sensor_constants(sensor, name)
         weights = BdptWeights(self.values["heuristic"], self.values["beta"], self.estimator.techniques())
-        self._scene = _SceneSetup(traits, spawn.offset_floor(traits), inv_area, axis, weights)
+        self._scene = _SceneSetup(traits, spawn.offset_floor(traits), inv_area, axis, weights, EmitterTable(scene))
         try:
             return self._render(scene, sensor, seed, spp)
         finally:
@@ -199,7 +211,7 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         # ---------------- the light subpath (its t = 1 strategy kept per lane) ----------------
         weights, floor = setup.weights, setup.floor
         tracer = LightTracer(scene, sensor, self.max_depth, NO_ROULETTE, weights, floor, only,
-                             plugin=self.ESTIMATOR.plugin_name)
+                             plugin=self.ESTIMATOR.plugin_name, table=setup.table)
         # Each side stops where the strategy needs it: the light subpath at x_(s-1) (its bound, a
         # path length, lets x_(s-1) be stored for a connection: s + 1), the camera's at t - 1
         # segments (its own bound stays the path's length k, which its checks compare against).
@@ -242,8 +254,9 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
 class _SceneSetup:
     """What every evaluation of one render shares."""
 
-    def __init__(self, traits, floor, inv_area, axis, weights):
+    def __init__(self, traits, floor, inv_area, axis, weights, table):
         self.traits, self.floor, self.inv_area, self.axis, self.weights = traits, floor, inv_area, axis, weights
+        self.table = table          # the emitters' constants (``EmitterTable``), made once per render
 
 
 mi.register_integrator("lab_mmlt", lambda props: LabMMLTIntegrator(props))
