@@ -28,8 +28,10 @@ from .sampler import PrimarySampleSampler
 
 #: Russian roulette never starts (pbrt-v4's MLTIntegrator has none: the state picks the length).
 NO_ROULETTE = 1 << 30
-#: Full lock-step rounds recorded once and replayed (``frozen.FrozenRounds``); False traces every round.
-FREEZE_ROUNDS = True
+#: Full lock-step rounds recorded once and replayed (``frozen.FrozenRounds``): 1.28x faster per
+#: mutation at the default chains, the same images; off by default, since two sweeps aborted inside a
+#: recording before the garbage collector was kept out of it, and too few renders have run since.
+FREEZE_ROUNDS = False
 #: The primary sample's streams, interleaved (``PrimarySampleSampler``): the camera's (the
 #: strategy, the film position, the camera subpath and its NEE) and the light's.
 CAMERA_STREAM, LIGHT_STREAM, STREAMS = 0, 1, 2
@@ -105,10 +107,10 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     mean is lab_bdpt's image at the same ``max_depth``. No Russian roulette (pbrt-v4's MMLT has
     none). Each side is traced only as far as the picked strategy needs (the camera subpath t - 1
     segments, the light subpath s, one more than needed so that its last needed vertex is stored),
-    and only that strategy's contribution is kept. The full lock-step rounds of a render are
-    recorded once with Dr.Jit's ``dr.freeze`` and replayed (``mlt/frozen.py``: the same image for
-    the same seed, without a traced round's Python per round; scenes with a projector trace every
-    round).
+    and only that strategy's contribution is kept. Every lock-step round is traced; setting
+    ``mlt.mmlt.FREEZE_ROUNDS = True`` records a round once with Dr.Jit's ``dr.freeze`` and replays
+    it (``mlt/frozen.py``: the same image for the same seed, without a traced round's Python per
+    round; an experiment, off by default; scenes with a projector trace every round).
 
     Variants: RGB and mono; spectral, polarized, crop windows, participating media and
     ``render(develop=False)`` are refused in one line. A scene whose bootstrap finds no light
