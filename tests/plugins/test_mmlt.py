@@ -1,5 +1,6 @@
-"""lab_mmlt's images: agreement in expectation with Mitsuba's `path` (the block test, RGB and mono)
-and its power (the strategy pick's probability left out fails it); finite, non-negative pixels on
+"""lab_mmlt's images: agreement in expectation with Mitsuba's `path` (the block test, RGB; mono in
+benchmarks/agreement/test_mmlt_matrix.py) and its power (the strategy pick's probability left out
+fails it: benchmarks/power/test_mmlt_power.py); finite, non-negative pixels on
 stiff scenes; a scene without light is black with a warning; the one-line refusals; ``mlt_stats()``.
 
 The block test (tests/agreement.py): the Cornell box at 16 x 16, max_depth 4, 16 renders a side
@@ -49,19 +50,6 @@ def test_cornell_box_agrees_with_mitsuba_path():
     assert not result.failing, result.summary()
 
 
-@pytest.mark.slow
-def test_leaving_out_the_strategy_probability_fails_the_block_test(monkeypatch):
-    """Power: a sample not divided by its strategy's probability 1 / (k + 1) is the image over
-    k + 1 on average: 8 renders fail (measured: max |z| 42.2, 16 of 16 blocks, ratios 0.24-0.48)."""
-    from mitsuba_lab.plugins.integrators.mlt import mmlt
-
-    monkeypatch.setattr(mmlt, "strategy_probability", lambda n_strategies: 1.0)
-    lab = renders(cornell(), make_integrator("lab_mmlt", MMLT), SPP, range(8))
-    result = block_test(lab, path_reference(), BLOCK)
-    print(f"strategy probability left out: {result.summary()}")
-    assert result.failing
-
-
 def test_pixels_finite_non_negative_and_stats():
     integrator = make_integrator("lab_mmlt", {"max_depth": 4, "chains": 512, "bootstrap": 4096})
     image, _ = render(load_scene(scene_path("cornell_box.xml"), res=16), integrator, spp=8, seed=3)
@@ -101,8 +89,7 @@ def test_bad_parameters_are_one_line_errors(params, message):
     assert "\n" not in str(error.value)
 
 
-@pytest.mark.slow
-def test_mono_agrees_with_mitsuba_path():
+def check_mono_agrees_with_mitsuba_path():
     """The mono variant: the same block test as above, lab_mmlt against `path` in mono (16 renders
     a side, seeds 0-15 and 1000-1015). Measured: max |z| 2.03 (bound 3.42; 2.07 with the length in
     the state)."""

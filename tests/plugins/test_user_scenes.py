@@ -261,10 +261,11 @@ def photon_cases(rgb_scenes, other_variant_cases):
 
 #: lab_photon's convergence on every scene in rgb and on OTHER_VARIANT_SCENES in mono and spectral:
 #: benchmarks/agreement/test_user_scenes_matrix.py. The suite keeps, in rgb, the scenes whose features
-#: are its own concern (meshes and a textured light, principled and blend, delta lights only, an
-#: environment map behind a thin lens), and the scenes of OTHER_VARIANT_CASES.
+#: are its own concern and no other of its cases covers (meshes and a textured light, an environment
+#: map behind a thin lens; principled and blend has the lobe check, delta lights only the spectral
+#: case), and the scenes of OTHER_VARIANT_CASES.
 ALL_PHOTON_CASES = photon_cases(SCENE_NAMES, [(v, name) for v in (MONO, SPECTRAL) for name in OTHER_VARIANT_SCENES])
-PHOTON_RGB_SCENES = ("textured_mesh_room", "principled_and_blend", "spot_and_directional", "thinlens_envmap")
+PHOTON_RGB_SCENES = ("textured_mesh_room", "thinlens_envmap")
 PHOTON_CASES = photon_cases(PHOTON_RGB_SCENES, [(v, name) for v, name, _ in OTHER_VARIANT_CASES])
 
 
