@@ -1,6 +1,7 @@
 """lab_vcm's ppm against lab_photon at equal light vertices, at the size the check was written for.
 
-``tests/plugins/test_vcm.py::test_merging_has_lab_photons_variance_at_equal_light_vertices`` runs
+``benchmarks/agreement/test_vcm_matrix.py::test_merging_has_lab_photons_variance_at_equal_light_vertices``
+(the suite's copy until 2026-11-28, ``test_vcm.check_merging_has_lab_photons_variance_at_equal_light_vertices``) runs
 it on 8 seeds a side (the ratio within 0.6, 5 bootstrap standard errors there: enough to catch
 the bug it guards, a pass's lanes sharing light vertices, at 2.36). Here, as first written: 24
 seeds a side, the ratio of the mean per-pixel variances on sds.xml's directly lit back wall must

