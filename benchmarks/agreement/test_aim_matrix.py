@@ -16,3 +16,9 @@ def test_aimed_emission_agrees_with_mitsuba_path(name, plugin, params):
     scene = load_scene(scene_path(name), res=RES)
     lab = renders(scene, make_integrator(plugin, {"max_depth": MAX_DEPTH, "aim": 0.5, **params}), 16, SEEDS_LAB)
     assert_agrees(lab, path_stack(name), f"{plugin} {params} aim=0.5 on {name}")
+
+
+def test_no_target_renders_the_same_image_in_lab_photon():
+    import test_aim
+
+    test_aim.test_no_target_renders_the_same_image("lab_photon")

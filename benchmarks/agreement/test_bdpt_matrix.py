@@ -9,6 +9,12 @@ import test_bdpt
 from test_bdpt import MOVED_LIGHT_PATHS_CASES, MOVED_SCENES, MOVED_USER_SCENES, user_assets  # noqa: F401
 
 
+def test_spectral_variant_agrees_with_mitsuba_path(tmp_path):
+    """lab_bdpt in the spectral variant (the suite covers the engine in spectral through lab_vcm's
+    mode vcm, tests/plugins/test_vcm.py)."""
+    test_bdpt.check_spectral_variant_agrees_with_mitsuba_path(tmp_path)
+
+
 @pytest.mark.parametrize("name", MOVED_SCENES)
 def test_agrees_with_mitsuba_path(name):
     test_bdpt.test_agrees_with_mitsuba_path(name)

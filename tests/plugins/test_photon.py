@@ -204,7 +204,12 @@ def cornell():
     return _cache["scene"], _cache["ref"]
 
 
-@pytest.mark.parametrize("direct", ["photons", "nee"])
+#: The suite keeps direct light by NEE; direct light by photons runs in
+#: benchmarks/agreement/test_photon_matrix.py.
+ALL_DIRECT = ["photons", "nee"]
+
+
+@pytest.mark.parametrize("direct", ALL_DIRECT[1:])
 def test_error_falls_with_passes_on_the_cornell_box(direct):
     """20000 photons per pass, 1 spp per pass, max_depth 6, seed 1, against `path` at 8192 spp
     (its own relMSE floor: 4e-5). Measured (this machine), photons / nee: relMSE 0.064 / 0.067 at
