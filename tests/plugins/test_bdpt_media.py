@@ -24,6 +24,7 @@ camera strategies the subset test also covers) and one heterogeneous one (rgb, g
 the full lists (``ALL_HOMOGENEOUS``, ``ALL_HETEROGENEOUS``) run in
 benchmarks/agreement/test_bdpt_media_matrix.py.
 """
+import numpy as np
 import pytest
 
 import mitsuba as mi
