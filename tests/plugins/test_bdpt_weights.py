@@ -85,9 +85,10 @@ def area_densities(g):
     return p_light, p_camera
 
 
-def recursive_weights(g, mis, wrong=None):
+def recursive_weights(g, mis, wrong=None, media_calls=False):
     """Every strategy's weight by the recursion, subpaths walked as the integrator will walk them
-    (``wrong``: a deliberate mistake, to show the test's power)."""
+    (``wrong``: a deliberate mistake, to show the test's power; ``media_calls``: each call told which
+    of its vertices lie in a medium, as lab_vcm's merging at medium vertices needs)."""
     k = g["d2"].shape[0]
     d2, cl, cc, fw, rv, delta = g["d2"], g["cos_l"], g["cos_c"], g["to_cam"], g["to_light"], g["delta"]
     # media: each segment's T goes to after_hit and, on a connecting segment, with its cosines
@@ -96,6 +97,11 @@ def recursive_weights(g, mis, wrong=None):
     T_light = np.ones((k, N)) if tr is None else tr
     T_cam, T = g.get("T_camera", tr), g.get("T_connect", T_light)
     pdf_emit = g["pos"] * fw[0]
+
+    def at(i, name="medium"):
+        """The keyword telling a call whether x_i lies in a medium (none without ``media_calls``)."""
+        return {name: g["medium"][i]} if media_calls else {}
+
     light = {}
     state = mis.start_light(pdf_emit, g["nee"], cc[0], delta[0])
     for i in range(1, k):
@@ -105,14 +111,14 @@ def recursive_weights(g, mis, wrong=None):
         light[i] = state
         cos_out = 1.0 if wrong == "cosine" else cc[i]
         pdf_rev = fw[i] if wrong == "swap" else rv[i]
-        state = mis.scatter_light(state, fw[i], pdf_rev, cos_out, delta[i])
+        state = mis.scatter_light(state, fw[i], pdf_rev, cos_out, delta[i], **at(i))
     camera = {}
     state = mis.start_camera(rv[k], delta[k])            # (delta[k]: an orthographic sensor)
     for i in range(k - 1, -1, -1):
         state = mis.after_hit(state, d2[i], cc[i], None if tr is None else T_cam[i])
         camera[i] = state
         if i > 0:                          # (x_i lies k - i segments from the sensor)
-            state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i], depth=k - i)
+            state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i], depth=k - i, **at(i))
     w = np.zeros((k + 1, N))
     for s in range(k + 1):
         t = k + 1 - s
@@ -122,13 +128,19 @@ def recursive_weights(g, mis, wrong=None):
             w[s] = mis.emitter_to_camera(rv[1], cc[0] * T[0], d2[0], g["pos"], delta[0])
         elif s == 1:
             w[s] = mis.nee(camera[1], g["nee"], pdf_emit, cc[0] * T[0], cl[1] * T[0], d2[0], rv[1], fw[1],
-                           delta[0], depth=k - 1)
+                           delta[0], depth=k - 1, **at(1))
         elif t == 1:
-            w[s] = mis.light_to_camera(light[k - 1], rv[k], cc[k - 1] * T[k - 1], d2[k - 1], rv[k - 1])
+            w[s] = mis.light_to_camera(light[k - 1], rv[k], cc[k - 1] * T[k - 1], d2[k - 1], rv[k - 1], **at(k - 1))
         else:
             w[s] = mis.connect(light[s - 1], camera[s], fw[s - 1], rv[s - 1], rv[s], fw[s],
-                               cc[s - 1] * T[s - 1], cl[s] * T[s - 1], d2[s - 1], depth=k - s)
-    return np.where(feasible(delta), w, 0.0)    # the integrator never runs an infeasible one
+                               cc[s - 1] * T[s - 1], cl[s] * T[s - 1], d2[s - 1], depth=k - s,
+                               **at(s - 1, "light_medium"), **at(s, "camera_medium"))
+    w = np.where(feasible(delta), w, 0.0)    # the integrator never runs an infeasible one
+    if not media_calls:
+        return w
+    merges = [np.where(delta[i] | (k - i < mis.merge_from), 0.0,
+                       mis.merge(light[i], camera[i], rv[i], fw[i], **at(i))) for i in range(1, k)]
+    return np.concatenate([w, np.array(merges).reshape(-1, N)])
 
 
 def _reference(g, beta, strategies="all"):

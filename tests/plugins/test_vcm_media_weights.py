@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from test_bdpt_weights import MERGE_SUBSETS, N, RTOL, _max_rel, area_densities, random_paths
+from test_bdpt_weights import recursive_weights as bdpt_recursive_weights
 from mitsuba_lab.plugins.integrators.bdpt import recursion
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, brute_force_weights, feasible
 
@@ -21,41 +22,7 @@ from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, brute_forc
 def recursive_weights(g, mis):
     """Every connection technique's weight, then merging's at x_1 .. x_{k-1}, by the recursion,
     each call told which of its vertices lie in a medium."""
-    k = g["d2"].shape[0]
-    d2, cl, cc, fw, rv, delta = g["d2"], g["cos_l"], g["cos_c"], g["to_cam"], g["to_light"], g["delta"]
-    medium, T = g["medium"], g["T"]
-    pdf_emit = g["pos"] * fw[0]
-    light, state = {}, mis.start_light(pdf_emit, g["nee"], cc[0], delta[0])
-    for i in range(1, k):
-        state = mis.after_hit(state, d2[i - 1], cl[i], T[i - 1])
-        light[i] = state
-        state = mis.scatter_light(state, fw[i], rv[i], cc[i], delta[i], medium[i])
-    camera, state = {}, mis.start_camera(rv[k], delta[k])
-    for i in range(k - 1, -1, -1):
-        state = mis.after_hit(state, d2[i], cc[i], T[i])
-        camera[i] = state
-        if i > 0:
-            state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i], depth=k - i, medium=medium[i])
-    w = np.zeros((k + 1, N))
-    for s in range(k + 1):
-        t = k + 1 - s
-        if s == 0:
-            w[s] = mis.hit(camera[0], g["nee"], pdf_emit, g["pos"])
-        elif t == 1 and s == 1:
-            w[s] = mis.emitter_to_camera(rv[1], cc[0] * T[0], d2[0], g["pos"], delta[0])
-        elif s == 1:
-            w[s] = mis.nee(camera[1], g["nee"], pdf_emit, cc[0] * T[0], cl[1] * T[0], d2[0], rv[1], fw[1],
-                           delta[0], depth=k - 1, medium=medium[1])
-        elif t == 1:
-            w[s] = mis.light_to_camera(light[k - 1], rv[k], cc[k - 1] * T[k - 1], d2[k - 1], rv[k - 1],
-                                       medium[k - 1])
-        else:
-            w[s] = mis.connect(light[s - 1], camera[s], fw[s - 1], rv[s - 1], rv[s], fw[s], cc[s - 1] * T[s - 1],
-                               cl[s] * T[s - 1], d2[s - 1], k - s, medium[s - 1], medium[s])
-    w = np.where(feasible(delta), w, 0.0)
-    merges = [np.where(delta[i] | (k - i < mis.merge_from), 0.0,
-                       mis.merge(light[i], camera[i], rv[i], fw[i], medium[i])) for i in range(1, k)]
-    return np.concatenate([w, np.array(merges).reshape(-1, N)])
+    return bdpt_recursive_weights(g, mis, media_calls=True)
 
 
 def worst_errors(subset, beta, merge_from):
