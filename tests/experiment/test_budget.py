@@ -324,8 +324,9 @@ def test_progressive_retries_reach_a_budget_that_the_pass_count_alone_exceeds():
     1.391 s: each of its 8 passes cost about 0.16 s whatever its size, and the retry kept the 8
     passes and scaled only their sizes. Here every timed pass takes 0.16 s + 2.5 ms per spp (8
     passes of 47 spp: 1.40 s for a 1 s budget). The retry fits that model to the passes'
-    measured times and drops passes until their fixed part is at most half the budget (3 passes,
-    0.48 s), the rest filled with samples: one retry, within the budget."""
+    measured times and drops passes until their fixed part is at most a tenth of the budget
+    (``budget.FIXED_SHARE``; 0.16 s is more: one pass), the rest filled with samples: one retry,
+    within the budget."""
     renders = FakeRenders(lambda count, seed: 0.16 + 0.0025 * count)
     point = Point("s/p/i/t1s", "s", "p", "i", None, 1.0, (1, 2, 3), WARMUP, progressive=True)
     progressive = PointTask(point=point, scene=SceneSpec("s", "s.xml", None, {}, {}),
@@ -337,13 +338,34 @@ def test_progressive_retries_reach_a_budget_that_the_pass_count_alone_exceeds():
     print([(t["passes"], round(t["measured_s"], 4)) for t in tries])
     assert tries[0]["measured_s"] == pytest.approx(8 * 0.16 + 47 * 0.0025)
     assert len(tries) == 2 and result.calibration["within_budget"] is True
-    assert tries[1]["passes"] == [69, 69, 70] and tries[1]["measured_s"] == pytest.approx(1.0)
-    assert [row["pass_spp"] for row, _ in result.runs] == [[69, 69, 70]] * 3
+    assert tries[1]["passes"] == [336] and tries[1]["measured_s"] == pytest.approx(1.0)
+    assert [row["pass_spp"] for row, _ in result.runs] == [[336]] * 3
     # the fit alone, from injected pass times: deterministic, and with no fixed part the passes stay
     times = [(n, 0.16 + 0.0025 * n) for n in (1, 1, 1, 2, 4, 8, 16, 14)]
-    assert budget.rescaled_passes((1, 1, 1, 2, 4, 8, 16, 14), 1.3975, 1.0, times) == (69, 69, 70)
+    assert budget.rescaled_passes((1, 1, 1, 2, 4, 8, 16, 14), 1.3975, 1.0, times) == (336,)
+    light = [(n, 0.019 + 0.0025 * n) for n in (1, 1, 1, 2, 4, 8, 16, 14)]    # 5 passes keep 0.095 s of fixed part
+    assert budget.rescaled_passes((1, 1, 1, 2, 4, 8, 16, 14), 0.2695, 1.0, light) == (40, 40, 40, 80, 162)
     assert budget.rescaled_passes((1, 1, 1, 2, 4, 8, 16, 14), 2 * 1.3975, 1.0, times) == (136,)   # twice as slow: one pass
     assert budget.rescaled_passes((10, 10, 20, 40), 2.0, 1.0, [(n, 0.025 * n) for n in (10, 10, 20, 40)]) == \
         (5, 5, 10, 20)
     assert budget.pass_times([{"checkpoints": [{"spp": 1, "wall_s": 0.2}, {"spp": 3, "wall_s": 0.5}]}]) == \
         [(1, 0.2), (2, pytest.approx(0.3))]
+
+
+def test_a_budget_run_whose_passes_cost_more_than_its_samples_is_fitted_again_with_fewer():
+    """A render's fixed part of 0.125 s (tracing a long kernel) and 5 ms per spp, a 1 s budget:
+    the budget's doubling passes from 1 spp (1, 1, 2, 4, 8, 16: 0.91 s) spend 0.75 s on their
+    fixed parts and render 32 spp. The first run's passes are refitted (``FIXED_SHARE``: their
+    fixed part at most 0.1 s, so one pass of 175 spp) and that seed rendered again; every seed
+    renders one pass, within the budget, at 5.5x the samples."""
+    renders = FakeRenders(lambda count, seed: 0.125 + 0.005 * count)
+    point = Point("s/p/i/t1s", "s", "p", "i", None, 1.0, (1, 2, 3), WARMUP, progressive=True)
+    fitted = PointTask(point=point, scene=SceneSpec("s", "s.xml", None, {}, {}),
+                       sampler=PluginSpec("i", "independent", {}), strategy=PluginSpec("p", "path", {}),
+                       seeds=(1, 2, 3), spp=None, reference_image=REFERENCE, regions={}, metrics=(),
+                       variant="scalar_rgb", passes=())
+    result = execute_progressive(fitted, renders)
+    timed = [count for count, _ in renders.timed()]
+    assert timed == [1, 1, 2, 4, 8, 16, 175, 175, 175], timed     # the doubling run, seed 1 again, seeds 2 and 3
+    assert result.calibration["passes"] == [175] and result.calibration["within_budget"] is True
+    assert [row["pass_spp"] for row, _ in result.runs] == [[175]] * 3

@@ -28,7 +28,9 @@ the same points as separate renders, fewest passes).
 Time budgets: passes start at 1 spp and double while the next one is predicted to fit (time =
 fixed + per-sample x spp, fitted to the passes so far), then one pass takes what is left; a
 pass that overran is dropped, so the run stops at the last pass that fits. The first seed's
-passes are then the point's (a calibration row), and its other seeds render the same passes.
+passes are then the point's (a calibration row; ``worker.fewer_passes`` renders it again with
+fewer where their fixed parts took more than ``budget.FIXED_SHARE`` of the budget), and its
+other seeds render the same passes.
 
 Chain estimators (``Estimator.CONTINUES_PASSES``: lab_pssmlt) do not render independent passes:
 pass 0 bootstraps and starts the Markov chains, every later pass continues them and returns the

@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ... import metrics
-from ..pipeline.budget import BUDGET_RETRIES, measured_time, once_cost, pass_times, rescaled_count, rescaled_passes, within_budget
+from ..pipeline.budget import (BUDGET_RETRIES, measured_time, once_cost, pass_times, rescaled_count, rescaled_passes,
+                               too_many_passes, within_budget)
 from ..pipeline.config import PluginSpec, SceneSpec, sample_count_plugin
 from ..pipeline.plan import Point, point_id, warmup_sizes
 from .progressive import Checkpoint, run_passes
@@ -261,13 +262,13 @@ def progressive_runs(task: PointTask, render_at, result: PointResult, sizes, see
     returns the pass sizes rendered."""
     result.runs = []
     for seed in seeds:
-        for _ in range(1 + RECOMPILE_RETRIES):
-            checkpoints = run_passes(render_at, seed, sizes, task.point.budget_s, continues_passes(task.strategy))
-            if checkpoints[-1].cache_misses == 0:
-                break                                   # else the run was a warm-up: again
-        totals = [0] + [cp.spp for cp in checkpoints]
-        done = tuple(b - a for a, b in zip(totals, totals[1:]))          # the pass sizes rendered
+        checkpoints = warm_run(task, render_at, seed, sizes)
+        done = pass_sizes(checkpoints)
         if sizes is None:                               # the first run fits the budget: its passes are the point's
+            fewer = fewer_passes(task, done, checkpoints)
+            if fewer:                                   # its passes' fixed cost took too much of it: again, fewer
+                checkpoints = warm_run(task, render_at, seed, fewer)
+                done = pass_sizes(checkpoints)
             sizes = done
             result.calibration = {"kind": "calibration", "point": task.point.id, "spp": checkpoints[-1].spp,
                                   "passes": list(sizes), "budget_s": task.point.budget_s, "fitted_on_seed": seed,
@@ -275,6 +276,36 @@ def progressive_runs(task: PointTask, render_at, result: PointResult, sizes, see
         result.spp = checkpoints[-1].spp
         result.runs.append(progressive_row(task, seed, done, checkpoints))
     return sizes
+
+
+def warm_run(task: PointTask, render_at, seed: int, sizes) -> list[Checkpoint]:
+    """One progressive run of ``seed`` (``progressive.run_passes``), rendered again while it still
+    compiled a kernel (then it was a warm-up)."""
+    for _ in range(1 + RECOMPILE_RETRIES):
+        checkpoints = run_passes(render_at, seed, sizes, task.point.budget_s, continues_passes(task.strategy))
+        if checkpoints[-1].cache_misses == 0:
+            break
+    return checkpoints
+
+
+def pass_sizes(checkpoints: list[Checkpoint]) -> tuple[int, ...]:
+    """The spp of each pass of a run, from its checkpoints' accumulated counts."""
+    totals = [0] + [cp.spp for cp in checkpoints]
+    return tuple(b - a for a, b in zip(totals, totals[1:]))
+
+
+def fewer_passes(task: PointTask, sizes, checkpoints: list[Checkpoint]) -> tuple[int, ...] | None:
+    """A budget run's passes refitted (``budget.rescaled_passes``) where their fixed cost took more
+    than ``budget.FIXED_SHARE`` of the budget (``budget.too_many_passes``); None where it did not.
+    The budget's doubling passes start at 1 spp, so an integrator whose render costs a large
+    fixed part (tracing a long kernel) would spend its budget on passes, not samples."""
+    row = {"checkpoints": [{"spp": cp.spp, "wall_s": cp.wall_s} for cp in checkpoints]}
+    continues = continues_passes(task.strategy)
+    times = pass_times([row], first=not continues)
+    if not too_many_passes(times, len(sizes) - continues, task.point.budget_s):
+        return None
+    once = once_cost([row], times) if continues else 0.0
+    return rescaled_passes(sizes, checkpoints[-1].wall_s, task.point.budget_s, times, once)
 
 
 def continues_passes(strategy: PluginSpec) -> bool:

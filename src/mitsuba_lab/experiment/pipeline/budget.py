@@ -47,9 +47,12 @@ def rescaled_count(count: int, seconds: float, budget_s: float, fixed_s: float =
     return max(1, int(round(count * max(scale, 0.0))))
 
 
-#: A rescaled progressive point keeps its passes while their fixed cost (per pass, fitted) takes
-#: at most this part of the budget; past it, passes are dropped until it does.
-FIXED_SHARE = 0.5
+#: A progressive budget point keeps its passes while their fixed cost (per pass, fitted) takes at
+#: most this part of the budget; past it, passes are dropped until it does. Every pass pays the
+#: fixed part again, where one render of the budget pays it once: at a tenth, the point's
+#: efficiency is the estimator's, not its passes' (a 1 s point of 5 passes of 0.125 s had half
+#: its time in them).
+FIXED_SHARE = 0.1
 
 
 def pass_times(runs, first: bool = True) -> list[tuple[int, float]]:
@@ -64,6 +67,14 @@ def pass_times(runs, first: bool = True) -> list[tuple[int, float]]:
                 out.append((cp["spp"] - spp, cp["wall_s"] - wall))
             spp, wall = cp["spp"], cp["wall_s"]
     return out
+
+
+def too_many_passes(times, count: int, budget_s: float) -> bool:
+    """Whether ``count`` passes whose (spp, seconds) are ``times`` pay, in their fixed part
+    (``progressive.fit_pass_time``), more than FIXED_SHARE of ``budget_s``."""
+    from ..execution.progressive import fit_pass_time
+
+    return count > 1 and bool(times) and fit_pass_time(list(times))[0] * count > FIXED_SHARE * budget_s
 
 
 def once_cost(runs, times) -> float:
