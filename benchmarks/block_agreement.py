@@ -53,6 +53,8 @@ ESTIMATORS = {
     "vcm_bpt": ("lab_vcm", {"mode": "bpt"}, True),
     "vcm": ("lab_vcm", {"mode": "vcm", "pilot": False}, False),   # (the estimator, not the pilot's choice)
     "ppm": ("lab_vcm", {"mode": "ppm"}, False),
+    # a radius set by hand: grazing_camera's floor, black at ppm's automatic radius (a pixel's width)
+    "ppm_r0.2": ("lab_vcm", {"mode": "ppm", "radius": 0.2}, False),
     "photon": ("lab_photon", {"photons_per_pass": 20000}, False),
 }
 MAX_DEPTH = 8
