@@ -7,7 +7,7 @@ strategies alone). Heterogeneous media (delta tracking, stand-in densities in th
 spot light into the smoke plume under an environment (rgb, global majorants) and a point light
 inside it (mono, the majorant grid); a ``mask``ed card inside fog (its mean only, cheaply); a point
 light in a clear lamp housing inside fog (light tracing's mean only: where light subpaths start),
-and an emitter between two media refused. Scenes without media keep the surface-only kernels
+the medium each emitter sits in. Scenes without media keep the surface-only kernels
 (checked bit for bit outside the suite, see the commit message); lab_vcm's modes without merging
 render the same images (test_vcm_media.py).
 
@@ -33,8 +33,8 @@ import mitsuba as mi
 import backend
 import media_scenes
 import mitsuba_lab
-from agreement import SEEDS_LAB, SEEDS_REF, Z_BOUND, assert_agrees, renders, z_scores
-from mitsuba_lab.scene import SceneTraits, make_integrator, strategy_applicability
+from agreement import SEEDS_LAB, SEEDS_REF, Z_BOUND, assert_agrees, renders, scene_path, z_scores
+from mitsuba_lab.scene import SceneTraits, load_scene, make_integrator, strategy_applicability
 
 pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier
 
@@ -57,6 +57,13 @@ SCENES = {"fog_box": fog_box, "fog_box_point": fog_box_point, "point_in_fog": me
           "point_in_plume": media_scenes.point_in_plume}
 
 
+def load(name: str) -> mi.Scene:
+    """A scene of SCENES, or a file of scenes/ (``.xml``) at 24 x 24."""
+    if name.endswith(".xml"):
+        return load_scene(scene_path(name), res=24)
+    return mi.load_dict(SCENES[name]())
+
+
 def reference(scene):
     return renders(scene, make_integrator("volpath", {"max_depth": DEPTH}), SPP, SEEDS_REF)
 
@@ -65,7 +72,8 @@ def bdpt(scene, **params):
     return renders(scene, make_integrator("lab_bdpt", {"max_depth": DEPTH, **params}), SPP, SEEDS_LAB)
 
 
-ALL_HOMOGENEOUS = ["fog_box", "point_in_fog", "chromatic_in_glass"]
+#: (fog_shafts.xml at 24 x 24: its point light in a clear lamp housing beside the fog-filled room)
+ALL_HOMOGENEOUS = ["fog_box", "point_in_fog", "chromatic_in_glass", "fog_shafts.xml"]
 HOMOGENEOUS = ["point_in_fog"]
 
 
@@ -80,7 +88,7 @@ _stacks = {}
 def homogeneous_stacks(name):
     """(lab_bdpt's renders, volpath's) on the scene ``name``, rendered once per module."""
     if name not in _stacks:
-        scene = mi.load_dict(SCENES[name]())
+        scene = load(name)
         _stacks[name] = bdpt(scene), reference(scene)
     return _stacks[name]
 
@@ -159,23 +167,35 @@ def test_light_subpaths_start_in_the_lamp_housings_clear_air():
     assert abs(ratio - 1) <= 0.15
 
 
-def test_an_emitter_between_two_media_is_refused_in_one_line():
+def test_each_emitter_sits_in_one_medium():
     """The medium each emitter sits in (``media_vertices.emitter_media``): the housing's light is
-    in none, ``point_in_fog``'s in its fog; a point light whose rays meet fog's side of one
-    boundary and no medium's side of another is refused, naming it."""
+    in none, ``point_in_fog``'s in its fog (its rays meet the fog's null sphere from inside); a
+    point light in a scene whose only medium is the sensor's is in it; an area light on a shape
+    with media is in the shape's exterior; a point light whose rays meet fog's side of one
+    boundary and no medium's side of another is refused in one line, naming it."""
     import drjit as dr
 
     from mitsuba_lab.plugins.integrators.bdpt.media_vertices import emitter_media
 
-    def medium_of_the_light(scene):
-        return dr.gather(mi.MediumPtr, emitter_media(scene, scene.sensors()[0], 1.0, "lab_bdpt"), mi.UInt32(0))
+    def in_medium(scene, medium, index=0):
+        media = emitter_media(scene, scene.sensors()[0], 1.0, "lab_bdpt")
+        return bool(dr.all(dr.gather(mi.MediumPtr, media, mi.UInt32(index)) == mi.MediumPtr(medium)))
 
-    housing = mi.load_dict(media_scenes.lamp_in_housing())
-    assert dr.all(medium_of_the_light(housing) == mi.MediumPtr(None))
+    assert in_medium(mi.load_dict(media_scenes.lamp_in_housing()), None)
     in_fog = mi.load_dict(media_scenes.point_in_fog())
-    assert dr.all(medium_of_the_light(in_fog) == mi.MediumPtr(in_fog.sensors()[0].get_medium()))
+    assert in_medium(in_fog, in_fog.sensors()[0].get_medium())
+    fog = {"type": "homogeneous", "sigma_t": 1.0, "id": "fog"}
+    only_sensor = media_scenes.base(sensor_medium=fog)
+    only_sensor["lamp"] = {"type": "point", "position": [0, 1, 0]}
+    only_sensor = mi.load_dict(only_sensor)
+    assert in_medium(only_sensor, only_sensor.sensors()[0].get_medium())
+    lit_fog = media_scenes.fog_box()
+    lit_fog["light"]["exterior"] = fog
+    lit_fog = mi.load_dict(lit_fog)
+    area = [s for s in lit_fog.shapes() if s.emitter() is not None][0]
+    assert in_medium(lit_fog, area.exterior_medium())
     between = media_scenes.base()
-    between["fog"] = {"type": "homogeneous", "sigma_t": 1.0, "id": "fog"}
+    between["fog"] = fog
     between["lamp"] = {"type": "point", "position": [0, 1, 0]}
     between["ceiling"] = {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([0, 2, 0]).rotate([1, 0, 0], 90).scale(9),
                           "bsdf": {"type": "null"}, "exterior": {"type": "ref", "id": "fog"}}   # the lamp's side: fog
