@@ -137,7 +137,7 @@ def _scene_media(scene: mi.Scene, sensor: mi.Sensor) -> list:
     for shape in scene.shapes():
         named += [shape.interior_medium(), shape.exterior_medium()]
     for m in named:
-        if m is not None and all(m is not f for f in found):
+        if m is not None and not any(dr.all(mi.MediumPtr(m) == mi.MediumPtr(f)) for f in found):
             found.append(m)
     return found
 
