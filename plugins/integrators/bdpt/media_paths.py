@@ -20,7 +20,8 @@ and only how the subpath goes on depends on the lobe sampled. A light subpath st
 emitter's medium, decided once per render for each emitter (``media_vertices.emitter_media``):
 the one the scene names for it, else the one its emitted rays find behind the first medium
 transition they meet through surfaces that transmit (an opaque lamp housing around a point light
-hides the fog beyond it). The camera subpath starts in the sensor's medium.
+hides the fog beyond it); an emitter at infinity in a medium sends nothing (T = 0 over the infinite
+distance). The camera subpath starts in the sensor's medium.
 
 **Densities.** A vertex x_i reached from x_{i-1} has the area density
 
@@ -130,6 +131,9 @@ def trace_light(tracer, st, block, vertices, store_lanes):
 
     # ---------------- x_1, x_2, ..: the light subpath ----------------
     beta = mi.Spectrum(st.ray_weight) * st.sel_weight
+    # an emitter at infinity in a medium (an environment in the sensor's unbounded fog): its light
+    # crosses an infinite stretch of it, T = 0
+    beta[infinite & (medium != None)] = 0.0  # noqa: E711 (Dr.Jit pointer test)
     beta_max0 = dr.max(mi.unpolarized_spectrum(beta))
     max_depth = dr.opaque(mi.UInt32, tracer.max_depth if tracer.max_depth > 0 else 0xFFFFFFFF)
     rr_depth = dr.opaque(mi.UInt32, tracer.rr_depth)
