@@ -3,7 +3,7 @@
 For every scene of tests/plugins/test_bdpt.py's agreement lists (the lab's scenes, the stiff
 ones where `path` is right, tests/user_scenes.py's users' scenes; on request the media scenes of
 ``MEDIA_SCENES``) and every variant asked for: --seeds renders of each estimator against --seeds
-renders of Mitsuba's `path` (`volpath` or lab_bdpt in media: ``MEDIA_SCENES``; other seeds,
+renders of Mitsuba's `path` (`volpath`, `volpathmis` or lab_bdpt in media: ``MEDIA_SCENES``; other seeds,
 --ref-scale x the samples), compared by tests/agreement.py's ``block_test`` (6x6-pixel block
 means, Welch z over the seeds, Sidak-corrected alpha 0.01 over the blocks). Unbiased
 estimators (lab_bdpt, lab_vcm mode bpt) must pass; consistent ones (lab_vcm modes vcm and ppm,
@@ -39,8 +39,9 @@ SCENES = ["cornell_box.xml", "caustic.xml", "veach_mis.xml", "glossy_small_light
           "stiff/scaled_1e4.xml"]
 #: Scenes with participating media, and their reference: volpath, or lab_bdpt on the volumetric
 #: caustic, whose light no Mitsuba integrator renders (lab_bdpt agrees with volpath where both apply:
-#: tests/plugins/test_bdpt_media.py). fog_box: tests/media_scenes.py's, sigma_t 2.5.
-MEDIA_SCENES = {"fog_box": "volpath", "volumetric_caustic.xml": "lab_bdpt"}
+#: tests/plugins/test_bdpt_media.py), and volpathmis on fog_shafts (the path family's reference there,
+#: tests/plugins/test_media_block.py). fog_box: tests/media_scenes.py's, sigma_t 2.5.
+MEDIA_SCENES = {"fog_box": "volpath", "volumetric_caustic.xml": "lab_bdpt", "fog_shafts.xml": "volpathmis"}
 #: (tests/media_scenes.py's other scenes, by name: reference volpath.) A fog box standing on the
 #: floor: volpath's reference is rendered with the box sunk into the floor, as volpath lets light
 #: through the floor where the two surfaces tie (2026-11-28-bdpt-media-defects.md).

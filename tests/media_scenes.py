@@ -191,6 +191,28 @@ def masked_card_in_fog() -> dict:
     return scene
 
 
+def lamp_in_housing() -> dict:
+    """A point light in a lamp housing of clear air (black walls that name no medium, a null window
+    towards the camera whose outside is the fog) inside ``fog_box``'s null cube of fog (sigma_t
+    2, albedo 0.9), no other light: a 16x12 film. Five in six of the light's rays meet a black
+    wall first, behind which lies the fog cube's boundary."""
+    scene = base(res=(16, 12))
+    scene["fog"] = {"type": "homogeneous", "albedo": 0.9, "sigma_t": 2.0, "id": "fog"}
+    fog = {"type": "ref", "id": "fog"}
+    scene["box"] = {"type": "cube", "to_world": T().translate([0, 0.8, 0]).scale(0.8), "bsdf": {"type": "null"},
+                    "interior": fog}
+    centre, h = [0, 0.8, 0], 0.25
+    walls = {"back": T().rotate([0, 1, 0], 180), "left": T().rotate([0, 1, 0], -90),
+             "right": T().rotate([0, 1, 0], 90), "top": T().rotate([1, 0, 0], -90),
+             "bottom": T().rotate([1, 0, 0], 90), "window": T()}
+    for name, turn in walls.items():
+        scene["housing_" + name] = {"type": "rectangle", "to_world": T().translate(centre) @ turn @ T().translate([0, 0, h]).scale(h),
+                                    "bsdf": {"type": "diffuse", "reflectance": rgb(0)}}
+    scene["housing_window"].update(bsdf={"type": "null"}, exterior=fog)
+    scene["light"] = {"type": "point", "position": centre, "intensity": rgb(5)}
+    return scene
+
+
 SCENES = {"fog_box": fog_box, "point_in_fog": point_in_fog, "chromatic_in_glass": chromatic_in_glass,
           "smoke": smoke, "chromatic_smoke": chromatic_smoke, "point_in_smoke": point_in_smoke,
           "spot_into_smoke": spot_into_smoke, "point_in_plume": point_in_plume,

@@ -1,6 +1,6 @@
 """tests/plugins/test_bdpt_media.py's agreement with volpath over its full scene lists: every
 homogeneous scene (fog behind a null box at sigma_t 2.5, a point light inside fog, a chromatic
-medium inside glass) and every heterogeneous case (a spot into smoke in rgb with global
+medium inside glass, fog_shafts.xml at 24 x 24) and every heterogeneous case (a spot into smoke in rgb with global
 majorants, a point light inside the plume in mono with the majorant grid). Same tolerance and
 seeds as the suite's cases.
 

@@ -24,7 +24,7 @@ from .endpoints import direction_is_delta
 from .estimator import Bidirectional
 from .light_subpath import LightTracer, check_variant
 from .media_paths import trace_camera, trace_light
-from .media_vertices import Tracking
+from .media_vertices import Tracking, emitter_media
 from .passes import PassPlan, Passes, pass_seed
 from .techniques import Strategy, Technique
 from .vertices import NONE, LightVertices, vertex_bytes
@@ -168,6 +168,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         tracer.media = trace_light if media else False
         # heterogeneous media: delta tracking in both subpaths (majorants = grid: its grid, built once per scene)
         tracer.tracking = Tracking(majorants.of_integrator(self, scene)) if media and traits.heterogeneous_media else None
+        # where each emitter's light subpaths start (a one-line error where its rays disagree)
+        tracer.emitter_media = emitter_media(scene, sensor, floor, self.ESTIMATOR.plugin_name) if media else None
         inv_area, axis = sensor_constants(sensor, self.ESTIMATOR.plugin_name)
         passes = self.passes
         self.stats = stats = passes.stats_class()

@@ -141,6 +141,9 @@ class LightTracer:
         self.channel_key = 0
         #: heterogeneous media: delta tracking in them (``media_vertices.Tracking``), else None
         self.tracking = None
+        #: in a scene with media, the medium each emitter sits in (``media_vertices.emitter_media``, set
+        #: by the driver once per render), else None
+        self.emitter_media = None
 
     @dr.syntax
     def _visible(self, it, ds, active):
@@ -223,7 +226,7 @@ class LightTracer:
             from types import SimpleNamespace
 
             emitted = SimpleNamespace(w=w, count=count, index=index, rng=rng, ray=ray, ray_weight=ray_weight,
-                                      sel_weight=sel_weight, emitter=emitter, ps=ps, pos_weight=pos_weight, pmf=pmf,
+                                      sel_weight=sel_weight, emitter=emitter, emitter_index=emitter_index, ps=ps, pos_weight=pos_weight, pmf=pmf,
                                       delta_pos=delta_pos, delta=delta, infinite=infinite, on_surface=on_surface,
                                       scale=scale, cos_emit=cos_emit, pdf_pos=pdf_pos, ds_0=ds_0)
             return self.media(self, emitted, block, vertices, store_lanes)

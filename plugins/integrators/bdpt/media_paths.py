@@ -16,10 +16,12 @@ boundary, a mask's clear part) is passed without a vertex (Mitsuba's ``volpath``
 and the medium is tracked across medium transitions. A surface with a smooth lobe is nonetheless
 a vertex for the strategies that end there (NEE, connections, splats, merges) on every arrival,
 as ``volpath`` samples emitters at a mask before its lobe is chosen: its f holds the opacity,
-and only how the subpath goes on depends on the lobe sampled. Light subpaths start in the emitter's
-medium where the scene gives it one (``<ref id="fog"/>`` inside the emitter), else in the medium
-behind the first medium transition the emitted ray meets (``origin_medium``: an area light or a
-point light in a null-bounded fog names none). The camera subpath starts in the sensor's medium.
+and only how the subpath goes on depends on the lobe sampled. A light subpath starts in its
+emitter's medium, decided once per render for each emitter (``media_vertices.emitter_media``):
+the one the scene names for it, else the one its emitted rays find behind the first medium
+transition they meet through surfaces that transmit (an opaque lamp housing around a point light
+hides the fog beyond it); an emitter at infinity in a medium sends nothing (T = 0 over the infinite
+distance). The camera subpath starts in the sensor's medium.
 
 **Densities.** A vertex x_i reached from x_{i-1} has the area density
 
@@ -71,7 +73,7 @@ from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
 from . import splats
 from .endpoints import nee_density
 from .media_vertices import (  # noqa: F401 (homogeneous_flight: the tests patch it here)
-    _AUX_KEY, RngSampler, Sides, homogeneous_flight, medium_vertex, origin_medium, path_channel,
+    _AUX_KEY, RngSampler, Sides, homogeneous_flight, medium_vertex, path_channel,
     phase_reverse_pdf, sigma_t_channel, tracked_flight, vertex_eval)
 from .media_vertices import transmittance as through
 from .techniques import Technique
@@ -104,9 +106,7 @@ def trace_light(tracer, st, block, vertices, store_lanes):
     aux_rng = mi.PCG32(count)
     aux_rng.seed(mi.sample_tea_64(index, mi.UInt32((tracer.channel_key ^ _AUX_KEY) & 0xFFFFFFFF)), index)
     aux = RngSampler(aux_rng)
-    declared = emitter.get_medium()          # an emitter's own medium, where the scene names one
-    medium = dr.select(declared != None, declared,  # noqa: E711 (Dr.Jit pointer test)
-                       origin_medium(scene, ray, floor, dr.full(mi.Bool, True, count) & (declared == None)))  # noqa: E711
+    medium = dr.gather(mi.MediumPtr, tracer.emitter_media, st.emitter_index)   # the emitter's (emitter_media)
     phase_ctx = mi.PhaseFunctionContext(None, mi.TransportMode.Importance)
     tracing = Technique.LIGHT in w.techniques and tracer.reaches_sensor
 
@@ -131,6 +131,9 @@ def trace_light(tracer, st, block, vertices, store_lanes):
 
     # ---------------- x_1, x_2, ..: the light subpath ----------------
     beta = mi.Spectrum(st.ray_weight) * st.sel_weight
+    # an emitter at infinity in a medium (an environment in the sensor's unbounded fog): its light
+    # crosses an infinite stretch of it, T = 0
+    beta[infinite & (medium != None)] = 0.0  # noqa: E711 (Dr.Jit pointer test)
     beta_max0 = dr.max(mi.unpolarized_spectrum(beta))
     max_depth = dr.opaque(mi.UInt32, tracer.max_depth if tracer.max_depth > 0 else 0xFFFFFFFF)
     rr_depth = dr.opaque(mi.UInt32, tracer.rr_depth)

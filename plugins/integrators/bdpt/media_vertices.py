@@ -1,8 +1,8 @@
 """The pieces of lab_bdpt's subpaths in media (``media_paths`` traces them): the path's sampling
 channel, the analytic free flight in it, delta tracking and the weights' stand-in transmittance
-in heterogeneous media, the medium a light subpath starts in, a medium vertex as a surface
-interaction, and a vertex's BSDF-or-phase evaluation. The densities, the channel and the
-stand-ins are explained in ``media_paths``."""
+in heterogeneous media, the medium each emitter sits in (where its light subpaths start), a
+medium vertex as a surface interaction, and a vertex's BSDF-or-phase evaluation. The densities,
+the channel and the stand-ins are explained in ``media_paths``."""
 from __future__ import annotations
 
 import drjit as dr
@@ -61,21 +61,89 @@ def homogeneous_flight(medium, ray: mi.Ray3f, t_max, u, channel, active):
     return m, scattered, mi.UnpolarizedSpectrum(weight), dr.select(ok, media.channel_value(tr, channel), 0.0)
 
 
+#: Rays per emitter that ``emitter_media`` walks (a fixed seed: the same media every render).
+EMITTER_RAYS = 4096
+#: Surfaces a walk passes at most (a medium transition or an opaque surface ends it sooner).
+_WALK_STEPS = 64
+
+
+def emitter_media(scene: mi.Scene, sensor: mi.Sensor, floor: float, plugin: str) -> mi.MediumPtr:
+    """The medium each emitter of ``scene`` sits in (one per ``scene.emitters()`` entry, in that
+    order; gathered by emitter index): where every light subpath from it starts.
+
+    An emitter's medium is a property of the emitter, decided once per render, not per ray:
+    the medium the scene names for it, or for an area light whose shape is a medium transition
+    its shape's exterior (the side it emits to); else the media that ``EMITTER_RAYS`` of its own
+    emitted rays find (``first_transition``: non-transition surfaces that transmit light are
+    passed, an opaque one ends a ray with no answer, the first medium transition answers with
+    its side the ray came from). They must all agree (else a one-line ValueError naming the
+    emitter); with none, the sensor's medium (volpath's: a path keeps its first medium until it
+    crosses a transition)."""
+    media = dr.zeros(mi.MediumPtr, max(1, len(scene.emitters())))
+    rng = mi.PCG32(EMITTER_RAYS)
+    time = mi.Float(sensor.shutter_open())
+    for i, emitter in enumerate(scene.emitters()):
+        medium = emitter.get_medium()
+        shape = emitter.get_shape()
+        if medium is None and shape is not None and shape.is_medium_transition():
+            medium = shape.exterior_medium()
+        elif medium is None:
+            u = [rng.next_float32() for _ in range(5)]
+            ray, _ = emitter.sample_ray(time, u[0], mi.Point2f(u[1], u[2]), mi.Point2f(u[3], u[4]))
+            voted, found = first_transition(scene, ray, floor)
+            votes = [(m, dr.count(voted & (found == mi.MediumPtr(m)))[0]) for m in _scene_media(scene, sensor)]
+            votes = [(m, n) for m, n in votes if n > 0]
+            if len(votes) > 1:
+                named = ", ".join(f"{n} in {_medium_name(m)}" for m, n in votes)
+                name = f"'{emitter.id()}'" if emitter.id() else f"number {i}"
+                raise ValueError(f"{plugin}: emitter {name} is in more than one medium: of "
+                                 f"{EMITTER_RAYS} of its rays, the first medium boundary each meets puts it "
+                                 f"{named}; name its medium in the scene (<ref id=\"...\"/> inside the emitter)")
+            medium = votes[0][0] if votes else sensor.get_medium()
+        if medium is not None:
+            dr.scatter(media, mi.MediumPtr(medium), mi.UInt32(i))
+    return media
+
+
 @dr.syntax
-def origin_medium(scene: mi.Scene, ray: mi.Ray3f, floor: float, active) -> mi.MediumPtr:
-    """The medium at ``ray``'s origin: behind the first medium transition the ray meets (other
-    surfaces are passed), none where it meets none."""
+def first_transition(scene: mi.Scene, ray: mi.Ray3f, floor: float) -> tuple[mi.Bool, mi.MediumPtr]:
+    """(found, medium): the medium on ``ray``'s side of the first medium transition it meets,
+    passing surfaces that are no transition and transmit light (a null or glass boundary
+    between two points in one medium: every path crossing it keeps its medium), and stopping
+    without one (``found`` False) at an opaque surface, whose far side may hold any medium (a
+    lamp housing's wall), or where it leaves the scene."""
     ray = mi.Ray3f(ray)
-    found = dr.zeros(mi.MediumPtr, dr.width(ray.o))
-    going = mi.Bool(active)
+    found = dr.zeros(mi.Bool, dr.width(ray.o))
+    medium = dr.zeros(mi.MediumPtr, dr.width(ray.o))
+    going = dr.full(mi.Bool, True, dr.width(ray.o))
+    steps = mi.UInt32(0)
     while going:
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=going)
         hit = going & si.is_valid()
         transition = hit & si.is_medium_transition()
-        found[transition] = si.target_medium(-ray.d)
-        going = hit & ~transition
+        found |= transition
+        medium[transition] = si.target_medium(-ray.d)
+        steps += 1
+        going = (hit & ~transition & mi.has_flag(si.bsdf().flags(), mi.BSDFFlags.Transmission)
+                 & (steps < _WALK_STEPS))
         ray[going] = spawn.spawn_ray(si, ray.d, floor)
+    return found, medium
+
+
+def _scene_media(scene: mi.Scene, sensor: mi.Sensor) -> list:
+    """No medium (None), then every medium the scene's shapes, sensor and emitters name."""
+    found = [None]
+    named = [sensor.get_medium(), *(e.get_medium() for e in scene.emitters())]
+    for shape in scene.shapes():
+        named += [shape.interior_medium(), shape.exterior_medium()]
+    for m in named:
+        if m is not None and not any(dr.all(mi.MediumPtr(m) == mi.MediumPtr(f)) for f in found):
+            found.append(m)
     return found
+
+
+def _medium_name(medium) -> str:
+    return "no medium" if medium is None else f"medium '{medium.id()}'"
 
 
 #: The optical depth past which the stand-in transmittance stops falling: 1 / T_det enters the
