@@ -109,7 +109,9 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     0.03 changed nothing resolved. A larger bootstrap (262144) gained 2.5x on the door at 4 s
     but lost on the Cornell box and missed 1 s budgets.
 
-    Every render seed is an independent bootstrap and set of chains. A scene whose bootstrap
+    Variants: RGB, mono and spectral (the wavelength sample is the primary sample's number after the
+    film position and time, so a chain perturbs it as any other). Every render seed is an
+    independent bootstrap and set of chains. A scene whose bootstrap
     finds no light renders black, with a warning. The alpha channel is 1. Refused in one line:
     polarized variants, ``render(develop=False)``. Participating media go through lab_mis's
     path loop unchanged (tests/plugins/test_pssmlt.py: block and image means agree with volpath's
