@@ -110,7 +110,8 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     and only that strategy's contribution is kept. Every lock-step round is traced; setting
     ``mlt.mmlt.FREEZE_ROUNDS = True`` records a round once with Dr.Jit's ``dr.freeze`` and replays
     it (``mlt/frozen.py``: the same image for the same seed, without a traced round's Python per
-    round; an experiment, off by default; scenes with a projector trace every round).
+    round; an experiment, off by default; scenes with a projector, and spectral variants
+    (not tried frozen), trace every round).
 
     Variants: RGB, mono and spectral. In a spectral variant the wavelength sample is one more number
     of the camera stream (after the film position), so a chain walks over wavelengths as over the
