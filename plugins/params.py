@@ -294,6 +294,10 @@ LAB_PSSMLT = LAB_MIS + (
     Param("bootstrap", int, 100_000, "independent paths that estimate the normaliser b (the image's mean "
           "luminance) and from which the chains start, drawn in proportion to their luminance",
           check=lambda v: 1 <= v <= MLT_MAX_BOOTSTRAP, expected=f"an integer in [1, {MLT_MAX_BOOTSTRAP}]"),
+    Param("bootstrap_share", float, 0.0, "bootstrap paths per mutation: a render that starts chains uses "
+          "max(bootstrap, bootstrap_share x width x height x spp) paths (at most the largest bootstrap), so the "
+          "bootstrap grows with the budget; 0: exactly bootstrap (a progressive run's chains start in its first "
+          "pass, whose spp is small)", check=lambda v: 0.0 <= v <= 64.0, expected="a number in [0, 64]"),
     Param("large_step", float, 0.3, "probability that a step draws every primary sample afresh (a large step)",
           check=lambda v: 0.0 <= v <= 1.0, expected="a number in [0, 1]"),
     Param("small_step", str, "normal", "the small step's perturbation of each primary sample (wrapped to "
@@ -310,7 +314,8 @@ LAB_MMLT = _override((
     Param("max_depth", int, 8, "longest path in segments (light + camera subpath); each chain keeps one "
           "length from 1 to max_depth, the lengths' chains in proportion to their b", **_int_at_least(1)),
 ) + tuple(p for p in LAB_BDPT if p.name in ("heuristic", "beta")) + tuple(
-    p for p in LAB_PSSMLT if p.name in ("chains", "bootstrap", "large_step", "small_step", "sigma")), Param(
+    p for p in LAB_PSSMLT if p.name in ("chains", "bootstrap", "bootstrap_share", "large_step", "small_step",
+                                        "sigma")), Param(
     "bootstrap", int, 100_000, "independent paths, split evenly over the lengths (bootstrap // max_depth "
     "each), that estimate each length's normaliser b_k and from which the chains start, drawn in proportion "
     "to their luminance", check=lambda v: 1 <= v <= MLT_MAX_BOOTSTRAP,

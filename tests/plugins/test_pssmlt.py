@@ -171,6 +171,7 @@ def test_spectral_agrees_with_mitsuba_path():
     ({"sigma": 0.0}, "lab_pssmlt: parameter 'sigma' must be a number in (0, 1], got 0.0"),
     ({"small_step": "gaussian"}, "lab_pssmlt: parameter 'small_step' must be one of normal, exponential, got 'gaussian'"),
     ({"bootstrap": 0}, "lab_pssmlt: parameter 'bootstrap' must be an integer in [1, 4194304], got 0"),
+    ({"bootstrap_share": -1.0}, "lab_pssmlt: parameter 'bootstrap_share' must be a number in [0, 64], got -1.0"),
 ])
 def test_bad_parameters_are_one_line_errors(params, message):
     from mitsuba_lab.plugins.params import ParameterError, resolve
@@ -181,6 +182,18 @@ def test_bad_parameters_are_one_line_errors(params, message):
     with pytest.raises(Exception, match=message.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[")
                        .replace("]", r"\]").replace(".", r"\.")):
         make_integrator("lab_pssmlt", params)
+
+
+@pytest.mark.parametrize("plugin", ["lab_pssmlt", "lab_mmlt"])
+def test_bootstrap_grows_with_the_mutations(plugin):
+    """``bootstrap_share``: a render's bootstrap is max(bootstrap, share x mutations), capped; a
+    continued render (a progressive run's later pass) bootstraps nothing anew."""
+    scene = load_scene(scene_path("cornell_box.xml"), res=8)
+    integrator = make_integrator(plugin, {"max_depth": 2, "chains": 64, "bootstrap": 512, "bootstrap_share": 2.0})
+    for spp, expected in ((4, 512), (16, 2048)):          # 64 pixels x spp x 2 against 512
+        render(scene, integrator, spp=spp, seed=1)
+        assert integrator.mlt_stats()["bootstrap"] == expected
+    assert integrator.bootstrap_for(10 ** 9) == 4194304
 
 
 @pytest.mark.slow

@@ -98,8 +98,9 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     dimensions, still exact).
 
     Parameters: lab_mis's (its path loop and weights) and the chains': ``chains`` (lanes in
-    lock-step), ``bootstrap`` (paths for b and the chains' start), ``large_step``, ``small_step``
-    and ``sigma`` (the table below). The defaults were measured at equal time against the
+    lock-step), ``bootstrap`` (paths for b and the chains' start; with ``bootstrap_share`` > 0 at
+    least that many paths per mutation of the render, so the bootstrap grows with the budget),
+    ``large_step``, ``small_step`` and ``sigma`` (the table below). The defaults were measured at equal time against the
     alternatives (experiments/results/2026-11-28-mlt-second.md: 32x32, 1 and 4 s, the door ajar
     and the Cornell box): the bootstrap's size matters most, since where few paths carry light
     many chains start from one bootstrap path and stay correlated (``mlt_stats()``'s
@@ -135,7 +136,7 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     def _init_chains(self) -> None:
         """The chains' settings, from ``self.estimator`` (shared with lab_mmlt)."""
         e = self.estimator
-        self.chains, self.bootstrap = e.chains, e.bootstrap
+        self.chains, self.bootstrap, self.bootstrap_share = e.chains, e.bootstrap, e.bootstrap_share
         self.large_step, self.small_step, self.sigma = e.large_step, e.small_step, e.sigma
         self.stats = MLTStats()
         #: Set (by the runner's progressive runs) to continue the chains of the last render of this
@@ -179,7 +180,8 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         if self.continue_chains and held is not None and held.identity == identity:
             return self._continue(scene, sensor, held, spp)
         key = chain.seed_key(seed)
-        self.stats = stats = MLTStats(bootstrap=self.bootstrap)
+        self._render_bootstrap = self.bootstrap_for(pixels * spp)
+        self.stats = stats = MLTStats(bootstrap=self._render_bootstrap)
 
         # ---------------- Bootstrap: b and the paths the chains start from ----------------
         start = _now()
@@ -213,8 +215,15 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
 
     # -- What lab_mmlt's per-length populations change (lab_pssmlt: one population) ----------
 
+    def bootstrap_for(self, mutations: int) -> int:
+        """The bootstrap's paths of a render of ``mutations`` that starts chains: ``bootstrap``, or
+        ``bootstrap_share`` x ``mutations`` where that is more, at most the largest bootstrap."""
+        from mitsuba_lab.plugins.params import MLT_MAX_BOOTSTRAP
+
+        return int(min(max(self.bootstrap, round(self.bootstrap_share * mutations)), MLT_MAX_BOOTSTRAP))
+
     def _bootstrap_paths(self) -> int:
-        return self.bootstrap
+        return self._render_bootstrap
 
     def _before_bootstrap(self, n: int) -> None:
         """Called before the bootstrap's ``n`` paths are evaluated."""

@@ -143,7 +143,7 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     # -- One population per path length -------------------------------------------------
 
     def _per_length(self) -> int:
-        return max(1, self.bootstrap // self.max_depth)
+        return max(1, self._render_bootstrap // self.max_depth)
 
     def _bootstrap_paths(self) -> int:
         return self._per_length() * self.max_depth
