@@ -172,7 +172,8 @@ def equal_time(args) -> None:
                 image, wall = timed_render(scene, integrator, spp, seed)
                 err = metrics.rel_mse(image, ref_image) - floor
                 rows.append((err, wall))
-                print(f"{name} {plan:10s} {settings} spp {spp} (fit: {fixed:.2f} s + {per * 1e3:.2f} ms/spp) seed {seed}: "
+                print(f"{name} {plan:10s} {settings} spp {spp} (fit: {fixed:.2f} s + {per * 1e3:.2f} ms/spp) "
+                      f"seed {seed}: "
                       f"relMSE {err:.3g}, {wall:.1f} s, mean/ref {image.mean() / ref_image.mean():.3f}"
                       f"{_chain_line(integrator)}", flush=True)
             errs, walls = zip(*rows)

@@ -14,6 +14,7 @@ from mitsuba_lab.plugins.integrators.bdpt import splats
 from mitsuba_lab.plugins.integrators.common.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.integrators.path import KernelPlan, LabMISIntegrator
 from mitsuba_lab.plugins.param_docs import documented
+from mitsuba_lab.plugins.params import MLT_MAX_BOOTSTRAP
 from mitsuba_lab.plugins.scene_traits import SceneTraits
 
 from . import chain
@@ -100,8 +101,8 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     Parameters: lab_mis's (its path loop and weights) and the chains': ``chains`` (lanes in
     lock-step), ``bootstrap`` (paths for b and the chains' start; with ``bootstrap_share`` > 0 at
     least that many paths per mutation of the render, so the bootstrap grows with the budget),
-    ``large_step``, ``small_step`` and ``sigma`` (the table below). The defaults were measured at equal time against the
-    alternatives (experiments/results/2026-11-28-mlt-second.md: 32x32, 1 and 4 s, the door ajar
+    ``large_step``, ``small_step`` and ``sigma`` (the table below). The defaults were measured at
+    equal time against the alternatives (experiments/results/2026-11-28-mlt-second.md: 32x32, 1 and 4 s, the door ajar
     and the Cornell box): the bootstrap's size matters most, since where few paths carry light
     many chains start from one bootstrap path and stay correlated (``mlt_stats()``'s
     ``distinct_starts``; on the door a 16384-path bootstrap and 2048 chains were 4.6x the
@@ -218,8 +219,6 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     def bootstrap_for(self, mutations: int) -> int:
         """The bootstrap's paths of a render of ``mutations`` that starts chains: ``bootstrap``, or
         ``bootstrap_share`` x ``mutations`` where that is more, at most the largest bootstrap."""
-        from mitsuba_lab.plugins.params import MLT_MAX_BOOTSTRAP
-
         return int(min(max(self.bootstrap, round(self.bootstrap_share * mutations)), MLT_MAX_BOOTSTRAP))
 
     def _bootstrap_paths(self) -> int:
