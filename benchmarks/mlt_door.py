@@ -15,10 +15,12 @@ and the dividing wall's far faces reflect through it). Veach's door has almost n
 ``time``: chain settings at equal time, one render per seed (not a progressive run, so a render
 knows its whole mutation count and settings can be chosen from it). Per plan, the mutations per
 pixel that fill ``--budget`` seconds are fitted (time = fixed + per spp x spp through two pilot
-renders, ``--pilots``), then each seed renders that many. Plans (``--plans``): ``defaults``; ``long``:
-fewer, longer chains, chains = pixels x N / ``--min-steps`` (N the defaults' fitted count, so each
-chain runs at least that many mutations; between 256 and the default 8192); ``boot``: a bootstrap that
-grows with the budget, ``--boot-share`` x pixels x N paths (at least the default 100000); ``long+boot``.
+renders, ``--pilots``), then each seed renders that many. Plans (``--plans``), each with
+``bootstrap_share`` 0: ``defaults`` (otherwise the defaults: 8192 chains, 100000 bootstrap paths);
+``long``: fewer, longer chains, chains = pixels x N / ``--min-steps`` (N the defaults' fitted count,
+so each chain runs at least that many mutations; between 256 and 8192); ``boot``: a bootstrap that
+grows with the budget, ``--boot-share`` x pixels x N paths (between 100000 and ``--boot-cap``);
+``long+boot``.
 ``--freeze``: lab_mmlt's rounds frozen in every plan (``mlt.mmlt.FREEZE_ROUNDS``).
 
     PYTHONPATH=src python benchmarks/mlt_door.py count --spp 256 --seeds 0 1 2
@@ -121,13 +123,14 @@ def count(args) -> None:
 DEFAULT_CHAINS, DEFAULT_BOOTSTRAP, MIN_CHAINS, MAX_BOOTSTRAP = 8192, 100000, 256, 4194304
 
 
-def plan_settings(plan: str, pixels: int, spp: int, min_steps: int, boot_share: float) -> dict:
+def plan_settings(plan: str, pixels: int, spp: int, min_steps: int, boot_share: float,
+                  boot_cap: int = MAX_BOOTSTRAP) -> dict:
     """The chain settings of ``plan`` for a render of ``spp`` mutations per pixel (``time``)."""
-    out = {}
+    out = {"bootstrap_share": 0.0}          # (every plan's bootstrap fixed: the defaults' is 100000)
     if "long" in plan:
         out["chains"] = int(np.clip(pixels * spp // min_steps, MIN_CHAINS, DEFAULT_CHAINS))
     if "boot" in plan:
-        out["bootstrap"] = int(np.clip(boot_share * pixels * spp, DEFAULT_BOOTSTRAP, MAX_BOOTSTRAP))
+        out["bootstrap"] = int(np.clip(boot_share * pixels * spp, DEFAULT_BOOTSTRAP, boot_cap))
     return out
 
 
@@ -158,11 +161,11 @@ def equal_time(args) -> None:
         kind = base.pop("type")
         n_default = None
         for plan in args.plans:
-            settings = {}
+            settings = {"bootstrap_share": 0.0}
             if plan != "defaults":
                 if n_default is None:
                     sys.exit("time: --plans must start with defaults (the others are chosen from its count)")
-                settings = plan_settings(plan, pixels, n_default, args.min_steps, args.boot_share)
+                settings = plan_settings(plan, pixels, n_default, args.min_steps, args.boot_share, args.boot_cap)
             integrator = make_integrator(kind, {**base, **settings})
             spp, fixed, per = fitted_spp(scene, integrator, args.budget, args.pilots)
             if plan == "defaults":
@@ -242,6 +245,7 @@ def main(argv=None) -> None:
                         choices=("defaults", "long", "boot", "long+boot"))
     parser.add_argument("--freeze", action="store_true", help="time: lab_mmlt with frozen rounds (every plan)")
     parser.add_argument("--min-steps", type=int, default=1024, help="time: plan long's mutations per chain")
+    parser.add_argument("--boot-cap", type=int, default=MAX_BOOTSTRAP, help="time: plan boot's most paths")
     parser.add_argument("--boot-share", type=float, default=0.25,
                         help="time: plan boot's bootstrap paths per mutation")
     args = parser.parse_args(argv)
