@@ -12,8 +12,20 @@ a millimetre inside them): what remains is the light that went from the lamp thr
 without touching those surfaces (the lamp's direct light through the slit, and what the door's
 and the dividing wall's far faces reflect through it). Veach's door has almost nothing left.
 
+``time``: chain settings at equal time, one render per seed (not a progressive run, so a render
+knows its whole mutation count and settings can be chosen from it). Per plan, the mutations per
+pixel that fill ``--budget`` seconds are fitted (time = fixed + per spp x spp through two pilot
+renders, ``--pilots``), then each seed renders that many. Plans (``--plans``), each with
+``bootstrap_share`` 0: ``defaults`` (otherwise the defaults: 8192 chains, 100000 bootstrap paths);
+``long``: fewer, longer chains, chains = pixels x N / ``--min-steps`` (N the defaults' fitted count,
+so each chain runs at least that many mutations; between 256 and 8192); ``boot``: a bootstrap that
+grows with the budget, ``--boot-share`` x pixels x N paths (between 100000 and ``--boot-cap``);
+``long+boot``.
+``--freeze``: lab_mmlt's rounds frozen in every plan (``mlt.mmlt.FREEZE_ROUNDS``).
+
     PYTHONPATH=src python benchmarks/mlt_door.py count --spp 256 --seeds 0 1 2
     PYTHONPATH=src python benchmarks/mlt_door.py slit --spp 1024
+    PYTHONPATH=src python benchmarks/mlt_door.py time --budget 16 --strategies lab_mmlt [--scene scenes/cornell_box.xml]
 """
 from __future__ import annotations
 
@@ -107,6 +119,71 @@ def count(args) -> None:
               f"relMSE x us/sample {err * wall / pixels / args.spp * 1e6:.3g}", flush=True)
 
 
+#: The default chains and bootstrap of both chain estimators (params.py), the bounds of the plans.
+DEFAULT_CHAINS, DEFAULT_BOOTSTRAP, MIN_CHAINS, MAX_BOOTSTRAP = 8192, 100000, 256, 4194304
+
+
+def plan_settings(plan: str, pixels: int, spp: int, min_steps: int, boot_share: float,
+                  boot_cap: int = MAX_BOOTSTRAP) -> dict:
+    """The chain settings of ``plan`` for a render of ``spp`` mutations per pixel (``time``)."""
+    out = {"bootstrap_share": 0.0}          # (every plan's bootstrap fixed: the defaults' is 100000)
+    if "long" in plan:
+        out["chains"] = int(np.clip(pixels * spp // min_steps, MIN_CHAINS, DEFAULT_CHAINS))
+    if "boot" in plan:
+        out["bootstrap"] = int(np.clip(boot_share * pixels * spp, DEFAULT_BOOTSTRAP, boot_cap))
+    return out
+
+
+def fitted_spp(scene, integrator, budget: float, pilots) -> tuple[int, float, float]:
+    """(spp filling ``budget`` seconds, fixed s, s per spp): time = fixed + per x spp through one
+    render at each of the two ``pilots`` counts (a warm-up render first: compilation)."""
+    timed_render(scene, integrator, pilots[0], 1000)
+    (p1, t1), (p2, t2) = ((p, timed_render(scene, integrator, p, 1001 + i)[1]) for i, p in enumerate(pilots))
+    per = max((t2 - t1) / (p2 - p1), 1e-9)
+    fixed = max(t1 - per * p1, 0.0)
+    return max(1, int((budget - fixed) / per)), fixed, per
+
+
+def equal_time(args) -> None:
+    if args.freeze:                  # (lab_mmlt's frozen rounds: a narrow round costs less than traced)
+        from mitsuba_lab.plugins.integrators.mlt import mmlt
+
+        mmlt.FREEZE_ROUNDS = True
+    ref = reference(args.scene, args.res, args.max_depth, args.ref_spp, args.ref_chunks)
+    ref_image, floor = np.asarray(ref.image, dtype=np.float64)[..., :3], ref.rel_mse_floor()
+    scene = load_scene_variant(args.scene, args.res)
+    pixels = int(np.prod(ref_image.shape[:2]))
+    print(f"{os.path.basename(args.scene)} at {args.res}: reference {ref.key}, relMSE floor {floor:.3g}; "
+          f"budget {args.budget} s, min steps {args.min_steps}, bootstrap share {args.boot_share}"
+          f"{', lab_mmlt rounds frozen' if args.freeze else ''}")
+    for name in args.strategies:
+        base = dict(STRATEGIES[name], max_depth=args.max_depth)
+        kind = base.pop("type")
+        n_default = None
+        for plan in args.plans:
+            settings = {"bootstrap_share": 0.0}
+            if plan != "defaults":
+                if n_default is None:
+                    sys.exit("time: --plans must start with defaults (the others are chosen from its count)")
+                settings = plan_settings(plan, pixels, n_default, args.min_steps, args.boot_share, args.boot_cap)
+            integrator = make_integrator(kind, {**base, **settings})
+            spp, fixed, per = fitted_spp(scene, integrator, args.budget, args.pilots)
+            if plan == "defaults":
+                n_default = spp
+            rows = []
+            for seed in args.seeds:
+                image, wall = timed_render(scene, integrator, spp, seed)
+                err = metrics.rel_mse(image, ref_image) - floor
+                rows.append((err, wall))
+                print(f"{name} {plan:10s} {settings} spp {spp} (fit: {fixed:.2f} s + {per * 1e3:.2f} ms/spp) "
+                      f"seed {seed}: "
+                      f"relMSE {err:.3g}, {wall:.1f} s, mean/ref {image.mean() / ref_image.mean():.3f}"
+                      f"{_chain_line(integrator)}", flush=True)
+            errs, walls = zip(*rows)
+            print(f"{name} {plan:10s} mean relMSE {np.mean(errs):.3g} (seeds {' '.join(f'{e:.3g}' for e in errs)}), "
+                  f"mean {np.mean(walls):.1f} s, {spp} mutations/px", flush=True)
+
+
 def _chain_line(integrator) -> str:
     """What the chains did, where the strategy has chains: b's relative standard error, distinct
     starts, acceptance (all, large steps), steps per chain."""
@@ -151,7 +228,7 @@ def slit(args) -> None:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("command", choices=("count", "slit"))
+    parser.add_argument("command", choices=("count", "slit", "time"))
     parser.add_argument("--scene", default=DOOR)
     parser.add_argument("--res", type=int, default=32)
     parser.add_argument("--max-depth", type=int, default=8)
@@ -162,8 +239,17 @@ def main(argv=None) -> None:
                         help="a parameter of every strategy in --strategies (e.g. chains=4096)")
     parser.add_argument("--ref-spp", type=int, default=16384)
     parser.add_argument("--ref-chunks", type=int, default=8)
+    parser.add_argument("--budget", type=float, default=16.0, help="time: seconds per render")
+    parser.add_argument("--pilots", type=int, nargs=2, default=[16, 64], help="time: the pilot renders' spp")
+    parser.add_argument("--plans", nargs="+", default=["defaults", "long", "boot", "long+boot"],
+                        choices=("defaults", "long", "boot", "long+boot"))
+    parser.add_argument("--freeze", action="store_true", help="time: lab_mmlt with frozen rounds (every plan)")
+    parser.add_argument("--min-steps", type=int, default=1024, help="time: plan long's mutations per chain")
+    parser.add_argument("--boot-cap", type=int, default=MAX_BOOTSTRAP, help="time: plan boot's most paths")
+    parser.add_argument("--boot-share", type=float, default=0.25,
+                        help="time: plan boot's bootstrap paths per mutation")
     args = parser.parse_args(argv)
-    count(args) if args.command == "count" else slit(args)
+    {"count": count, "slit": slit, "time": equal_time}[args.command](args)
 
 
 if __name__ == "__main__":

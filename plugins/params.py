@@ -288,12 +288,20 @@ LAB_VCM = (
 #: lab_pssmlt (Kelemen's primary-sample-space MLT over lab_mis's path loop, ``integrators/mlt/``): lab_mis's
 #: parameters and the chains'; its small steps, and its most bootstrap paths (traced in one wavefront).
 MLT_SMALL_STEPS, MLT_MAX_BOOTSTRAP = ("normal", "exponential"), 1 << 22
+#: The most paths ``bootstrap_share`` grows a bootstrap to: a bootstrap of MLT_MAX_BOOTSTRAP paths ran
+#: out of a 23 GB machine's memory, 1.2 million paths did not
+#: (experiments/results/2026-11-29-mlt-fourth.md).
+MLT_GROWN_BOOTSTRAP = 1 << 20
 LAB_PSSMLT = LAB_MIS + (
     Param("chains", int, 8192, "Markov chains advancing in lock-step, one per lane (at most the render's "
           "mutations: width x height x spp)", **_int_at_least(1)),
     Param("bootstrap", int, 100_000, "independent paths that estimate the normaliser b (the image's mean "
           "luminance) and from which the chains start, drawn in proportion to their luminance",
           check=lambda v: 1 <= v <= MLT_MAX_BOOTSTRAP, expected=f"an integer in [1, {MLT_MAX_BOOTSTRAP}]"),
+    Param("bootstrap_share", float, 0.25, "bootstrap paths per mutation: a render that starts chains uses "
+          f"max(bootstrap, bootstrap_share x width x height x spp) paths, the second at most {MLT_GROWN_BOOTSTRAP}, "
+          "so the bootstrap grows with the budget; 0: exactly bootstrap (a progressive run's chains start in its "
+          "first pass, whose spp is small)", check=lambda v: 0.0 <= v <= 64.0, expected="a number in [0, 64]"),
     Param("large_step", float, 0.3, "probability that a step draws every primary sample afresh (a large step)",
           check=lambda v: 0.0 <= v <= 1.0, expected="a number in [0, 1]"),
     Param("small_step", str, "normal", "the small step's perturbation of each primary sample (wrapped to "
@@ -310,7 +318,8 @@ LAB_MMLT = _override((
     Param("max_depth", int, 8, "longest path in segments (light + camera subpath); each chain keeps one "
           "length from 1 to max_depth, the lengths' chains in proportion to their b", **_int_at_least(1)),
 ) + tuple(p for p in LAB_BDPT if p.name in ("heuristic", "beta")) + tuple(
-    p for p in LAB_PSSMLT if p.name in ("chains", "bootstrap", "large_step", "small_step", "sigma")), Param(
+    p for p in LAB_PSSMLT if p.name in ("chains", "bootstrap", "bootstrap_share", "large_step", "small_step",
+                                        "sigma")), Param(
     "bootstrap", int, 100_000, "independent paths, split evenly over the lengths (bootstrap // max_depth "
     "each), that estimate each length's normaliser b_k and from which the chains start, drawn in proportion "
     "to their luminance", check=lambda v: 1 <= v <= MLT_MAX_BOOTSTRAP,

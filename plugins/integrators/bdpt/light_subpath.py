@@ -28,7 +28,8 @@ join) are stored for the camera subpaths (``vertices.LightVertices``).
 Spectral variants: a pass has one set of wavelengths, the sensor's for the pass's sample
 (``pass_spectrum``, set by the driver), and every light subpath is emitted at exactly those
 (``spectral.emit``), so its vertices can be joined to camera vertices; a splat carries the
-sensor's spectral weight that a camera ray's weight carries.
+sensor's spectral weight that a camera ray's weight carries. lab_mmlt sets each lane's own
+wavelengths and weight instead (its lane's camera ray's).
 """
 from __future__ import annotations
 
@@ -114,7 +115,8 @@ class LightTracer:
 
     def __init__(self, scene: mi.Scene, sensor: mi.Sensor, max_depth: int = -1, rr_depth: int = 5,
                  weights: BdptWeights | None = None, offset_floor: float = 1.0, only: Strategy | None = None,
-                 hide_emitters: bool = False, aim=None, plugin: str = "lab_bdpt", table: EmitterTable | None = None):
+                 hide_emitters: bool = False, aim=None, plugin: str = "lab_bdpt", table: EmitterTable | None = None,
+                 spectra: spectral.EmitterSpectra | None = None):
         if not isinstance(max_depth, int) or max_depth < -1 or max_depth == 0:
             raise ValueError(f"{plugin}: max_depth must be -1 (unbounded) or >= 1, got {max_depth!r}")
         if not isinstance(rr_depth, int) or rr_depth < 1:
@@ -131,8 +133,11 @@ class LightTracer:
         self.only = only                     # None or the one strategy (s, t) to splat
         self.hide_emitters = hide_emitters   # camera rays pass through area emitters
         self.reaches_sensor = not direction_is_delta(sensor)   # (orthographic: t = 1 is impossible)
-        self.spectra = spectral.EmitterSpectra(scene, plugin) if mi.is_spectral else None
-        #: spectral variants: (wavelengths, the sensor's spectral weight) of the pass
+        # (``spectra``: one the caller made once for many traces, as ``table``)
+        self.spectra = (spectra if spectra is not None else spectral.EmitterSpectra(scene, plugin)) \
+            if mi.is_spectral else None
+        #: spectral variants: (wavelengths, the sensor's spectral weight) of the pass: Python floats,
+        #: or Dr.Jit arrays with each lane's own (lab_mmlt)
         self.pass_spectrum = None
         #: in a scene with (homogeneous) media, the loop that scatters the subpaths in them
         #: (``media_paths.trace_light``, set by the driver), else False

@@ -76,6 +76,8 @@ class EmitterSpectra:
     HALF_WINDOW = 4
 
     def __init__(self, scene: mi.Scene, plugin: str = "lab_photon"):
+        self.plugin = plugin
+        self._lane_tables = None            # (``lane_samples``: made on first use)
         emitters = scene.emitters()
         n = self.TABLE + 1
         self.grid = np.linspace(0.0, 1.0, n)
@@ -101,39 +103,87 @@ class EmitterSpectra:
                                  f"is not monotone, so its photons cannot be emitted at the camera's "
                                  f"wavelengths in spectral variants; use an RGB variant")
 
+    def invert(self, e: int, wavelengths) -> tuple[np.ndarray, np.ndarray]:
+        """(t, density) of emitter ``e``'s map at each of ``wavelengths`` (numpy): t with F(t) =
+        lambda, linear in the table, and dF^-1/dlambda there (a central difference over 2
+        ``HALF_WINDOW`` table steps); both 0 where the emitter never samples lambda."""
+        table, h = self.maps[e], self.HALF_WINDOW
+        lam = np.asarray(wavelengths, dtype=np.float64)
+        inside = (table[0] <= lam) & (lam <= table[-1])
+        i = np.clip(np.searchsorted(table, lam), h, len(table) - 1 - h)
+        span = table[i + h] - table[i - h]
+        density = (self.grid[i + h] - self.grid[i - h]) / np.where(span > 0, span, 1.0)
+        return (np.where(inside, np.interp(lam, table, self.grid), 0.0),
+                np.where(inside & (span > 0), density, 0.0))
+
     def tables(self, wavelengths: list[float]):
         """(u_k, p_k) for k = 0..n-1, each a Float array over the emitters: the sample for
         which an emitter's wavelength k is ``wavelengths[k]``, and that wavelength's density
         (0 where the emitter never samples it: it emits nothing there)."""
         n = len(wavelengths)
-        h = self.HALF_WINDOW
         us, ps = [], []
         for k, lam in enumerate(wavelengths):
-            u_k, p_k = [], []
-            for table in self.maps:
-                t, density = 0.0, 0.0
-                if table[0] <= lam <= table[-1]:
-                    t = float(np.interp(lam, table, self.grid))
-                    i = int(np.clip(np.searchsorted(table, lam), h, len(table) - 1 - h))
-                    span = table[i + h] - table[i - h]
-                    density = (self.grid[i + h] - self.grid[i - h]) / span if span > 0 else 0.0
-                u_k.append((t - k / n) % 1.0)
-                p_k.append(density)
-            us.append(mi.Float(u_k))
-            ps.append(mi.Float(p_k))
+            t, p = zip(*(self.invert(e, lam) for e in range(len(self.maps))))
+            us.append(mi.Float([(float(t_e) - k / n) % 1.0 for t_e in t]))
+            ps.append(mi.Float([float(p_e) for p_e in p]))
         if not self.literal_samples:
             # with one emitter a table is a single value, which would be compiled into the
             # kernels, and every pass would compile them again: keep it in memory
             dr.make_opaque(*us, *ps)
         return us, ps
 
-    def emit(self, emitter, emitter_index, time, wavelengths: list[float], sample2, sample3):
+    def emit(self, emitter, emitter_index, time, wavelengths, sample2, sample3):
         """(ray, flux weight) of each lane's ``emitter`` (``emitter_index``: its index in the
-        scene's emitters) at the pass's ``wavelengths`` (``emit`` with this pass's tables)."""
+        scene's emitters) at the pass's ``wavelengths`` (``emit`` with this pass's tables), or,
+        where ``wavelengths`` is a Dr.Jit array, at each lane's own (``lane_samples``)."""
+        if not isinstance(wavelengths, (list, tuple)):
+            samples, densities = self.lane_samples(emitter_index, wavelengths)
+            return emit(emitter, time, [wavelengths[k] for k in range(len(samples))], samples, densities,
+                        sample2, sample3, True)
         u_tables, p_tables = self.tables(wavelengths)
         return emit(emitter, time, [dr.opaque(mi.Float, v) for v in wavelengths],
                     [dr.gather(mi.Float, t, emitter_index) for t in u_tables],
                     [dr.gather(mi.Float, t, emitter_index) for t in p_tables], sample2, sample3, True)
+
+    #: Steps of the per-lane inverse maps over [MI_CIE_MIN, MI_CIE_MAX] (``lane_samples``).
+    LANE_TABLE = 4096
+
+    def check_lane_samples(self) -> None:
+        """Refuse, in one line, emitters that ``lane_samples`` cannot emit."""
+        if self.literal_samples:
+            raise ValueError(f"{self.plugin}: a blackbody emitter cannot be emitted at each lane's own wavelengths "
+                             f"in spectral variants (Mitsuba samples a blackbody's wavelengths only from values "
+                             f"fixed when its kernel is traced); give it an RGB or tabulated spectrum, or use an "
+                             f"RGB variant")
+
+    def lane_samples(self, emitter_index, wavelengths):
+        """(u_k, p_k) per lane (``tables``' values) for wavelengths that differ from lane to lane
+        (lab_mmlt: each chain holds its own wavelength sample): each emitter's t and density
+        tabulated once over a uniform grid of ``LANE_TABLE`` steps over the visible range and
+        interpolated linearly (exact for the uniform map of ``rgb`` and ``uniform`` spectra).
+        Mitsuba samples a blackbody's wavelengths only from literals (see ``__init__``), so a
+        blackbody is refused here in one line."""
+        self.check_lane_samples()
+        if self._lane_tables is None:
+            lo, hi, m = mi.MI_CIE_MIN, mi.MI_CIE_MAX, self.LANE_TABLE
+            grid = np.linspace(lo, hi, m + 1)
+            t, p = zip(*(self.invert(e, grid) for e in range(len(self.maps))))
+            self._lane_tables = (mi.Float(np.concatenate(t)), mi.Float(np.concatenate(p)))
+        t_table, p_table = self._lane_tables
+        lo, hi, m = mi.MI_CIE_MIN, mi.MI_CIE_MAX, self.LANE_TABLE
+        n = dr.size_v(mi.UnpolarizedSpectrum)
+        base = mi.UInt32(emitter_index) * (m + 1)
+        samples, densities = [], []
+        for k in range(n):
+            x = dr.clip((mi.Float(wavelengths[k]) - lo) * (m / (hi - lo)), 0.0, float(m))
+            i = dr.minimum(mi.UInt32(x), m - 1)
+            f = x - mi.Float(i)
+            t = dr.lerp(dr.gather(mi.Float, t_table, base + i), dr.gather(mi.Float, t_table, base + i + 1), f)
+            u = t - k / n
+            samples.append(dr.select(u < 0.0, u + 1.0, u))
+            densities.append(dr.lerp(dr.gather(mi.Float, p_table, base + i),
+                                     dr.gather(mi.Float, p_table, base + i + 1), f))
+        return samples, densities
 
 
 def emit(emitter, time, wavelengths, samples, densities, sample2, sample3, active):

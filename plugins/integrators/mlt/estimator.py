@@ -9,7 +9,7 @@ from mitsuba_lab.plugins.integrators.estimator import exact_key
 from mitsuba_lab.plugins.integrators.mis import MIS
 
 #: The parameters of the chains (the rest are lab_mis's, or lab_bdpt's).
-CHAIN_PARAMETERS = ("chains", "bootstrap", "large_step", "small_step", "sigma")
+CHAIN_PARAMETERS = ("chains", "bootstrap", "bootstrap_share", "large_step", "small_step", "sigma")
 
 
 def chain_equivalence(cls, traits, params: dict) -> tuple[tuple, str]:

@@ -14,6 +14,7 @@ from mitsuba_lab.plugins.integrators.bdpt import splats
 from mitsuba_lab.plugins.integrators.common.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.integrators.path import KernelPlan, LabMISIntegrator
 from mitsuba_lab.plugins.param_docs import documented
+from mitsuba_lab.plugins.params import MLT_GROWN_BOOTSTRAP
 from mitsuba_lab.plugins.scene_traits import SceneTraits
 
 from . import chain
@@ -98,18 +99,23 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     dimensions, still exact).
 
     Parameters: lab_mis's (its path loop and weights) and the chains': ``chains`` (lanes in
-    lock-step), ``bootstrap`` (paths for b and the chains' start), ``large_step``, ``small_step``
-    and ``sigma`` (the table below). The defaults were measured at equal time against the
-    alternatives (experiments/results/2026-11-28-mlt-second.md: 32x32, 1 and 4 s, the door ajar
+    lock-step), ``bootstrap`` (paths for b and the chains' start; with ``bootstrap_share`` > 0 at
+    least that many paths per mutation of the render, so the bootstrap grows with the budget),
+    ``large_step``, ``small_step`` and ``sigma`` (the table below). The defaults were measured at
+    equal time against the alternatives (experiments/results/2026-11-28-mlt-second.md: 32x32, 1 and 4 s, the door ajar
     and the Cornell box): the bootstrap's size matters most, since where few paths carry light
     many chains start from one bootstrap path and stay correlated (``mlt_stats()``'s
     ``distinct_starts``; on the door a 16384-path bootstrap and 2048 chains were 4.6x the
     defaults' relMSE at 4 s); fewer, longer chains lose (a lock-step costs nearly the same at
     512 lanes as at 2048), more than 8192 gained nothing resolved, and large_step 0.1 or sigma
     0.03 changed nothing resolved. A larger bootstrap (262144) gained 2.5x on the door at 4 s
-    but lost on the Cornell box and missed 1 s budgets.
+    but lost on the Cornell box and missed 1 s budgets; one that grows with the render's
+    mutations (``bootstrap_share`` 0.25, the default) gained 4.7x on the door at 16 s and was
+    level on the Cornell box in relMSE x time (2026-11-29-mlt-fourth.md, single renders).
 
-    Every render seed is an independent bootstrap and set of chains. A scene whose bootstrap
+    Variants: RGB, mono and spectral (the wavelength sample is the primary sample's number after the
+    film position and time, so a chain perturbs it as any other). Every render seed is an
+    independent bootstrap and set of chains. A scene whose bootstrap
     finds no light renders black, with a warning. The alpha channel is 1. Refused in one line:
     polarized variants, ``render(develop=False)``. Participating media go through lab_mis's
     path loop unchanged (tests/plugins/test_pssmlt.py: block and image means agree with volpath's
@@ -133,7 +139,7 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     def _init_chains(self) -> None:
         """The chains' settings, from ``self.estimator`` (shared with lab_mmlt)."""
         e = self.estimator
-        self.chains, self.bootstrap = e.chains, e.bootstrap
+        self.chains, self.bootstrap, self.bootstrap_share = e.chains, e.bootstrap, e.bootstrap_share
         self.large_step, self.small_step, self.sigma = e.large_step, e.small_step, e.sigma
         self.stats = MLTStats()
         #: Set (by the runner's progressive runs) to continue the chains of the last render of this
@@ -177,7 +183,8 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         if self.continue_chains and held is not None and held.identity == identity:
             return self._continue(scene, sensor, held, spp)
         key = chain.seed_key(seed)
-        self.stats = stats = MLTStats(bootstrap=self.bootstrap)
+        self._render_bootstrap = self.bootstrap_for(pixels * spp)
+        self.stats = stats = MLTStats(bootstrap=self._render_bootstrap)
 
         # ---------------- Bootstrap: b and the paths the chains start from ----------------
         start = _now()
@@ -211,8 +218,13 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
 
     # -- What lab_mmlt's per-length populations change (lab_pssmlt: one population) ----------
 
+    def bootstrap_for(self, mutations: int) -> int:
+        """The bootstrap's paths of a render of ``mutations`` that starts chains: ``bootstrap``, or
+        ``bootstrap_share`` x ``mutations`` (at most MLT_GROWN_BOOTSTRAP) where that is more."""
+        return int(max(self.bootstrap, min(round(self.bootstrap_share * mutations), MLT_GROWN_BOOTSTRAP)))
+
     def _bootstrap_paths(self) -> int:
-        return self.bootstrap
+        return self._render_bootstrap
 
     def _before_bootstrap(self, n: int) -> None:
         """Called before the bootstrap's ``n`` paths are evaluated."""

@@ -14,7 +14,7 @@ from mitsuba_lab.plugins.integrators.bdpt.light_subpath import LightTracer
 from mitsuba_lab.plugins.integrators.bdpt.techniques import Strategy
 from mitsuba_lab.plugins.integrators.bdpt.vertices import LightVertices
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights
-from mitsuba_lab.plugins.integrators.common import spawn
+from mitsuba_lab.plugins.integrators.common import spawn, spectral
 from mitsuba_lab.plugins.integrators.common.support import render_arguments
 from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins.scene_traits import SceneTraits
@@ -110,9 +110,14 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     and only that strategy's contribution is kept. Every lock-step round is traced; setting
     ``mlt.mmlt.FREEZE_ROUNDS = True`` records a round once with Dr.Jit's ``dr.freeze`` and replays
     it (``mlt/frozen.py``: the same image for the same seed, without a traced round's Python per
-    round; an experiment, off by default; scenes with a projector trace every round).
+    round; an experiment, off by default; scenes with a projector, and spectral variants
+    (not tried frozen), trace every round).
 
-    Variants: RGB and mono; spectral, polarized, crop windows, participating media and
+    Variants: RGB, mono and spectral. In a spectral variant the wavelength sample is one more number
+    of the camera stream (after the film position), so a chain walks over wavelengths as over the
+    film, and each lane's light subpath is emitted at its camera ray's wavelengths
+    (``spectral.EmitterSpectra.lane_samples``; a blackbody emitter, which Mitsuba samples only from
+    literals, is refused). Polarized variants, crop windows, participating media and
     ``render(develop=False)`` are refused in one line. A scene whose bootstrap finds no light
     renders black, with a warning. Statistics of the last render: ``mlt_stats()``.
 
@@ -138,7 +143,7 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     # -- One population per path length -------------------------------------------------
 
     def _per_length(self) -> int:
-        return max(1, self.bootstrap // self.max_depth)
+        return max(1, self._render_bootstrap // self.max_depth)
 
     def _bootstrap_paths(self) -> int:
         return self._per_length() * self.max_depth
@@ -161,7 +166,7 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         return super()._continue(scene, sensor, held, spp)
 
     def _frozen_rounds(self, chains, evaluate, splat, captured: list):
-        if not FREEZE_ROUNDS or self._scene.table.projectors:
+        if not FREEZE_ROUNDS or self._scene.table.projectors or mi.is_spectral:    # (spectral: not tried)
             return None
         captured = captured + [self._lengths, vars(self._scene.table)]
         return FrozenRounds(chains, evaluate, splat, captured, self.ESTIMATOR.plugin_name)
@@ -169,8 +174,6 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     def render(self, scene: mi.Scene, sensor=0, seed=0, spp: int = 0, develop: bool = True,
                evaluate: bool = True):
         self.refuse(develop)
-        if mi.is_spectral:
-            raise self.error(f"variant '{mi.variant()}' is not supported yet: use an rgb or mono variant")
         traits = SceneTraits.from_scene(scene)
         problem = self.ESTIMATOR.media_problem(traits) or self.ESTIMATOR.unsupported(traits)
         if problem:
@@ -183,19 +186,26 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         name = self.ESTIMATOR.plugin_name
         inv_area, axis = sensor_constants(sensor, name)
         weights = BdptWeights(self.values["heuristic"], self.values["beta"], self.estimator.techniques())
-        self._scene = _SceneSetup(traits, spawn.offset_floor(traits), inv_area, axis, weights, EmitterTable(scene))
+        spectra = spectral.EmitterSpectra(scene, name) if mi.is_spectral else None
+        if spectra is not None:
+            spectra.check_lane_samples()
+        self._scene = _SceneSetup(traits, spawn.offset_floor(traits), inv_area, axis, weights, EmitterTable(scene),
+                                  spectra)
         try:
             return self._render(scene, sensor, seed, spp)
         finally:
             self._scene = None
 
     def evaluate(self, scene, sensor, samples: chain.PrimarySamples, width: int, height: int, active=True):
-        """(I, (f, film position in pixels), numbers read) of one strategy of one path per lane of
-        ``samples`` (the class docstring)."""
+        """(I, (f, film position in pixels[, wavelengths]), numbers read) of one strategy of one path
+        per lane of ``samples`` (the class docstring)."""
         setup, lanes = self._scene, samples.lanes
         if not scene.emitters():     # (no light subpath to start: every path is dark, the driver warns)
             zero = dr.zeros(mi.Float, lanes)
-            return zero, (dr.zeros(mi.Spectrum, lanes), dr.zeros(mi.Point2f, lanes)), dr.zeros(mi.UInt32, lanes)
+            payload = (dr.zeros(mi.Spectrum, lanes), dr.zeros(mi.Point2f, lanes))
+            if mi.is_spectral:
+                payload += (dr.zeros(type(mi.Ray3f().wavelengths), lanes),)
+            return zero, payload, dr.zeros(mi.UInt32, lanes)
         camera = PrimarySampleSampler(samples, CAMERA_STREAM, STREAMS)
         light = PrimarySampleSampler(samples, LIGHT_STREAM, STREAMS)
         # ---------------- the length (the lane's) and the strategy ----------------
@@ -207,13 +217,19 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         pick = dr.rcp(strategy_probability(n_strategies))
         # ---------------- the camera ray ----------------
         film_u = camera.next_2d()
+        # spectral: the wavelengths are one more number of the camera stream, so a chain walks over
+        # them too; the light subpath is emitted at its lane's (``spectral.EmitterSpectra.lane_samples``)
+        wavelength_u = camera.next_1d() if mi.is_spectral else mi.Float(0.5)
         aperture_u = camera.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
-        ray, ray_weight = sensor.sample_ray_differential(mi.Float(sensor.shutter_open()), mi.Float(0.5), film_u,
-                                                         aperture_u)
+        time = mi.Float(sensor.shutter_open())
+        ray, ray_weight = sensor.sample_ray_differential(time, wavelength_u, film_u, aperture_u)
         # ---------------- the light subpath (its t = 1 strategy kept per lane) ----------------
         weights, floor = setup.weights, setup.floor
         tracer = LightTracer(scene, sensor, self.max_depth, NO_ROULETTE, weights, floor, only,
-                             plugin=self.ESTIMATOR.plugin_name, table=setup.table)
+                             plugin=self.ESTIMATOR.plugin_name, table=setup.table, spectra=setup.spectra)
+        if mi.is_spectral:       # (the sensor's spectral weight, which light tracing's splats carry)
+            _, sensor_weight = sensor.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f, lanes), wavelength_u)
+            tracer.pass_spectrum = (ray.wavelengths, sensor_weight)
         # Each side stops where the strategy needs it: the light subpath at x_(s-1) (its bound, a
         # path length, lets x_(s-1) be stored for a connection: s + 1), the camera's at t - 1
         # segments (its own bound stays the path's length k, which its checks compare against).
@@ -232,7 +248,8 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
         f = dr.select(light_tracing, record.value, mi.Spectrum(ray_weight * L)) * pick
         value, f = target(f, ray.wavelengths, active)
         position = dr.select(light_tracing, record.position, mi.Point2f(film_u.x * width, film_u.y * height))
-        return value, (f, position), dr.maximum(camera.dims_read(), light.dims_read())
+        payload = (f, position, ray.wavelengths) if mi.is_spectral else (f, position)
+        return value, payload, dr.maximum(camera.dims_read(), light.dims_read())
 
     # -- What a path tracer's interface would answer ------------------------------------
 
@@ -256,9 +273,10 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
 class _SceneSetup:
     """What every evaluation of one render shares."""
 
-    def __init__(self, traits, floor, inv_area, axis, weights, table):
+    def __init__(self, traits, floor, inv_area, axis, weights, table, spectra=None):
         self.traits, self.floor, self.inv_area, self.axis, self.weights = traits, floor, inv_area, axis, weights
         self.table = table          # the emitters' constants (``EmitterTable``), made once per render
+        self.spectra = spectra      # spectral variants: the emitters' wavelength maps, likewise
 
 
 mi.register_integrator("lab_mmlt", lambda props: LabMMLTIntegrator(props))
