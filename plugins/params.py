@@ -288,9 +288,8 @@ LAB_VCM = (
 #: lab_pssmlt (Kelemen's primary-sample-space MLT over lab_mis's path loop, ``integrators/mlt/``): lab_mis's
 #: parameters and the chains'; its small steps, and its most bootstrap paths (traced in one wavefront).
 MLT_SMALL_STEPS, MLT_MAX_BOOTSTRAP = ("normal", "exponential"), 1 << 22
-#: The most paths ``bootstrap_share`` grows a bootstrap to: a bootstrap of MLT_MAX_BOOTSTRAP paths ran
-#: out of a 23 GB machine's memory, 1.2 million paths did not
-#: (experiments/results/2026-11-29-mlt-fourth.md).
+#: The most paths ``bootstrap_share`` grows a bootstrap to (MLT_MAX_BOOTSTRAP's ran out of a 23 GB
+#: machine's memory, 1.2 million did not: benchmarks/mlt_door.py time, 2026-11-29-mlt-fourth.md).
 MLT_GROWN_BOOTSTRAP = 1 << 20
 LAB_PSSMLT = LAB_MIS + (
     Param("chains", int, 8192, "Markov chains advancing in lock-step, one per lane (at most the render's "
