@@ -225,11 +225,11 @@ def main(argv=None) -> int:
     for name in args.scenes:
         m = measure(name, args.res, args.spp, args.max_depth, args.radius, args.rounds, args.merge_first,
                     args.light_paths, args.aim, args.merge_vertices)
+        ptracer = (("-", "-") if m["media"] else        # (no ptracer in media)
+                   (f"{m['ptracer_ns_per_path']:.0f}", f"{m['light_ns_per_path'] / m['ptracer_ns_per_path']:.2f}x"))
         print(" | ".join([m["scene"], *(f"{m[k]:.2f}" for k in ("light_ms", "grid_ms", "camera_ms", "merge_ms",
                                                                  "vcm_ms", "bpt_ms", "path_ms")),
-                          f"{m['light_ns_per_path']:.0f}",
-                          *((f"{m['ptracer_ns_per_path']:.0f}", f"{m['light_ns_per_path'] / m['ptracer_ns_per_path']:.2f}x")
-                            if m["media"] is None else ("-", "-")), f"{m['merged']:.3f}",
+                          f"{m['light_ns_per_path']:.0f}", *ptracer, f"{m['merged']:.3f}",
                           str(m["passes"]),
                           str(m["compiled"])]), flush=True)
         if m["media"]:

@@ -87,7 +87,8 @@ def through_mask(scene, shape_id, res, sub=4) -> np.ndarray:
     sensor = scene.sensors()[0]
     for a in range(sub):
         for b in range(sub):
-            pos = mi.Point2f(mi.Float((xs.ravel() + (a + 0.5) / sub) / res), mi.Float((ys.ravel() + (b + 0.5) / sub) / res))
+            pos = mi.Point2f(mi.Float((xs.ravel() + (a + 0.5) / sub) / res),
+                             mi.Float((ys.ravel() + (b + 0.5) / sub) / res))
             ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5))
             si = scene.ray_intersect(ray)
             hit |= np.array(si.is_valid() & (si.shape == mi.ShapePtr(shapes[0]))).reshape(res, res)
