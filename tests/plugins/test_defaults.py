@@ -3,7 +3,8 @@
 * The first merging radius is one pixel's width at the first surfaces the camera sees
   (``footprint.py``): on a wall facing the camera it is the wall's distance times the pixel's
   angular width (perspective, thin lens), or the view's width over the film's (orthographic),
-  on a non-square film; it follows the film's resolution. Tolerance 4%: off-axis pixels of a
+  on a non-square film; it follows the film's resolution; a null-BSDF surface in front (a medium's
+  boundary, such as a fog box around the camera) is looked through. Tolerance 4%: off-axis pixels of a
   20-degree view see the wall a little farther and at a little smaller angle.
 * lab_vcm in mode vcm runs its pilot (counted costs, up to 16 light subpaths), merges from the
   camera's second vertex and aims 0.9 of its light subpaths at the specular shapes; in other modes
@@ -48,6 +49,19 @@ def test_the_footprint_is_a_pixels_width_on_a_facing_wall(kind, width, height):
     # fov spans the film's width (fov_axis x)
     expected = WALL_DISTANCE * 2 * math.tan(math.radians(10)) / width
     assert pixel_footprint(scene, scene.sensors()[0]) == pytest.approx(expected, rel=0.04)
+
+
+def test_the_footprint_looks_through_a_medium_boundary():
+    # a null-BSDF sheet (a fog box's wall) at half the wall's distance, and one nested behind it
+    scene = wall_scene({"type": "perspective", "fov": 20, "film": film(40, 30)})
+    sheets = {f"sheet_{i}": {"type": "rectangle", "bsdf": {"type": "null"},
+                            "to_world": mi.ScalarTransform4f().translate([0, 0, z]).scale(100)}
+              for i, z in enumerate((WALL_DISTANCE / 2, WALL_DISTANCE * 0.75))}
+    fogged = mi.load_dict({"type": "scene", "sensor": scene.sensors()[0], **sheets,
+                           "wall": {"type": "rectangle",
+                                    "to_world": mi.ScalarTransform4f().translate([0, 0, WALL_DISTANCE]).scale(100)}})
+    expected = WALL_DISTANCE * 2 * math.tan(math.radians(10)) / 40
+    assert pixel_footprint(fogged, fogged.sensors()[0]) == pytest.approx(expected, rel=0.04)
 
 
 def test_the_footprint_of_an_orthographic_view_is_its_width_over_the_films():

@@ -10,8 +10,10 @@ ppm: its mean over the fog box's pixels within 10% of volpath's (sigma_t 2.5, 32
 64 light subpaths per camera subpath, 4 seeds x 4 spp against 2 x 64 spp; standard error about
 3.5%, the ball's bias at the box's faces about -3%; 93% of those pixels' light is merged in the
 fog). Power: the first check fails when lab_vcm leaves the media out (``RENDERS_MEDIA`` off); the
-second when the ball's kernel is 30% high.
+second when the ball's kernel is 30% high. A new seed reuses the media loops' compiled kernels (a seed
+baked into the light subpaths' kernel compiled it again for every render: seconds each).
 """
+import drjit as dr
 import numpy as np
 import pytest
 
@@ -42,6 +44,18 @@ def difference(scene, mode) -> float:
 @pytest.mark.parametrize("mode", sorted(SAME))
 def test_modes_without_merging_render_what_lab_bdpt_renders(mode):
     assert difference(fog(), mode) <= 1e-5
+
+
+def test_a_new_seed_reuses_the_media_loops_kernels():
+    scene, hashes = fog(), []
+    for seed in (7, 8, 9):
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        dr.kernel_history()
+        image(scene, "lab_bdpt", seed=seed, strategies="all")
+        dr.sync_thread()
+        hashes.append(sorted(k["hash"] for k in dr.kernel_history() if "hash" in k))
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert hashes[1] == hashes[2] and len(hashes[1]) > 0
 
 
 def test_leaving_the_media_out_is_caught(monkeypatch):

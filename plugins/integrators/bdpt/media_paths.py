@@ -104,7 +104,7 @@ def trace_light(tracer, st, block, vertices, store_lanes):
     scale, cos_emit, pdf_pos, ds_0 = st.scale, st.cos_emit, st.pdf_pos, st.ds_0
     channel = path_channel(index, tracer.channel_key)
     aux_rng = mi.PCG32(count)
-    aux_rng.seed(mi.sample_tea_64(index, mi.UInt32((tracer.channel_key ^ _AUX_KEY) & 0xFFFFFFFF)), index)
+    aux_rng.seed(mi.sample_tea_64(index, dr.opaque(mi.UInt32, (tracer.channel_key ^ _AUX_KEY) & 0xFFFFFFFF)), index)
     aux = RngSampler(aux_rng)
     medium = dr.gather(mi.MediumPtr, tracer.emitter_media, st.emitter_index)   # the emitter's (emitter_media)
     phase_ctx = mi.PhaseFunctionContext(None, mi.TransportMode.Importance)

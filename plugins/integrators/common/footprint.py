@@ -4,6 +4,8 @@ Merging blurs light over a disc of radius r; a disc about one pixel wide where t
 looks is as much blur as the film can show, so the first radius is the median, over a grid of
 pixels, of the distance between the first camera hits of a pixel's centre ray and of its
 neighbour's ray (the ray differential one pixel to the side, carried to the same distance).
+Surfaces with a null BSDF alone (a medium's boundary, index-matched: nothing is seen or merged
+there) are passed through: in fog the first hit is what lies behind the fog's box, not its walls.
 This follows the film (resolution, crop) and the sensor (field of view, orthographic width,
 thin lens: the lens centre's ray) instead of a number per scene. Rays that leave the scene
 are skipped; when every ray leaves, the scene's bounding-box diagonal over the film's larger
@@ -17,6 +19,8 @@ import numpy as np
 
 #: at most this many pixels per film side are probed (a grid of pixel centres)
 PROBES_PER_SIDE = 32
+#: at most this many null-BSDF surfaces (medium boundaries) a probe ray passes through
+NULL_CROSSINGS = 8
 
 
 def bbox_radius(scene: mi.Scene, sensor: mi.Sensor) -> float:
@@ -25,6 +29,18 @@ def bbox_radius(scene: mi.Scene, sensor: mi.Sensor) -> float:
     diag = float(dr.norm(bbox.max - bbox.min)) if bbox.valid() else 1.0
     size = sensor.film().crop_size()
     return max(diag, 1e-6) / max(int(size[0]), int(size[1]), 1)
+
+
+def is_null(bsdf) -> mi.Bool:
+    """Whether the BSDF has a null lobe and nothing else (a medium's index-matched boundary)."""
+    flags = bsdf.flags()
+    # (BSDFFlags.Delta holds Null too)
+    scatters = (mi.BSDFFlags.Smooth, mi.BSDFFlags.DeltaReflection, mi.BSDFFlags.DeltaTransmission,
+                mi.BSDFFlags.Delta1D)
+    null = mi.has_flag(flags, mi.BSDFFlags.Null)
+    for lobe in scatters:
+        null &= ~mi.has_flag(flags, lobe)
+    return null
 
 
 def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor) -> float:
@@ -40,7 +56,15 @@ def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor) -> float:
     ray, _ = sensor.sample_ray_differential(dr.zeros(mi.Float, n), dr.full(mi.Float, 0.5, n), pos,
                                             mi.Point2f(0.5, 0.5))
     si = scene.ray_intersect(mi.Ray3f(ray))
-    t = si.t
+    t = mi.Float(si.t)
+    for _ in range(NULL_CROSSINGS):
+        # a null BSDF alone is a medium's boundary, not a surface the camera sees: go on through it
+        crossing = si.is_valid() & is_null(si.bsdf())
+        if not dr.any(crossing):
+            break
+        si_next = scene.ray_intersect(si.spawn_ray(ray.d), crossing)
+        t = dr.select(crossing, t + si_next.t, t)
+        si[crossing] = si_next
     # a pixel's neighbour ray, carried to the centre ray's hit distance (ray differentials are one pixel apart)
     dx = (ray.o_x + ray.d_x * t) - (ray.o + ray.d * t)
     dy = (ray.o_y + ray.d_y * t) - (ray.o + ray.d * t)

@@ -58,7 +58,8 @@ class PpmWeights(BdptWeights):
 @dataclass
 class VcmStats(BdptStats):
     """lab_bdpt's statistics of the last render, and merging's and the pilot's."""
-    grid_s: float = 0.0               # building the light vertices' grids
+    grid_s: float = 0.0               # building the light vertices' grids (both, in scenes with media)
+    volume_grid_s: float = 0.0        # of it, building the grid of the light vertices in media
     merging_vertices: int = 0         # light vertices in the grids (merge_vertices: all or caustic)
     radius_first: float = 0.0         # the merging radius of the first and last pass
     radius_last: float = 0.0
@@ -160,9 +161,13 @@ class VcmPasses(Passes):
         grid.first_only = self.ppm
         dr.eval(grid.buckets, grid.order, grid.points, grid.records)
         if vertices.media:
+            dr.sync_thread()
+            volume_start = time.perf_counter()
             volume_radii = self.volume_radii(plan)
             grid.volume = MediumGrid(vertices, stored, volume_radii, sizes, kernel)
             dr.eval(grid.volume.buckets, grid.volume.order, grid.volume.points, grid.volume.records)
+            dr.sync_thread()
+            stats.volume_grid_s += time.perf_counter() - volume_start
             stats.merging_vertices += grid.volume.count
             stats.medium_merging_vertices += grid.volume.count
             if plan.index == 0:
