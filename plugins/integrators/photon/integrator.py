@@ -161,10 +161,17 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     camera's wavelengths by inverting each emitter's wavelength sampling.
     Refused, in one line: polarized variants; ``render(develop=False)``; being
     wrapped by an integrator that calls its ``sample()`` (``aov``, ``moment``):
-    the photon maps are built by its own ``render()``. Participating media are
-    ignored (one warning through Mitsuba's logger); the experiment planner leaves
-    lab_photon out of such scenes, with the reason
-    (``estimator.PhotonMapping.applicability``).
+    the photon maps are built by its own ``render()``; ``hide_emitters`` in a scene
+    with participating media.
+
+    **Participating media** (homogeneous and heterogeneous): photons fly through them
+    as lab_bdpt's light subpaths do (free flights, delta tracking in heterogeneous
+    media) and store a *volumetric photon* at every collision; camera paths take free
+    flights too, and at a collision gather the volumetric photons within r_v with the
+    Epanechnikov kernel over the ball, divided by sigma_s there (``media_camera.py``,
+    ``gather.volume_estimate``). ``radius_volume`` is r_v,1 (0: the surfaces' r_1),
+    and r_v,{i+1}^3 = r_v,i^3 (i + alpha) / (i + 1). With ``direct = nee``, next-event
+    estimation at the camera's vertex carries the transmittance to the light.
 
     Statistics of the last render: ``photon_stats()`` (passes, photons traced and
     stored, photon tracing / grid / gather times, photons per second) and
@@ -173,7 +180,7 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     .. code-block:: python
 
         {'type': 'lab_photon', 'photons_per_pass': 200000, 'passes': 32,
-         'alpha': 0.66, 'radius': 0.0, 'max_depth': -1, 'direct': 'nee',
+         'alpha': 0.66, 'radius': 0.0, 'radius_volume': 0.0, 'max_depth': -1, 'direct': 'nee',
          'hide_emitters': False}
     """
     #: The estimator class: what lab_photon knows about scenes and sample counts.
@@ -203,6 +210,8 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
                              "average of developed pass images, so there is no film to leave undeveloped; "
                              "call render() with develop=True")
         traits = SceneTraits.from_scene(scene)
+        if traits.media and self.settings_.hide_emitters:
+            raise ValueError("lab_photon: hide_emitters is not supported in scenes with participating media yet")
         warn_if_unsupported(self, traits)         # never an image silently missing light
         sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
         cfg = self.settings_
@@ -211,8 +220,6 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         floor = spawn.offset_floor(traits)
         stats = PhotonStats(stored_flux=[0.0] * spectrum_channels())
         media = bool(traits.media)
-        if media and cfg.hide_emitters:
-            raise ValueError("lab_photon: hide_emitters is not supported in scenes with participating media yet")
         # heterogeneous media: delta tracking against the media's own majorants
         tracking = Tracking() if media and traits.heterogeneous_media else None
         self._camera.counters.reset()

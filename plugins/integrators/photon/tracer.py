@@ -248,8 +248,11 @@ class PhotonTracer:
             bsdf = si.bsdf()
 
             # ------------------- Store the photon -------------------
-            # (a medium photon: its collision, normal 0; a surface photon: a smooth lobe's hit)
+            # (a medium photon: its collision, normal 0, unless it carries nothing, absorbed in a
+            # medium of albedo 0; a surface photon: a smooth lobe's hit)
             store = (scattered | (surface & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))) & (at >= min_segments)
+            if dr.hint(media, mode="scalar"):
+                store &= dr.max(mi.unpolarized_spectrum(beta)) > 0
             slot = dr.scatter_inc(stores, mi.UInt32(0), store)
             if dr.hint(media, mode="scalar"):
                 records.store(slot, dr.select(scattered, mei.p, si.p), -ray.d,
