@@ -222,6 +222,9 @@ class PhotonTracer:
         media = self.media
         if dr.hint(media, mode="scalar"):
             medium = dr.gather(mi.MediumPtr, self.emitter_media, emitter_index)
+            # an emitter at infinity in a medium (an environment in the sensor's unbounded fog): its
+            # light crosses an infinite stretch of it, T = 0 (as lab_bdpt's light subpaths)
+            active &= ~(mi.has_flag(emitter.flags(), mi.EmitterFlags.Infinite) & (medium != None))  # noqa: E711
             channel = path_channel(index, pass_seed ^ _CHANNEL_KEY)
             aux = mi.PCG32(count)
             aux.seed(mi.sample_tea_64(index, seed ^ _TRACKING_KEY), index)
