@@ -133,7 +133,8 @@ def volume_estimate(grid: PhotonGrid, mei: mi.MediumInteraction3f, phase: mi.Pha
 
     total = kernel_sum(grid, mei.p, medium_photon, max_photon_depth, active, dimension=3)
     sigma_s = mi.Spectrum(mei.sigma_s)
-    return dr.select(sigma_s > 0, total * grid.inv_volume / dr.maximum(sigma_s, 1e-30), 0.0)
+    # (a Spectrum again: in spectral variants the comparison's select gives a plain 4-vector)
+    return mi.Spectrum(dr.select(sigma_s > 0, total * grid.inv_volume / dr.maximum(sigma_s, 1e-30), 0.0))
 
 
 class CameraPass(mi.SamplingIntegrator):
