@@ -139,6 +139,10 @@ LAB_PHOTON = (
     Param("radius", float, 0.0, "first-pass radius in scene units; 0 = automatic (one pixel's width at the "
           "first surfaces the camera sees)",
           check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
+    Param("radius_volume", float, 0.0, "first-pass radius r_v,1 of the ball volumetric photons are gathered in "
+          "(scenes with participating media), in scene units; 0 = automatic (the surfaces' first radius); "
+          "r_v,{i+1}^3 = r_v,i^3 (i + alpha) / (i + 1)",
+          check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
     Param("max_depth", int, UNBOUNDED, "longest path in segments (camera + light subpath), -1 unbounded",
           check=lambda v: v == UNBOUNDED or v >= 1, expected="-1 (unbounded) or an integer >= 1"),
     replace(PATH_TRACER[1], doc="depth at which Russian roulette starts, on both subpaths"),

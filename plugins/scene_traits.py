@@ -274,7 +274,7 @@ class SceneTraits:
         if not self.emits_light:
             notes.append("no emitter emits light: every image is black")
         if self.media and media:
-            notes.append("the scene has participating media, which lab_photon, lab_vcm and Mitsuba's path "
-                         "ignore (lab_bdpt: homogeneous ones only): render it with lab_mis (lab_nee, lab_naive), "
-                         "lab_bdpt or Mitsuba's volpath")
+            notes.append("the scene has participating media, which Mitsuba's path ignores and lab_mmlt refuses: "
+                         "render it with lab_mis (lab_nee, lab_naive), lab_bdpt, lab_vcm, lab_photon or Mitsuba's "
+                         "volpath")
         return notes

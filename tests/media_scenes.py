@@ -56,6 +56,15 @@ def fog_box(albedo: float = 0.8, sigma_t: float = 1.0) -> dict:
     return scene
 
 
+def fog_box_lifted(albedo: float = 0.8, sigma_t: float = 2.5, res=(16, 12)) -> dict:
+    """``fog_box`` lifted 0.1 off the floor (no null face on the floor's plane, where the ray tracer
+    breaks the tie between the two surfaces either way: the reference is then the scene's)."""
+    scene = fog_box(albedo, sigma_t)
+    scene["box"]["to_world"] = T().translate([0, 0.7, 0]).scale(0.6)
+    scene["sensor"]["film"].update(width=res[0], height=res[1])
+    return scene
+
+
 def point_in_fog() -> dict:
     """The camera and a point light inside one forward-scattering fog (HG g = 0.5) that fills a
     large null sphere; a card under the light casts a shadow through the fog."""

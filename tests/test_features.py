@@ -70,7 +70,8 @@ def test_features_and_the_default_reference():
     assert ignored_features(medium, "lab_mis") == ()
     assert ignored_features(medium, "lab_bdpt") == ()               # homogeneous media: rendered
     assert ignored_features(medium, "lab_vcm") == ()                # (merging at medium vertices too)
-    assert ignored_features(medium, "lab_photon") == ("media",)
+    assert ignored_features(medium, "lab_photon") == ()             # (volumetric photons)
+    assert ignored_features(medium, "lab_mmlt") == ("media",)
     assert ignored_features(medium, "volpath") == ()
     assert ignored_features(medium, "aov", {"aovs": "d:depth", "inner": {"type": "volpath"}}) == ()
     assert ignored_features(medium, "my_own_plugin") is None           # unknown: not judged

@@ -1,6 +1,6 @@
 """A reference must render every feature of its scene (issue 42, item 1): on a scene with a
 participating medium the default reference is volpathmis, a named `path` reference is refused,
-a strategy that ignores the medium (Mitsuba's path, lab_photon) is left out with its reason unless
+a strategy that ignores the medium (Mitsuba's path and ptracer) is left out with its reason unless
 experiment.allow_unsupported names it (then every table marks it), and a sweep with nothing to
 run renders nothing and exits 2. The same rule for `mitsuba-lab reference` and `check`.
 
@@ -72,7 +72,7 @@ MEDIUM_REASON = "path ignores participating media (the scene has a medium): use 
 
 def write_config(tmp_path, name="fog.toml", experiment="", reference="", scene="",
                  strategies='volpath = { type = "volpath" }\npath = { type = "path" }\nmis = { type = "lab_mis" }\n'
-                            'photon = { type = "lab_photon" }'):
+                            'tracer = { type = "ptracer" }'):
     (tmp_path / "fog.xml").write_text(FOG_XML)
     path = tmp_path / name
     path.write_text(CONFIG.format(cache=tmp_path / "cache", experiment=experiment, reference=reference,
@@ -113,7 +113,7 @@ def test_a_named_reference_that_ignores_the_medium_is_refused(tmp_path, where, k
 def test_a_strategy_that_ignores_the_medium_is_left_out_with_its_reason(tmp_path):
     _, plan = prepare_sweep(write_config(tmp_path))
     left = {item["strategy"]: item["reason"] for item in plan.left_out}
-    assert left["path"] == MEDIUM_REASON and "participating media" in left["photon"] and "mis" not in left
+    assert left["path"] == MEDIUM_REASON and "participating media" in left["tracer"] and "mis" not in left
     assert [p.strategy for p in plan.points] == ["volpath", "mis"] and plan.unsupported == []
 
 
@@ -123,13 +123,13 @@ def test_dry_run_lists_what_it_leaves_out(tmp_path):
     assert code == 0, err
     assert "fog: 2 points" in out and "reference volpathmis" in out
     assert f"left out: fog / path: {MEDIUM_REASON}" in out
-    assert "left out: fog / photon: lab_photon does not support participating media" in out
+    assert "left out: fog / tracer: ptracer ignores participating media" in out
     assert "left out: fog / mis" not in out
     assert cached_references(tmp_path) == []
 
 
 def test_nothing_to_run_renders_nothing_and_exits_2(tmp_path):
-    path = write_config(tmp_path, strategies='path = { type = "path" }\nphoton = { type = "lab_photon" }')
+    path = write_config(tmp_path, strategies='path = { type = "path" }\ntracer = { type = "ptracer" }')
     code, out, err = run(["sweep", path, "-o", str(tmp_path / "out")])
     assert code == 2 and len(err.strip().splitlines()) == 1, err
     assert "nothing to run: every strategy is left out on every scene" in err and MEDIUM_REASON in err
@@ -146,7 +146,7 @@ def test_nothing_to_run_renders_nothing_and_exits_2(tmp_path):
 def test_allowed_strategies_run_and_every_table_marks_them(tmp_path):
     # (strategy names unlike any plugin name, so that a table cell names the strategy)
     path = write_config(tmp_path, experiment='allow_unsupported = ["pt", "lab"]',
-                        strategies='volpath = { type = "volpath" }\npt = { type = "path" }\nlab = { type = "lab_photon" }')
+                        strategies='volpath = { type = "volpath" }\npt = { type = "path" }\nlab = { type = "ptracer" }')
     _, plan = prepare_sweep(path)
     assert plan.left_out == []
     assert {(u["strategy"], u["mark"]) for u in plan.unsupported} == {("pt", "ignores media"),
@@ -168,7 +168,7 @@ def test_allowed_strategies_run_and_every_table_marks_them(tmp_path):
 def test_allow_unsupported_names_strategies(tmp_path):
     with pytest.raises(ConfigError) as err:
         prepare_sweep(write_config(tmp_path, experiment='allow_unsupported = ["nope"]'))
-    assert "experiment.allow_unsupported: expected a list of [strategies] names (volpath, path, mis, photon), " \
+    assert "experiment.allow_unsupported: expected a list of [strategies] names (volpath, path, mis, tracer), " \
            "got ['nope']" in str(err.value)
 
 
@@ -197,6 +197,7 @@ def test_check_measures_against_a_reference_that_renders_the_medium(tmp_path, mo
         rows = list(csv.DictReader(f))
     assert rows[0]["strategy"] == "volpathmis (reference)"
     status = {row["strategy"]: row["status"] for row in rows[1:]}
-    for name in ("lab_naive", "lab_nee", "lab_mis_power", "lab_mis_balance", "lab_bdpt", "lab_vcm"):   # media
+    for name in ("lab_naive", "lab_nee", "lab_mis_power", "lab_mis_balance", "lab_bdpt", "lab_vcm",
+                 "lab_photon"):                                      # (they render media)
         assert status[name] == "ok", name
-    assert status["lab_photon"] == "skipped"                         # it leaves them out
+    assert status["lab_mmlt"] == "skipped"                           # it leaves them out

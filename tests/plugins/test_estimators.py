@@ -65,13 +65,13 @@ def test_photon_applies_to_smooth_and_purely_delta_bsdfs():
         assert t.mixed_bsdfs == () and strategy_applicability(t, "lab_photon", {}) == (True, ""), bsdf
 
 
-def test_photon_is_left_out_with_media_and_without_emitters():
+def test_photon_renders_media_and_is_left_out_without_emitters():
     medium = {"type": "scene", "ball": {"type": "sphere", "bsdf": {"type": "null"},
                                         "interior": {"type": "homogeneous", "albedo": 0.5, "sigma_t": 1.0}},
               "light": {"type": "constant"}}
-    applies, reason = strategy_applicability(traits_of(medium), "lab_photon", {})
-    assert not applies and reason == ("lab_photon does not support participating media (the scene has a "
-                                      "medium): use lab_mis or Mitsuba's volpath")
+    assert strategy_applicability(traits_of(medium), "lab_photon", {}) == (True, "")
+    applies, reason = strategy_applicability(traits_of(medium), "lab_photon", {"hide_emitters": True})
+    assert not applies and reason == "lab_photon does not support hide_emitters in scenes with participating media yet"
     applies, reason = strategy_applicability(traits_of({"type": "scene", "ball": {"type": "sphere"}}),
                                              "lab_photon", {})
     assert not applies and "needs an emitter" in reason

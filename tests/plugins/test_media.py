@@ -155,9 +155,9 @@ def test_stiff_media_give_finite_non_negative_pixels(case):
 
 def test_the_planner_runs_the_path_family_on_media_and_leaves_the_others_out():
     traits = SceneTraits.from_scene(mi.load_dict(media_scenes.fog_box()))
-    for kind in ("lab_naive", "lab_nee", "lab_mis", "lab_bdpt", "lab_vcm"):
+    for kind in ("lab_naive", "lab_nee", "lab_mis", "lab_bdpt", "lab_vcm", "lab_photon"):
         assert strategy_applicability(traits, kind, {}) == (True, ""), kind
-    applies, reason = strategy_applicability(traits, "lab_photon", {})
+    applies, reason = strategy_applicability(traits, "lab_mmlt", {})
     assert not applies and "participating media" in reason and "lab_mis" in reason
 
 

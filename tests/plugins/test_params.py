@@ -162,7 +162,7 @@ DEFAULTS = {
     "lab_nee": {**PATH_DEFAULTS, "medium_sampling": "distance", "transmittance": "ratio", **MEDIA_DEFAULTS},
     "lab_mis": {**PATH_DEFAULTS, "heuristic": "power", "beta": 2.0, "emitter_samples": 1, "medium_sampling": "mis",
                 "transmittance": "ratio", **MEDIA_DEFAULTS},
-    "lab_photon": {"photons_per_pass": 100_000, "passes": 16, "alpha": 2.0 / 3.0, "radius": 0.0,
+    "lab_photon": {"photons_per_pass": 100_000, "passes": 16, "alpha": 2.0 / 3.0, "radius": 0.0, "radius_volume": 0.0,
                    "max_depth": -1, "rr_depth": 5, "direct": "nee", "max_records": 1 << 21,
                    "hide_emitters": False, "aim": 0.5, "aim_at": "specular"},
     "lab_pssmlt": {**PATH_DEFAULTS, "heuristic": "power", "beta": 2.0, "emitter_samples": 1, "medium_sampling": "mis",

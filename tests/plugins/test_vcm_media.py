@@ -98,3 +98,15 @@ def test_settings_the_media_loops_lack_are_refused_in_one_line(setting):
     with pytest.raises(ValueError, match=f"^lab_vcm: {name} = '{value}' is not supported in scenes with "
                                          f"participating media yet"):
         make_integrator("lab_vcm", {"mode": "vcm", "pilot": False, **setting}).render(fog(), spp=1)
+
+
+def test_each_iteration_merges_in_its_own_ball():
+    """The camera lanes of a pass belong to its iterations (lane i to iteration i mod K), each
+    with its own radius and light vertices: with the radius shrinking fast (alpha 0.01) ppm's image
+    differs from the one with the radius fixed (alpha 0.999), which it equalled while every lane of
+    the media loop merged in iteration 0 (2026-11-29-photon-media.md)."""
+    scene = fog()
+    ppm = {"mode": "ppm", "radius": 0.1, "radius_volume": 0.4, "light_paths": 4}
+    shrinking = image(scene, "lab_vcm", spp=4, seed=3, alpha=0.01, **ppm)
+    fixed = image(scene, "lab_vcm", spp=4, seed=3, alpha=0.999, **ppm)
+    assert np.abs(shrinking - fixed).max() > 1e-3

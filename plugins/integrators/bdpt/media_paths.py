@@ -340,6 +340,8 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
 
     lanes = dr.width(ray)
     lane = dr.arange(mi.UInt32, lanes)
+    # (lab_vcm: the lane's merging iteration, from the pass's tables, which ``at_lanes`` drops)
+    iteration = cp.weights.lane_iteration(lane)
     cp = replace(cp, weights=cp.weights.at_lanes(lane))
     w, table, floor = cp.weights, cp.table, cp.offset_floor
     ctx = mi.BSDFContext(mi.TransportMode.Radiance)
@@ -349,7 +351,6 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
     rr_depth = dr.opaque(mi.UInt32, cp.rr_depth)
     emitter_hits = cp.emitter_hits and Technique.HIT in w.techniques
     merging = cp.grid is not None                      # (lab_vcm: surface and medium vertices merge)
-    iteration = w.lane_iteration(lane)                 # (lab_vcm: the lane's merging iteration)
 
     if dr.hint(cp.light_count < lanes, mode="scalar"):
         lane = lane % dr.opaque(mi.UInt32, cp.light_count)

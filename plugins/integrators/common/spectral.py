@@ -233,7 +233,7 @@ def render_pass(integrator, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int, 
         time += sampler.next_1d() * sensor.shutter_open_time()
     ray, ray_weight = sensor.sample_ray_differential(time, dr.opaque(mi.Float, u), dr.fma(pos_f, scale, offset),
                                                      aperture)
-    L, valid, _ = integrator.sample(scene, sampler, ray, None, True)
+    L, valid, _ = integrator.sample(scene, sampler, ray, sensor.get_medium(), True)   # (rays start in its medium)
 
     block = film.create_block()
     block.set_coalesce(block.coalesce() and spp >= 4)

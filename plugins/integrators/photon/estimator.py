@@ -10,6 +10,7 @@ class PhotonMapping(Estimator):
     passes, each with its own photon map (see ``integrator.LabPhotonIntegrator``)."""
     plugin_name = "lab_photon"
     PARAMETERS = declarations.LAB_PHOTON
+    RENDERS_MEDIA = True
 
     @classmethod
     def separate_reason(cls, params: dict) -> str:
@@ -26,15 +27,17 @@ class PhotonMapping(Estimator):
     def applicability(cls, traits, params: dict) -> tuple[bool, str]:
         """Left out (in either ``direct`` mode) on scenes whose light it cannot estimate:
 
-        * participating media (photons and camera paths ignore them);
-        * no emitter (no photon to trace).
+        * no emitter (no photon to trace);
+        * participating media with ``hide_emitters`` (refused by the plugin too).
+
+        Participating media, homogeneous and heterogeneous, are rendered: volumetric photons
+        gathered in a ball at the camera paths' collisions (``media_camera``).
 
         BSDFs that mix delta and smooth lobes (``plastic``, ``mask``, ``blendbsdf``, ...) are
         rendered: camera paths follow their delta lobes stochastically (``gather``).
         """
-        problem = cls.media_problem(traits)
-        if problem:
-            return False, problem
+        if traits.media and params.get("hide_emitters"):
+            return False, "lab_photon does not support hide_emitters in scenes with participating media yet"
         if traits.emitters == 0:
             return False, "lab_photon needs an emitter to trace photons from, and the scene has none"
         return True, ""

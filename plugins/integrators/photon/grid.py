@@ -32,6 +32,7 @@ class PhotonGrid:
         self.table_size = size
         self.inv_cell_size = dr.opaque(mi.Float, 1.0 / radius)
         self.radius2 = dr.opaque(mi.Float, radius * radius)
+        self.inv_volume = dr.opaque(mi.Float, 1.0 / radius ** 3)       # (the ball's 1 / r^3)
         self.mask = dr.opaque(mi.UInt32, size - 1)
         if n == 0:
             self.records = records

@@ -27,6 +27,7 @@ from .gather import CameraPass
 from .grid import PhotonGrid
 from .records import record_bytes
 from .tracer import PhotonTracer
+from mitsuba_lab.plugins.integrators.bdpt.media_vertices import Tracking, emitter_media
 
 #: max_depth = -1 (unbounded) is stored as this many segments (sums of depths stay in uint32).
 DEPTH_CAP = 1 << 30
@@ -42,6 +43,7 @@ class PhotonSettings:
     passes: int
     alpha: float
     radius: float
+    radius_volume: float
     max_depth: int
     rr_depth: int
     direct: str
@@ -61,12 +63,14 @@ class PhotonSettings:
         return DEPTH_CAP if self.max_depth == UNBOUNDED else self.max_depth
 
 
-def radius_schedule(r1: float, passes: int, alpha: float) -> list[float]:
-    """r_{i+1}^2 = r_i^2 (i + alpha) / (i + 1), i = 1..P-1 (Knaus & Zwicker 2011, eq. 20)."""
-    r2 = [r1 * r1]
+def radius_schedule(r1: float, passes: int, alpha: float, dimension: int = 2) -> list[float]:
+    """r_{i+1}^2 = r_i^2 (i + alpha) / (i + 1), i = 1..P-1 (Knaus & Zwicker 2011, eq. 20): the
+    disc's area shrinks by (i + alpha) / (i + 1) from one pass to the next; ``dimension`` 3, the
+    ball's volume (r^3) does, as Knaus & Zwicker's argument gives it in three dimensions."""
+    rd = [r1 ** dimension]
     for i in range(1, passes):
-        r2.append(r2[-1] * (i + alpha) / (i + 1))
-    return [math.sqrt(v) for v in r2]
+        rd.append(rd[-1] * (i + alpha) / (i + 1))
+    return [v ** (1.0 / dimension) for v in rd]
 
 
 @dataclass
@@ -88,6 +92,9 @@ class PhotonStats:
     gather_s: float = 0.0
     radius_first: float = 0.0
     radius_last: float = 0.0
+    radius_volume_first: float = 0.0
+    radius_volume_last: float = 0.0
+    photons_stored_in_media: int = 0
     peak_record_bytes: int = 0
     stored_flux: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
 
@@ -154,10 +161,17 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     camera's wavelengths by inverting each emitter's wavelength sampling.
     Refused, in one line: polarized variants; ``render(develop=False)``; being
     wrapped by an integrator that calls its ``sample()`` (``aov``, ``moment``):
-    the photon maps are built by its own ``render()``. Participating media are
-    ignored (one warning through Mitsuba's logger); the experiment planner leaves
-    lab_photon out of such scenes, with the reason
-    (``estimator.PhotonMapping.applicability``).
+    the photon maps are built by its own ``render()``; ``hide_emitters`` in a scene
+    with participating media.
+
+    **Participating media** (homogeneous and heterogeneous): photons fly through them
+    as lab_bdpt's light subpaths do (free flights, delta tracking in heterogeneous
+    media) and store a *volumetric photon* at every collision; camera paths take free
+    flights too, and at a collision gather the volumetric photons within r_v with the
+    Epanechnikov kernel over the ball, divided by sigma_s there (``media_camera.py``,
+    ``gather.volume_estimate``). ``radius_volume`` is r_v,1 (0: the surfaces' r_1),
+    and r_v,{i+1}^3 = r_v,i^3 (i + alpha) / (i + 1). With ``direct = nee``, next-event
+    estimation at the camera's vertex carries the transmittance to the light.
 
     Statistics of the last render: ``photon_stats()`` (passes, photons traced and
     stored, photon tracing / grid / gather times, photons per second) and
@@ -166,7 +180,7 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
     .. code-block:: python
 
         {'type': 'lab_photon', 'photons_per_pass': 200000, 'passes': 32,
-         'alpha': 0.66, 'radius': 0.0, 'max_depth': -1, 'direct': 'nee',
+         'alpha': 0.66, 'radius': 0.0, 'radius_volume': 0.0, 'max_depth': -1, 'direct': 'nee',
          'hide_emitters': False}
     """
     #: The estimator class: what lab_photon knows about scenes and sample counts.
@@ -196,6 +210,8 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
                              "average of developed pass images, so there is no film to leave undeveloped; "
                              "call render() with develop=True")
         traits = SceneTraits.from_scene(scene)
+        if traits.media and self.settings_.hide_emitters:
+            raise ValueError("lab_photon: hide_emitters is not supported in scenes with participating media yet")
         warn_if_unsupported(self, traits)         # never an image silently missing light
         sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
         cfg = self.settings_
@@ -203,8 +219,12 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         min_segments = 2 if cfg.direct == "nee" else 1
         floor = spawn.offset_floor(traits)
         stats = PhotonStats(stored_flux=[0.0] * spectrum_channels())
+        media = bool(traits.media)
+        # heterogeneous media: delta tracking against the media's own majorants
+        tracking = Tracking() if media and traits.heterogeneous_media else None
         self._camera.counters.reset()
         self._camera.hide_emitters, self._camera.offset_floor = cfg.hide_emitters, floor
+        self._camera.media, self._camera.tracking = media, tracking
         size = sensor.film().crop_size()
         self._camera_rays = int(size[0]) * int(size[1]) * spp * cfg.passes
         bind_film_layout(sensor)                         # lab_zsobol learns the film's shape
@@ -212,16 +232,21 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         # Photons travel at most depth - 1 segments: the camera needs one to reach them.
         tracer = PhotonTracer(scene, max_segments=min(depth - 1, DEPTH_CAP), min_segments=min_segments,
                               rr_depth=cfg.rr_depth, offset_floor=floor,
-                              aim=AimedEmission(scene, cfg.aim, cfg.aim_at, "lab_photon"))
+                              aim=AimedEmission(scene, cfg.aim, cfg.aim_at, "lab_photon"), media=media,
+                              tracking=tracking,
+                              emitter_media=emitter_media(scene, sensor, floor, "lab_photon") if media else None)
         r1 = cfg.radius if cfg.radius > 0 else pixel_footprint(scene, sensor)
         radii = radius_schedule(r1, cfg.passes, cfg.alpha)
         stats.radius_first, stats.radius_last = radii[0], radii[-1]
+        volume_radii = radius_schedule(cfg.radius_volume or r1, cfg.passes, cfg.alpha, dimension=3)
+        if media:
+            stats.radius_volume_first, stats.radius_volume_last = volume_radii[0], volume_radii[-1]
         # Spectral variants: one wavelength sample per pass, shared by photons and camera rays.
         u_passes = spectral.pass_samples(seed, cfg.passes) if mi.is_spectral else [None] * cfg.passes
         stores_per_photon = 4.0                          # first guess; learnt from each batch
 
         image = None
-        for i, radius in enumerate(radii):
+        for i, (radius, radius_volume) in enumerate(zip(radii, volume_radii)):
             pass_seed = int(mi.sample_tea_32(seed & 0xFFFFFFFF, i)[0])
             camera_seed = int(mi.sample_tea_32(i, seed & 0xFFFFFFFF)[0])
             u = u_passes[i]
@@ -234,13 +259,21 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
                     stores_per_photon = max(0.25, (records.count + 1) / n_traced)
                     flux = records.total_power()
                     stats.stored_flux = [a + b for a, b in zip(stats.stored_flux, flux)]   # per channel
+                    stored = records.count
                     t0 = time.perf_counter()
+                    volume = None
+                    if media:
+                        records, in_media = records.split_media()
+                        stats.photons_stored_in_media += in_media.count
+                        volume = PhotonGrid(in_media, radius_volume)
+                        del in_media
                     grid = PhotonGrid(records, radius)
                     dr.sync_thread()
                     stats.grid_s += time.perf_counter() - t0
-                    stats.peak_record_bytes = max(stats.peak_record_bytes, 2 * records.count * record_bytes())
+                    stats.peak_record_bytes = max(stats.peak_record_bytes, 2 * stored * record_bytes())
                     del records
                     self._camera.grid, self._camera.with_direct = grid, batch_index == 0
+                    self._camera.volume_grid = volume
                     t0 = time.perf_counter()
                     img = self._camera_pass(scene, sensor, camera_seed, spp, u)
                     interrupts.checkpoint(self._camera)    # Ctrl-C stops the render here, between passes
@@ -249,7 +282,7 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
                     stats.gather_s += time.perf_counter() - t0
                     image = img if image is None else image + img
                     dr.eval(image)
-                    self._camera.grid = None
+                    self._camera.grid = self._camera.volume_grid = None
                     batch_index += 1
                     stats.batches += 1
                 first += count

@@ -5,7 +5,8 @@ A record is what the density estimate needs at a stored interaction:
 ============ ========= ===================================================
 p            Point3f   position of the interaction
 wi           Vector3f  direction towards where the photon came from (world)
-n            Normal3f  geometric normal at the interaction
+n            Normal3f  geometric normal at the interaction; 0 at a collision
+                       in a participating medium (a volumetric photon)
 power        Spectrum  flux carried by the photon, already divided by the
                        number of photons emitted in the pass (watts; in
                        spectral variants at the pass's wavelengths)
@@ -65,6 +66,11 @@ class PhotonRecords:
         out = PhotonRecords.allocate(self.count)
         out.store(destination, self.p, self.wi, self.n, self.power, self.depth, True)
         return out
+
+    def split_media(self) -> tuple["PhotonRecords", "PhotonRecords"]:
+        """(surface photons, volumetric photons): the records whose normal is 0 lie in a medium."""
+        in_medium = dr.squared_norm(self.n) == 0
+        return (self.permuted(dr.compress(~in_medium)).eval(), self.permuted(dr.compress(in_medium)).eval())
 
     def arrays(self) -> tuple:
         return tuple(getattr(self, f) for f in FIELDS)

@@ -22,6 +22,16 @@ the unperturbed one, as ``ptracer`` does). No photon is dropped for lying on the
 of one normal and not the other, so photon paths cover what the path tracers' camera paths
 cover.
 
+**Participating media** (``media``: the scene has them). Photons travel as lab_bdpt's light
+subpaths do (``bdpt.media_paths``): they start in their emitter's medium (``media_vertices.
+emitter_media``, decided once per render for each emitter: ``emitter_media``), take a free
+flight in the medium they are in (``media_paths.flight``: the analytic one in homogeneous media,
+delta tracking in heterogeneous ones, in one sampling channel per photon, weighted T / p_c and
+sigma_s at a collision), scatter at a collision by the medium's phase function, and pass null
+boundaries (a ``null`` BSDF, a mask's clear part) without a vertex (volpath's counting of
+``max_depth``). A collision stores a *volumetric photon*: its normal is 0 (``records``), and its
+power holds sigma_s there, which the gather divides out at the camera's vertex (``gather``).
+
 In spectral variants every photon of a pass is emitted at the pass's wavelengths
 (``spectral.emit``). Rays leave surfaces at the lab's scale-robust offsets (``spawn``); in a
 scene smaller than 1 unit an area emitter's own offset (Mitsuba's, absolute) is replaced too.
@@ -34,8 +44,15 @@ import mitsuba as mi
 from mitsuba_lab.plugins.integrators.common import spawn, spectral
 from mitsuba_lab.plugins.integrators.common.adjoint import adjoint_correction
 from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
+from mitsuba_lab.plugins.integrators.bdpt.media_paths import flight
+from mitsuba_lab.plugins.integrators.bdpt.media_vertices import RngSampler, medium_vertex, path_channel
 
 from .records import PhotonRecords
+
+#: A key mixed into a pass's seed for the photons' sampling channel (``media_vertices.path_channel``)
+#: and one for their second random stream (delta tracking's draws in heterogeneous media).
+_CHANNEL_KEY = 0x51ED270B
+_TRACKING_KEY = 0x3C6EF372
 
 #: Emission samples per emitter for the power estimate that drives emitter selection.
 POWER_SAMPLES = 1 << 14
@@ -129,7 +146,7 @@ class PhotonTracer:
     """
 
     def __init__(self, scene: mi.Scene, max_segments: int, min_segments: int, rr_depth: int,
-                 offset_floor: float = 1.0, aim=None):
+                 offset_floor: float = 1.0, aim=None, media: bool = False, tracking=None, emitter_media=None):
         if not scene.emitters():
             raise ValueError("lab_photon: the scene has no emitter")
         self.spectra = spectral.EmitterSpectra(scene) if mi.is_spectral else None
@@ -146,6 +163,12 @@ class PhotonTracer:
         self.emitters = scene.emitters_dr()
         #: ``aim.AimedEmission`` when a share of area lights' directions is aimed at shapes
         self.aim = aim if aim is not None and aim.enabled else None
+        #: the scene has media (photons fly through them); ``tracking``: ``media_vertices.Tracking``
+        #: where some medium is heterogeneous, else None; ``emitter_media``: the medium of each
+        #: emitter (``media_vertices.emitter_media``), gathered by emitter index
+        self.media = media
+        self.tracking = tracking
+        self.emitter_media = emitter_media
 
     @dr.syntax
     def trace(self, first: int, count: int, pass_seed: int, emitted_in_pass: int, capacity: int,
@@ -196,29 +219,82 @@ class PhotonTracer:
         depth = mi.UInt32(0)
         n_seg = mi.UInt32(0)
         active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_segments > 0)
+        media = self.media
+        if dr.hint(media, mode="scalar"):
+            medium = dr.gather(mi.MediumPtr, self.emitter_media, emitter_index)
+            # an emitter at infinity in a medium (an environment in the sensor's unbounded fog): its
+            # light crosses an infinite stretch of it, T = 0 (as lab_bdpt's light subpaths)
+            active &= ~(mi.has_flag(emitter.flags(), mi.EmitterFlags.Infinite) & (medium != None))  # noqa: E711
+            channel = path_channel(index, pass_seed ^ _CHANNEL_KEY)
+            aux = mi.PCG32(count)
+            aux.seed(mi.sample_tea_64(index, seed ^ _TRACKING_KEY), index)
+            tracker = RngSampler(aux)
+            phase_ctx = mi.PhaseFunctionContext(None, mi.TransportMode.Importance)
+        else:       # (defined on both branches: the symbolic loop carries what it finds defined)
+            medium = channel = tracker = phase_ctx = None
         while dr.hint(active, max_iterations=-1, label="lab_photon photon loop"):
             si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
             n_seg += dr.select(active, 1, 0)
-            active &= si.is_valid()
-            depth += 1
+            if dr.hint(media, mode="scalar"):
+                # ---------- a free flight: a collision in the medium, or the surface ----------
+                si = spawn.behind_null_face(scene, ray, si, floor, active)
+                in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+                mei, scattered, w_flight, _ = flight(medium, ray, si.t, rng.next_float32(), tracker, channel,
+                                                     in_medium, self.tracking)
+                beta[in_medium] *= mi.Spectrum(w_flight)
+                surface = active & ~scattered & si.is_valid()
+                active = scattered | surface
+            else:
+                active &= si.is_valid()
+                scattered, surface = mi.Bool(False), active
+            at = depth + 1
             bsdf = si.bsdf()
 
             # ------------------- Store the photon -------------------
-            store = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth) & (depth >= min_segments)
+            # (a medium photon: its collision, normal 0, unless it carries nothing, absorbed in a
+            # medium of albedo 0; a surface photon: a smooth lobe's hit)
+            store = (scattered | (surface & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))) & (at >= min_segments)
+            if dr.hint(media, mode="scalar"):
+                store &= dr.max(mi.unpolarized_spectrum(beta)) > 0
             slot = dr.scatter_inc(stores, mi.UInt32(0), store)
-            records.store(slot, si.p, -ray.d, si.n, beta, depth, store & (slot < cap))
+            if dr.hint(media, mode="scalar"):
+                records.store(slot, dr.select(scattered, mei.p, si.p), -ray.d,
+                              dr.select(scattered, mi.Normal3f(0), si.n), beta, at, store & (slot < cap))
+            else:
+                records.store(slot, si.p, -ray.d, si.n, beta, at, store & (slot < cap))
 
-            # ------------------- BSDF sampling ----------------------
-            active &= depth < max_segments
-            bs, bsdf_weight = bsdf.sample(ctx, si, rng.next_float32(),
-                                          mi.Point2f(rng.next_float32(), rng.next_float32()), active)
-            beta *= bsdf_weight * adjoint_correction(si, -ray.d, bs.wo)
-            ray = spawn.spawn_ray(si, si.to_world(bs.wo), floor)
+            # ------------------- BSDF (or phase function) sampling ----------------------
+            u_lobe, u_dir = rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32())
+            if dr.hint(media, mode="scalar"):
+                bs, bsdf_weight = bsdf.sample(ctx, si, u_lobe, u_dir, surface)
+                passing = surface & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
+                depth[~passing] = at                     # (a null boundary is no vertex)
+                going = active & ~passing & (depth < max_segments)
+                phase = mei.medium.phase_function()
+                phase[~scattered] = dr.zeros(mi.PhaseFunctionPtr)
+                wo_phase, phase_weight, _ = phase.sample(phase_ctx, mei, u_lobe, u_dir, going & scattered)
+                direction = dr.select(scattered, wo_phase, si.to_world(bs.wo))
+                weight = dr.select(scattered, mi.Spectrum(phase_weight),
+                                   bsdf_weight * adjoint_correction(si, -ray.d, bs.wo))
+                beta[going | passing] *= weight
+                medium[surface & si.is_medium_transition()] = si.target_medium(direction)
+                v = mi.SurfaceInteraction3f(si)
+                v[scattered] = medium_vertex(mei, ray.wavelengths)
+                ray = spawn.spawn_ray(v, direction, floor)
+                active = going | passing
+                vertex = ~passing
+            else:
+                depth = at
+                active &= depth < max_segments
+                bs, bsdf_weight = bsdf.sample(ctx, si, u_lobe, u_dir, active)
+                beta *= bsdf_weight * adjoint_correction(si, -ray.d, bs.wo)
+                ray = spawn.spawn_ray(si, si.to_world(bs.wo), floor)
+                vertex = mi.Bool(True)
 
             # ------------------- Stopping criterion -----------------
             beta_max = dr.max(mi.unpolarized_spectrum(beta))
             active &= (beta_max > 0) & dr.isfinite(beta_max)
-            beta, survives = russian_roulette(beta, rng.next_float32(), depth >= rr_depth, start=beta_max0)
+            beta, survives = russian_roulette(beta, rng.next_float32(), vertex & (depth >= rr_depth), start=beta_max0)
             active &= survives
 
         dr.scatter_reduce(dr.ReduceOp.Add, segments, n_seg, 0, mode=dr.ReduceMode.Local)
