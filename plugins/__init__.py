@@ -33,14 +33,16 @@ _ORDER = (
     "integrators.common.spawn", "integrators.common.direct", "integrators.common.aim",
     "integrators.common.support", "integrators.common.footprint", "integrators.common.grid",
     "integrators.common.majorants", "integrators.common.media", "integrators.common.equiangular",
+    "integrators.common.subpath_media",
     # the path tracers
     "integrators.path",
     # lab_photon
-    "integrators.photon.records", "integrators.photon.grid", "integrators.photon.gather",
+    "integrators.photon.records", "integrators.photon.grid", "integrators.photon.estimates",
+    "integrators.photon.media_camera", "integrators.photon.gather",
     "integrators.photon.tracer", "integrators.photon.integrator",
     # lab_bdpt, then lab_vcm on it
     "integrators.bdpt.endpoints", "integrators.bdpt.splats", "integrators.bdpt.vertices",
-    "integrators.bdpt.media_vertices", "integrators.bdpt.media_paths", "integrators.bdpt.light_subpath", "integrators.bdpt.camera_subpath", "integrators.bdpt.passes",
+    "integrators.bdpt.media_paths", "integrators.bdpt.light_subpath", "integrators.bdpt.camera_subpath", "integrators.bdpt.passes",
     "integrators.bdpt.integrator",
     "integrators.vcm.merging", "integrators.vcm.volume_merging", "integrators.vcm.pilot", "integrators.vcm.integrator",
     # the samplers

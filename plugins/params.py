@@ -103,13 +103,10 @@ LAB_MIS = PATH_TRACER + (
 
 #: Aimed emission (``integrators/common/aim.py``): lab_photon, lab_bdpt and lab_vcm. Aiming changes nothing in
 #: a scene without aim_at shapes (the light emits as Mitsuba samples it, with the same random numbers),
-#: so every one aims by default. lab_vcm's default depends on its mode (``VCM_AIM_DEFAULTS``, set by the
-#: plugin unless ``aim`` is given): 0.9 in mode vcm (vcm.toml's vcm_auto; issue 41's sweep,
-#: experiments/results/2026-11-28-vcm-defaults-2.md), lab_bdpt's 0.5 in bpt and lt (so mode bpt with
-#: no parameter renders lab_bdpt's image), none in ppm and bpm: there merging carries the direct light
-#: too, and only the 1 - aim of the light subpaths that leave unaimed bring it, each with 1 / (1 - aim)
-#: the weight, so away from the targets the image is noisier and heavier-tailed (not biased:
-#: tests/plugins/test_vcm.py::test_merging_aimed_light_vertices_agrees_with_mitsuba_path).
+#: so every one aims by default. lab_vcm's default depends on its mode (``VCM_AIM_DEFAULTS``, unless ``aim``
+#: is given): 0.9 in vcm (vcm.toml's vcm_auto), lab_bdpt's 0.5 in bpt and lt (so bpt renders lab_bdpt's
+#: image), none in ppm and bpm: there merging carries the direct light too, brought only by the unaimed
+#: light subpaths with 1 / (1 - aim) the weight: noisier away from the targets, not biased.
 AIM_DEFAULT = 0.5
 VCM_AIM_DEFAULTS = {"vcm": 0.9, "bpt": AIM_DEFAULT, "lt": AIM_DEFAULT, "bpm": 0.0, "ppm": 0.0, "pt": 0.0}
 VCM_AIM_DEFAULT = VCM_AIM_DEFAULTS["vcm"]      # (mode vcm's, the default mode: the declared default)
@@ -292,8 +289,7 @@ LAB_VCM = (
 #: lab_pssmlt (Kelemen's primary-sample-space MLT over lab_mis's path loop, ``integrators/mlt/``): lab_mis's
 #: parameters and the chains'; its small steps, and its most bootstrap paths (traced in one wavefront).
 MLT_SMALL_STEPS, MLT_MAX_BOOTSTRAP = ("normal", "exponential"), 1 << 22
-#: The most paths ``bootstrap_share`` grows a bootstrap to (MLT_MAX_BOOTSTRAP's ran out of a 23 GB
-#: machine's memory, 1.2 million did not: benchmarks/mlt_door.py time, 2026-11-29-mlt-fourth.md).
+#: The most paths ``bootstrap_share`` grows a bootstrap to (4x as many ran out of 23 GB: benchmarks/mlt_door.py).
 MLT_GROWN_BOOTSTRAP = 1 << 20
 LAB_PSSMLT = LAB_MIS + (
     Param("chains", int, 8192, "Markov chains advancing in lock-step, one per lane (at most the render's "

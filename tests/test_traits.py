@@ -73,9 +73,10 @@ def test_media_are_reported():
         "light": {"type": "constant"}})
     t = SceneTraits.from_scene(scene)
     assert t.media and any("participating media" in w for w in t.warnings())
-    applies, reason = strategy_applicability(t, "lab_photon", {})
+    applies, reason = strategy_applicability(t, "lab_mmlt", {})
     assert not applies and "participating media" in reason and "volpath" in reason
     assert strategy_applicability(t, "lab_bdpt", {}) == (True, "")     # homogeneous media: rendered
+    assert strategy_applicability(t, "lab_photon", {}) == (True, "")   # volumetric photons
     assert strategy_applicability(t, "lab_mis", {}) == (True, "")      # the path family renders media
     assert strategy_applicability(t, "volpath", {}) == (True, "")
 

@@ -36,7 +36,7 @@ import backend  # noqa: F401 (the variant)
 import media_scenes
 from mitsuba_lab.experiment.report.spectrum import fit_slope
 from mitsuba_lab.metrics import bias_squared
-from mitsuba_lab.plugins.integrators.photon import gather
+from mitsuba_lab.plugins.integrators.photon import estimates
 from mitsuba_lab.scene import make_integrator
 
 pytestmark = pytest.mark.slow
@@ -130,13 +130,13 @@ def test_lab_photon_bias_falls_with_passes(name):
 
 @pytest.mark.parametrize("wrong", ["disc", "sigma_s"])
 def test_a_wrong_ball_normalisation_does_not_converge(wrong, monkeypatch):
-    exact = gather.volume_estimate
+    exact = estimates.volume_estimate
     if wrong == "disc":      # K2 / r^2 in place of K3 / r^3
         factor = (2.0 / dr.pi) / (15.0 / (8.0 * dr.pi))
-        monkeypatch.setattr(gather, "volume_estimate", lambda grid, mei, phase, depth, active:
+        monkeypatch.setattr(estimates, "volume_estimate", lambda grid, mei, phase, depth, active:
                             exact(grid, mei, phase, depth, active) * (factor * dr.sqrt(grid.radius2)))
     else:                    # not divided by sigma_s at the camera's collision
-        monkeypatch.setattr(gather, "volume_estimate", lambda grid, mei, phase, depth, active:
+        monkeypatch.setattr(estimates, "volume_estimate", lambda grid, mei, phase, depth, active:
                             exact(grid, mei, phase, depth, active) * mi.Spectrum(mei.sigma_s))
     rows, fit = bias_curve("fog_box_lifted", photon, PHOTON_PASSES)
     report(f"lab_photon on fog_box_lifted, ball normalised wrong ({wrong})", rows, fit)

@@ -1,4 +1,4 @@
-"""lab_bdpt's MIS weights in heterogeneous media (``bdpt/media_vertices.py``): the distance
+"""lab_bdpt's MIS weights in heterogeneous media (``common/subpath_media.py``): the distance
 densities are unknown there, so every strategy weighs a path with deterministic stand-ins, g =
 sigma_t(x) at a medium vertex and ``stand_in`` for each segment's transmittance. The weights sum
 to 1 only if every place that evaluates a segment gives it the same value: the light subpath's
@@ -21,7 +21,7 @@ import drjit as dr
 import mitsuba as mi
 import media_scenes
 from test_bdpt_weights import N, _max_rel, _reference, random_paths, recursive_weights
-from mitsuba_lab.plugins.integrators.bdpt import media_vertices
+from mitsuba_lab.plugins.integrators.common import subpath_media
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, feasible
 from mitsuba_lab.plugins.integrators.common import media, spawn
 from mitsuba_lab.scene import SceneTraits
@@ -49,7 +49,7 @@ def heterogeneous_path(k, seed, scene, medium):
     x = lo[:, None, None] + (hi - lo)[:, None, None] * rng.random((3, k + 1, N))
     n = k * N
     floor = spawn.offset_floor(SceneTraits.from_scene(scene))
-    sampler = media_vertices.RngSampler()
+    sampler = subpath_media.RngSampler()
     sampler.rng.seed(dr.arange(mi.UInt32, n), dr.opaque(mi.UInt32, seed))
     channel = dr.zeros(mi.UInt32, n)
     wavelengths = dr.zeros(mi.Ray3f, n).wavelengths
@@ -58,20 +58,20 @@ def heterogeneous_path(k, seed, scene, medium):
     mei = dr.zeros(mi.MediumInteraction3f, n)
     mei.p = _point(x[:, 1:].reshape(3, -1))
     sigma = np.ones((k + 1, N))
-    sigma[1:] = media_vertices.sigma_t_channel(ptr, mei, channel, on).numpy().reshape(k, N)
+    sigma[1:] = subpath_media.sigma_t_channel(ptr, mei, channel, on).numpy().reshape(k, N)
     # a medium vertex's g is its sigma_t; the test needs it positive (the smoke's empty corners are not)
     medium_vertex = g["medium"] & (sigma > 0)
     g["cos_l"] = np.where(medium_vertex, sigma, np.where(g["medium"], 1.0, g["cos_l"]))
     g["cos_c"] = np.where(medium_vertex, sigma, np.where(g["medium"], 1.0, g["cos_c"]))
     a, b = _point(x[:, :-1].reshape(3, -1)), _point(x[:, 1:].reshape(3, -1))
-    g["T"] = media_vertices.stand_in(ptr, a, b, wavelengths, channel, on).numpy().reshape(k, N)
-    g["T_camera"] = media_vertices.stand_in(ptr, b, a, wavelengths, channel, on).numpy().reshape(k, N)
+    g["T"] = subpath_media.stand_in(ptr, a, b, wavelengths, channel, on).numpy().reshape(k, N)
+    g["T_camera"] = subpath_media.stand_in(ptr, b, a, wavelengths, channel, on).numpy().reshape(k, N)
     # connections walk from the camera vertex to the light vertex (t = 1: to the sensor)
     last = dr.arange(mi.UInt32, n) >= (k - 1) * N
     it = dr.zeros(mi.Interaction3f, n)
     it.p, it.wavelengths = dr.select(last, a, b), wavelengths
     _, T_det = media.transmittance(scene, ptr, it, dr.select(last, b, a), sampler, channel, floor, on,
-                                   stand_in=media_vertices.stand_in)
+                                   stand_in=subpath_media.stand_in)
     g["T_connect"] = T_det.numpy().reshape(k, N)
     return g
 
@@ -107,10 +107,10 @@ def test_an_asymmetric_stand_in_is_caught(smoke, monkeypatch):
     def at_start(medium, start, end, wavelengths, channel, active):
         mei = dr.zeros(mi.MediumInteraction3f)
         mei.p, mei.wavelengths = start, wavelengths
-        tau = dr.norm(end - start) * media_vertices.sigma_t_channel(medium, mei, channel, active)
-        return dr.select(active, dr.exp(-dr.minimum(tau, media_vertices.TAU_CAP)), 1.0)
+        tau = dr.norm(end - start) * subpath_media.sigma_t_channel(medium, mei, channel, active)
+        return dr.select(active, dr.exp(-dr.minimum(tau, subpath_media.TAU_CAP)), 1.0)
 
-    monkeypatch.setattr(media_vertices, "stand_in", at_start)
+    monkeypatch.setattr(subpath_media, "stand_in", at_start)
     worst_sum, _, _ = _check(smoke)
     print(f"sigma_t at the start: max |sum - 1| {worst_sum:.2e}")
     assert worst_sum > 100 * TOL

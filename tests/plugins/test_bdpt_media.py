@@ -168,14 +168,14 @@ def test_light_subpaths_start_in_the_lamp_housings_clear_air():
 
 
 def test_each_emitter_sits_in_one_medium():
-    """The medium each emitter sits in (``media_vertices.emitter_media``): the housing's light is
+    """The medium each emitter sits in (``subpath_media.emitter_media``): the housing's light is
     in none, ``point_in_fog``'s in its fog (its rays meet the fog's null sphere from inside); a
     point light in a scene whose only medium is the sensor's is in it; an area light on a shape
     with media is in the shape's exterior; a point light whose rays meet fog's side of one
     boundary and no medium's side of another is refused in one line, naming it."""
     import drjit as dr
 
-    from mitsuba_lab.plugins.integrators.bdpt.media_vertices import emitter_media
+    from mitsuba_lab.plugins.integrators.common.subpath_media import emitter_media
 
     def in_medium(scene, medium, index=0):
         media = emitter_media(scene, scene.sensors()[0], 1.0, "lab_bdpt")

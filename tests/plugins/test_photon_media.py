@@ -1,6 +1,6 @@
 """lab_photon in participating media: photons fly and scatter through the fog, volumetric photons
 are gathered in a ball at the camera paths' collisions (``photon/media_camera.py``,
-``gather.volume_estimate``).
+``estimates.volume_estimate``).
 
 Tolerances: with every light taken from photons (``direct = photons``: the fog's light is all
 volumetric photons), the image mean of the lifted fog box (sigma_t 2.5, albedo 0.8, 16x12) within
@@ -18,7 +18,7 @@ import pytest
 import mitsuba as mi
 import backend  # noqa: F401 (the variant)
 import media_scenes
-from mitsuba_lab.plugins.integrators.photon import gather
+from mitsuba_lab.plugins.integrators.photon import estimates
 from mitsuba_lab.plugins.integrators.photon.estimator import PhotonMapping
 from mitsuba_lab.scene import make_integrator
 from mitsuba_lab.plugins.scene_traits import SceneTraits
@@ -50,8 +50,8 @@ def test_volumetric_photons_agree_with_volpath():
 
 
 def test_a_ball_estimate_not_divided_by_sigma_s_is_caught(monkeypatch):
-    exact = gather.volume_estimate
-    monkeypatch.setattr(gather, "volume_estimate", lambda grid, mei, phase, depth, active:
+    exact = estimates.volume_estimate
+    monkeypatch.setattr(estimates, "volume_estimate", lambda grid, mei, phase, depth, active:
                         exact(grid, mei, phase, depth, active) * mi.Spectrum(mei.sigma_s))
     ratio = photon_over_volpath()
     print(f"without 1 / sigma_s: lab_photon over volpath {ratio:.4f}")

@@ -66,7 +66,7 @@ class CameraPass:
     channel_key: int = 0                 # in media: the key of each light subpath's sampling channel
     sensor_medium: object = None         # in media: the sensor's medium (the camera subpaths start in it)
     camera_depth: object = None          # lab_mmlt: per lane, the last camera vertex its one strategy needs
-    tracking: object = None              # heterogeneous media: ``media_vertices.Tracking``, else None
+    tracking: object = None              # heterogeneous media: ``subpath_media.Tracking``, else None
 
 
 def sensor_constants(sensor: mi.Sensor, plugin: str = "lab_bdpt") -> tuple[float, tuple]:

@@ -24,7 +24,7 @@ from .endpoints import direction_is_delta
 from .estimator import Bidirectional
 from .light_subpath import LightTracer, check_variant
 from .media_paths import trace_camera, trace_light
-from .media_vertices import Tracking, emitter_media
+from mitsuba_lab.plugins.integrators.common.subpath_media import Tracking, emitter_media
 from .passes import PassPlan, Passes, pass_seed
 from .techniques import Strategy, Technique
 from .vertices import NONE, LightVertices, vertex_bytes

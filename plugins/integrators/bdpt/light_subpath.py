@@ -144,9 +144,9 @@ class LightTracer:
         self.media = False
         #: the pass's key of each light subpath's sampling channel in media (``media_paths.path_channel``)
         self.channel_key = 0
-        #: heterogeneous media: delta tracking in them (``media_vertices.Tracking``), else None
+        #: heterogeneous media: delta tracking in them (``subpath_media.Tracking``), else None
         self.tracking = None
-        #: in a scene with media, the medium each emitter sits in (``media_vertices.emitter_media``, set
+        #: in a scene with media, the medium each emitter sits in (``subpath_media.emitter_media``, set
         #: by the driver once per render), else None
         self.emitter_media = None
 

@@ -17,7 +17,7 @@ and the medium is tracked across medium transitions. A surface with a smooth lob
 a vertex for the strategies that end there (NEE, connections, splats, merges) on every arrival,
 as ``volpath`` samples emitters at a mask before its lobe is chosen: its f holds the opacity,
 and only how the subpath goes on depends on the lobe sampled. A light subpath starts in its
-emitter's medium, decided once per render for each emitter (``media_vertices.emitter_media``):
+emitter's medium, decided once per render for each emitter (``subpath_media.emitter_media``):
 the one the scene names for it, else the one its emitted rays find behind the first medium
 transition they meet through surfaces that transmit (an opaque lamp housing around a point light
 hides the fog beyond it); an emitter at infinity in a medium sends nothing (T = 0 over the infinite
@@ -47,11 +47,11 @@ given c: the estimator is unbiased with c random. A connection's contribution ca
 spectrum's T (exact: Beer-Lambert in homogeneous media through null boundaries,
 ``common.media.transmittance``), its weight only T_c.
 
-**Heterogeneous media** (``media_vertices.Tracking``, compiled only where the scene has one).
+**Heterogeneous media** (``subpath_media.Tracking``, compiled only where the scene has one).
 The subpaths' flights there are the path family's delta tracking (``common.media.free_flight``,
 global majorants or ``majorants = grid``) and every connection's T is ratio tracking
 (``common.media.transmittance``); the distance densities are then unknown. The weights instead
-use, for every strategy alike, g = sigma_t,c(x) at a medium vertex and ``media_vertices.stand_in``
+use, for every strategy alike, g = sigma_t,c(x) at a medium vertex and ``subpath_media.stand_in``
 for each piece of a segment in a heterogeneous medium (exp of minus its length times sigma_t,c at
 its midpoint, capped), deterministic and symmetric in the piece's ends. Unbiased: the weights of
 a path's strategies, computed from the same positive values, still sum to 1 (tests/plugins/
@@ -69,26 +69,16 @@ from mitsuba_lab.plugins.integrators.common.adjoint import adjoint_correction, t
 from mitsuba_lab.plugins.integrators.common.counters import tally
 from mitsuba_lab.plugins.integrators.common.direct import spectrum_or_zero
 from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
+from mitsuba_lab.plugins.integrators.common.subpath_media import (
+    _AUX_KEY, RngSampler, Sides, flight, medium_vertex, path_channel,
+    phase_reverse_pdf, sigma_t_channel, vertex_eval)
+from mitsuba_lab.plugins.integrators.common.subpath_media import transmittance as through
 
 from . import splats
 from .endpoints import nee_density
-from .media_vertices import (  # noqa: F401 (homogeneous_flight: the tests patch it here)
-    _AUX_KEY, RngSampler, Sides, homogeneous_flight, medium_vertex, path_channel,
-    phase_reverse_pdf, sigma_t_channel, tracked_flight, vertex_eval)
-from .media_vertices import transmittance as through
 from .techniques import Technique
 from .vertices import NONE
 from .weights import SubpathMis
-
-def flight(medium, ray, t_max, u, sampler, channel, active, tracking):
-    """A free flight (mei, scattered, weight, T_c for the weights): ``homogeneous_flight``, and
-    in a scene with heterogeneous media (``tracking``) delta tracking in their lanes."""
-    if tracking is None:
-        return homogeneous_flight(medium, ray, t_max, u, channel, active)
-    tracked = active & ~medium.is_homogeneous()
-    exact = homogeneous_flight(medium, ray, t_max, u, channel, active & ~tracked)
-    return tracked_flight(medium, ray, t_max, sampler, channel, tracked, tracking, exact)
-
 
 @dr.syntax
 def trace_light(tracer, st, block, vertices, store_lanes):

@@ -27,7 +27,7 @@ from .gather import CameraPass
 from .grid import PhotonGrid
 from .records import record_bytes
 from .tracer import PhotonTracer
-from mitsuba_lab.plugins.integrators.bdpt.media_vertices import Tracking, emitter_media
+from mitsuba_lab.plugins.integrators.common.subpath_media import Tracking, emitter_media
 
 #: max_depth = -1 (unbounded) is stored as this many segments (sums of depths stay in uint32).
 DEPTH_CAP = 1 << 30

@@ -2,14 +2,14 @@
 ``trace_camera`` there; scenes without media keep its surface-only loop).
 
 A camera path starts in the sensor's medium and takes free flights as the light subpaths of
-lab_bdpt do (``bdpt.media_paths.flight``: analytic in homogeneous media, delta tracking in
+lab_bdpt do (``common.subpath_media.flight``: analytic in homogeneous media, delta tracking in
 heterogeneous ones, in one channel per path, ``common.media.sampling_channel``, with the weight
 T / p_c, times sigma_s at a collision). It ends at its first vertex with a smooth lobe or in a
 medium, where the photons estimate the light it sees:
 
 * a collision in a medium: the volumetric photons within r_v, over the ball
-  (``gather.volume_estimate``, divided by sigma_s there);
-* a surface with a smooth lobe: the surface photons within r (``gather.density_estimate``), and
+  (``estimates.volume_estimate``, divided by sigma_s there);
+* a surface with a smooth lobe: the surface photons within r (``estimates.density_estimate``), and
   through the BSDF's delta lobes the path goes on, as in the surface loop.
 
 A null boundary (a ``null`` BSDF, a mask's clear part) is passed without a vertex (volpath's
@@ -25,9 +25,11 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators.bdpt.media_paths import flight
+from mitsuba_lab.plugins.integrators.common.subpath_media import flight
 from mitsuba_lab.plugins.integrators.common import media, spawn
 from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
+
+from . import estimates
 
 
 def _emitter_sampling_alone(d):
@@ -39,15 +41,13 @@ def _emitter_sampling_alone(d):
 def trace_camera(cp, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, medium, active):
     """(L, valid_ray, n_ext, n_shadow) of the camera paths of ``cp`` (a ``gather.CameraPass``)
     in a scene with media, starting in the sensor's ``medium``."""
-    from .gather import DELTA_MASK, density_estimate, volume_estimate
-
     cfg = cp.settings
     grid, volume = cp.grid, cp.volume_grid
     with_direct = cp.with_direct
     floor = cp.offset_floor
     use_nee = cfg.direct == "nee"
     bsdf_ctx = mi.BSDFContext()
-    delta_ctx = mi.BSDFContext(mi.TransportMode.Radiance, DELTA_MASK)
+    delta_ctx = mi.BSDFContext(mi.TransportMode.Radiance, estimates.DELTA_MASK)
     phase_ctx = mi.PhaseFunctionContext(sampler)
     max_depth = dr.opaque(mi.UInt32, cfg.depth_limit)
     rr_depth = dr.opaque(mi.UInt32, cp.settings.rr_depth)
@@ -102,9 +102,9 @@ def trace_camera(cp, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, medium
 
         # ------------------------- Density estimates -------------------------
         if dr.hint(grid is not None and grid.photon_count > 0, mode="scalar"):
-            L += beta * density_estimate(grid, si, bsdf, max_photon_depth, smooth)
+            L += beta * estimates.density_estimate(grid, si, bsdf, max_photon_depth, smooth)
         if dr.hint(volume is not None and volume.photon_count > 0, mode="scalar"):
-            L += beta * volume_estimate(volume, mei, phase, max_photon_depth, scattered)
+            L += beta * estimates.volume_estimate(volume, mei, phase, max_photon_depth, scattered)
 
         # --------------------- Delta lobes and null boundaries: continue ---------------------
         through = surface & mi.has_flag(flags, mi.BSDFFlags.Delta)

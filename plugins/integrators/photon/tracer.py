@@ -23,9 +23,9 @@ of one normal and not the other, so photon paths cover what the path tracers' ca
 cover.
 
 **Participating media** (``media``: the scene has them). Photons travel as lab_bdpt's light
-subpaths do (``bdpt.media_paths``): they start in their emitter's medium (``media_vertices.
-emitter_media``, decided once per render for each emitter: ``emitter_media``), take a free
-flight in the medium they are in (``media_paths.flight``: the analytic one in homogeneous media,
+subpaths do (``bdpt.media_paths``, from ``common.subpath_media``): they start in their emitter's
+medium (``subpath_media.emitter_media``, decided once per render for each emitter), take a free
+flight in the medium they are in (``subpath_media.flight``: the analytic one in homogeneous media,
 delta tracking in heterogeneous ones, in one sampling channel per photon, weighted T / p_c and
 sigma_s at a collision), scatter at a collision by the medium's phase function, and pass null
 boundaries (a ``null`` BSDF, a mask's clear part) without a vertex (volpath's counting of
@@ -44,12 +44,12 @@ import mitsuba as mi
 from mitsuba_lab.plugins.integrators.common import spawn, spectral
 from mitsuba_lab.plugins.integrators.common.adjoint import adjoint_correction
 from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
-from mitsuba_lab.plugins.integrators.bdpt.media_paths import flight
-from mitsuba_lab.plugins.integrators.bdpt.media_vertices import RngSampler, medium_vertex, path_channel
+from mitsuba_lab.plugins.integrators.common.subpath_media import flight
+from mitsuba_lab.plugins.integrators.common.subpath_media import RngSampler, medium_vertex, path_channel
 
 from .records import PhotonRecords
 
-#: A key mixed into a pass's seed for the photons' sampling channel (``media_vertices.path_channel``)
+#: A key mixed into a pass's seed for the photons' sampling channel (``subpath_media.path_channel``)
 #: and one for their second random stream (delta tracking's draws in heterogeneous media).
 _CHANNEL_KEY = 0x51ED270B
 _TRACKING_KEY = 0x3C6EF372
@@ -163,9 +163,9 @@ class PhotonTracer:
         self.emitters = scene.emitters_dr()
         #: ``aim.AimedEmission`` when a share of area lights' directions is aimed at shapes
         self.aim = aim if aim is not None and aim.enabled else None
-        #: the scene has media (photons fly through them); ``tracking``: ``media_vertices.Tracking``
+        #: the scene has media (photons fly through them); ``tracking``: ``subpath_media.Tracking``
         #: where some medium is heterogeneous, else None; ``emitter_media``: the medium of each
-        #: emitter (``media_vertices.emitter_media``), gathered by emitter index
+        #: emitter (``subpath_media.emitter_media``), gathered by emitter index
         self.media = media
         self.tracking = tracking
         self.emitter_media = emitter_media

@@ -39,7 +39,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_lab.plugins.integrators.bdpt.media_vertices import phase_reverse_pdf
+from mitsuba_lab.plugins.integrators.common.subpath_media import phase_reverse_pdf
 from mitsuba_lab.plugins.integrators.bdpt.vertices import RECORD, spectrum_at, vector
 
 from .merging import VertexGrid

@@ -1,4 +1,5 @@
-"""The pieces of lab_bdpt's subpaths in media (``media_paths`` traces them): the path's sampling
+"""The pieces of subpaths in media that lab_bdpt (``bdpt.media_paths`` traces them), lab_vcm and
+lab_photon share: the path's sampling
 channel, the analytic free flight in it, delta tracking and the weights' stand-in transmittance
 in heterogeneous media, the medium each emitter sits in (where its light subpaths start), a
 medium vertex as a surface interaction, and a vertex's BSDF-or-phase evaluation. The densities,
@@ -186,6 +187,16 @@ def tracked_flight(medium, ray: mi.Ray3f, t_max, sampler, channel, active, track
     weight = dr.select(active, weight_h, weight)
     T_c = dr.select(active, stand_in(medium, ray.o, end, ray.wavelengths, channel, active), T_c)
     return mei, scattered, weight, T_c
+
+
+def flight(medium, ray, t_max, u, sampler, channel, active, tracking):
+    """A free flight (mei, scattered, weight, T_c for the weights): ``homogeneous_flight``, and
+    in a scene with heterogeneous media (``tracking``) delta tracking in their lanes."""
+    if tracking is None:
+        return homogeneous_flight(medium, ray, t_max, u, channel, active)
+    tracked = active & ~medium.is_homogeneous()
+    exact = homogeneous_flight(medium, ray, t_max, u, channel, active & ~tracked)
+    return tracked_flight(medium, ray, t_max, sampler, channel, tracked, tracking, exact)
 
 
 def transmittance(scene, medium, it, target, sampler, channel, floor, active, tracking):
