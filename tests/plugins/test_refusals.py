@@ -54,9 +54,13 @@ def test_render_refuses_media_in_one_line(tmp_path, capfd):
     # (lab_mmlt: the one lab plugin left that does not render media; lab_photon renders them since issue 46)
     code = cli.main(["render", str(scene), "--integrator", "lab_mmlt", "-o", str(tmp_path / "x.exr")])
     err = capfd.readouterr().err
-    assert code == 2 and err.strip() == ("mitsuba-lab: error: lab_mmlt does not support participating media "
-                                         "(the scene has a medium): use lab_mis or Mitsuba's volpath "
-                                         "(--allow-unsupported renders it anyway)")
+    refusal = ("mitsuba-lab: error: lab_mmlt does not support participating media (the scene has a medium): "
+               "use lab_mis or Mitsuba's volpath")
+    assert code == 2 and err.strip() == refusal           # (no --allow-unsupported offered: its render refuses)
+    code = cli.main(["render", str(scene), "--integrator", "lab_mmlt", "--allow-unsupported",
+                     "-o", str(tmp_path / "x.exr")])
+    err = capfd.readouterr().err
+    assert code == 2 and err.strip() == refusal
     assert not (tmp_path / "x.exr").exists()
     code = cli.main(["render", str(scene), "--integrator", "path", "-o", str(tmp_path / "p.exr")])
     err = capfd.readouterr().err

@@ -55,8 +55,14 @@ class MMLT(Bidirectional):
         return CONNECTIONS
 
     @classmethod
+    def unsupported(cls, traits) -> str:
+        """lab_bdpt's refusals, and media: its chains' subpaths are surface ones, and its render
+        refuses a scene with a medium rather than leave the medium out."""
+        return cls.media_problem(traits) or super().unsupported(traits)
+
+    @classmethod
     def applicability(cls, traits, params: dict) -> tuple[bool, str]:
-        problem = cls.media_problem(traits) or cls.unsupported(traits)
+        problem = cls.unsupported(traits)
         return (False, problem) if problem else (True, "")
 
     @classmethod

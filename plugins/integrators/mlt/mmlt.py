@@ -175,7 +175,7 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
                evaluate: bool = True):
         self.refuse(develop)
         traits = SceneTraits.from_scene(scene)
-        problem = self.ESTIMATOR.media_problem(traits) or self.ESTIMATOR.unsupported(traits)
+        problem = self.ESTIMATOR.unsupported(traits)
         if problem:
             raise ValueError(problem)
         sensor, seed, spp = render_arguments(scene, sensor, seed, spp)
