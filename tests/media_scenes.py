@@ -244,3 +244,13 @@ def fog_box_sky() -> dict:
     scene["sun"] = {"type": "directional", "direction": [-0.6, -1.0, -0.4], "irradiance": rgb(1.5)}
     return scene
 
+
+
+def sky_in_unbounded_fog() -> dict:
+    """The sensor's fog (sigma_t 0.5, albedo 0.8) and nothing that bounds it, under a constant
+    sky and a sun (``directional``): both at infinity, so inside the fog, infinitely far from
+    them, none of their light arrives (the image is black). A 16x12 film."""
+    scene = base(sensor_medium={"type": "homogeneous", "sigma_t": 0.5, "albedo": 0.8}, res=(16, 12))
+    scene["sky"] = environment(1.0)
+    scene["sun"] = {"type": "directional", "direction": [-0.6, -1.0, -0.4], "irradiance": rgb(1.5)}
+    return scene

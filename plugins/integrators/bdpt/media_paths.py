@@ -417,9 +417,12 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         ds, em_weight = scene.sample_emitter_direction(v, sampler.next_2d(), False, nee_on)
         tally(cp.counters, "shadow", nee_on)
         nee_on &= ds.pdf > 0
-        T, T_c = through(scene, sides.toward(ds.d), v, ds.p, sampler, channel, floor, nee_on, cp.tracking)
-        f, pdf_fwd, pdf_rev = vertex_eval(ctx, ctx_imp, phase_ctx, si, bsdf, mei, phase, scattered, ds.d, nee_on)
+        # an emitter at infinity seen through unbounded fog sends nothing (T = 0 over the infinite
+        # distance), as its light subpaths carry nothing (``trace_light``)
         infinite = table.at_infinity(ds.emitter, nee_on)
+        T, T_c = through(scene, sides.toward(ds.d), v, ds.p, sampler, channel, floor, nee_on, cp.tracking,
+                         unbounded=infinite)
+        f, pdf_fwd, pdf_rev = vertex_eval(ctx, ctx_imp, phase_ctx, si, bsdf, mei, phase, scattered, ds.d, nee_on)
         dist2 = dr.select(infinite, 1.0, dr.square(ds.dist))
         cos_light = dr.select(ds.delta | infinite, 1.0, dr.abs(dr.dot(ds.n, ds.d)))
         pdf_nee = dr.select(ds.delta, ds.pdf, ds.pdf * cos_light / dist2)

@@ -213,7 +213,7 @@ def global_segment_transmittance(medium: mi.MediumPtr, ray: mi.Ray3f, sampler: m
 @dr.syntax
 def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, target: mi.Point3f,
                   sampler: mi.Sampler, channel, floor: float, active, tracking_kind: str = "ratio", grid=None,
-                  stand_in=None, coplanar: bool = False):
+                  stand_in=None, coplanar: bool = False, unbounded=None):
     """T from the vertex ``it`` (inside ``medium``, which a surface vertex has already switched
     to the side facing ``target``) to the point ``target``: through media, and through the
     surfaces between whose BSDFs let light pass unscattered (``null`` boundaries, a mask's clear
@@ -224,7 +224,11 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
     ``stand_in(medium, start, end, wavelengths, channel, active)``; then returns (T, T_det): T_det
     the product in ``channel`` of the exact factors (homogeneous pieces, null boundaries) and of
     the stand-ins (lab_bdpt's MIS weights need a transmittance that no random draw changes).
-    ``coplanar``: a surface on a passed null face's plane blocks too (``spawn.behind_null_face``)."""
+    ``coplanar``: a surface on a passed null face's plane blocks too (``spawn.behind_null_face``).
+    ``unbounded``: None, or the lanes whose ``target`` stands for an emitter at infinity (Mitsuba
+    puts it 2 bounding-sphere radii away): their last piece, past the last surface, runs on for
+    ever, so in a homogeneous medium T is exp(-sigma_t inf), 0 wherever sigma_t > 0 (a
+    heterogeneous medium is empty outside its grid: its pieces keep their tracked T)."""
     ray = spawn.spawn_ray_to(it, target, floor)
     medium = mi.MediumPtr(medium)
     T = mi.UnpolarizedSpectrum(1.0)
@@ -240,6 +244,10 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
         inside = going & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
         T_seg = segment_transmittance(medium, segment, sampler, channel, inside, tracking_kind, grid)[0]
         T[inside] *= T_seg
+        if dr.hint(unbounded is not None, mode="scalar"):
+            forever = inside & ~crossing & unbounded & medium.is_homogeneous()
+            T_inf = unbounded_transmittance(medium, segment, forever)
+            T[forever] *= T_inf
         bsdf = si.bsdf(ray)
         # (its unpolarized part: exact for null and mask boundaries, which scale light)
         T_null = mi.unpolarized_spectrum(bsdf.eval_null_transmission(si, crossing))
@@ -251,6 +259,8 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
             T_det[inside] *= dr.select(tracked, stand_in(medium, segment.o, end, ray.wavelengths, channel, tracked),
                                        channel_value(T_seg, channel))
             T_det[crossing] *= channel_value(T_null, channel)
+            if dr.hint(unbounded is not None, mode="scalar"):
+                T_det[forever] *= channel_value(T_inf, channel)
         medium[crossing & si.is_medium_transition()] = si.target_medium(ray.d)
         # on past the surface, towards the same target
         ray[crossing] = spawn.spawn_ray_to(si, target, floor)
@@ -258,9 +268,18 @@ def transmittance(scene: mi.Scene, medium: mi.MediumPtr, it: mi.Interaction3f, t
     return T if stand_in is None else (T, T_det)
 
 
+def unbounded_transmittance(medium, ray: mi.Ray3f, active) -> mi.UnpolarizedSpectrum:
+    """exp(-sigma_t inf) per channel in the homogeneous ``medium`` from ``ray``'s origin: 0 where
+    sigma_t > 0, 1 where it is 0 (1 in inactive lanes)."""
+    mei = dr.zeros(mi.MediumInteraction3f)
+    mei.p, mei.wavelengths = ray.o, ray.wavelengths
+    _, _, sigma_t = medium.get_scattering_coefficients(mei, active)
+    return dr.select(active & (mi.UnpolarizedSpectrum(sigma_t) > 0), 0.0, mi.UnpolarizedSpectrum(1.0))
+
+
 def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, scattered, medium, channel,
                      beta, L, sample_weight, n_L: int, active, floor: float, tracking_kind: str = "ratio",
-                     equiangular=None, nee: bool = True, grid=None):
+                     equiangular=None, nee: bool = True, grid=None, unbounded: bool = False):
     """Next-event estimation at a vertex of a path in a scene with media: the surface ``si``
     (its ``bsdf``) or, where ``scattered``, the medium point ``mei`` (its ``phase`` function);
     ``it`` is the vertex as an ``Interaction3f``, ``medium`` the medium the path arrived in.
@@ -270,7 +289,9 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
     null boundaries pass light, other surfaces block it), f and p_B the BSDF's (with its cosine)
     or the phase function's, and w = ``sample_weight(Densities)`` (direct.py's convention).
     ``equiangular``: None, or the ``Equiangular`` state of the path's vertex, whose medium
-    vertices then weigh their samples against equi-angular sampling too."""
+    vertices then weigh their samples against equi-angular sampling too. ``unbounded``: an emitter
+    at infinity is infinitely far (``transmittance``'s ``unbounded``: none of its light crosses
+    unbounded fog) rather than at Mitsuba's stand-in distance (``volpath``'s, lab_mis's)."""
     from mitsuba_lab.plugins.integrators.common.direct import emitter_sample_contribution
     from mitsuba_lab.plugins.integrators.estimator import Densities
 
@@ -279,7 +300,9 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
         sampled = active & (ds.pdf != 0)
         # a surface at a medium boundary sends the shadow ray into the medium on its side
         start = dr.select(~scattered & si.is_medium_transition(), si.target_medium(ds.d), medium)
-        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled, tracking_kind, grid)
+        infinite = (mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite) & sampled) if unbounded else None
+        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled, tracking_kind, grid,
+                          unbounded=infinite)
         f_bsdf, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), sampled & ~scattered)
         f_phase, pdf_phase = phase.eval_pdf(phase_ctx, mei, ds.d, sampled & scattered)
         f = dr.select(scattered, f_phase, f_bsdf)

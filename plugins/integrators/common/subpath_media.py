@@ -199,16 +199,18 @@ def flight(medium, ray, t_max, u, sampler, channel, active, tracking):
     return tracked_flight(medium, ray, t_max, sampler, channel, tracked, tracking, exact)
 
 
-def transmittance(scene, medium, it, target, sampler, channel, floor, active, tracking):
+def transmittance(scene, medium, it, target, sampler, channel, floor, active, tracking, unbounded=None):
     """(T, T_c for the weights) from ``it`` to ``target`` (``common.media.transmittance``): T_c
     T's own value in ``channel`` in homogeneous media (exact), else with ``stand_in`` for the
     pieces in heterogeneous media, while T is ratio tracking's unbiased estimate. A surface on a
-    passed null face's plane blocks, as the subpaths meet it (``spawn.behind_null_face``)."""
+    passed null face's plane blocks, as the subpaths meet it (``spawn.behind_null_face``).
+    ``unbounded``: the lanes whose target is an emitter at infinity (``media.transmittance``)."""
     if tracking is None:
-        T = media.transmittance(scene, medium, it, target, sampler, channel, floor, active, coplanar=True)
+        T = media.transmittance(scene, medium, it, target, sampler, channel, floor, active, coplanar=True,
+                                unbounded=unbounded)
         return T, media.channel_value(T, channel)
     return media.transmittance(scene, medium, it, target, sampler, channel, floor, active, grid=tracking.grid,
-                               stand_in=stand_in, coplanar=True)
+                               stand_in=stand_in, coplanar=True, unbounded=unbounded)
 
 
 def sigma_t_channel(medium, mei, channel, active):
