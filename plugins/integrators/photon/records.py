@@ -69,6 +69,8 @@ class PhotonRecords:
 
     def split_media(self) -> tuple["PhotonRecords", "PhotonRecords"]:
         """(surface photons, volumetric photons): the records whose normal is 0 lie in a medium."""
+        if self.count == 0:     # (no photon stored: an environment in unbounded fog sends none)
+            return self, PhotonRecords.allocate(0)
         in_medium = dr.squared_norm(self.n) == 0
         return (self.permuted(dr.compress(~in_medium)).eval(), self.permuted(dr.compress(in_medium)).eval())
 
