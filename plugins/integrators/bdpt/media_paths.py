@@ -21,7 +21,9 @@ emitter's medium, decided once per render for each emitter (``subpath_media.emit
 the one the scene names for it, else the one its emitted rays find behind the first medium
 transition they meet through surfaces that transmit (an opaque lamp housing around a point light
 hides the fog beyond it); an emitter at infinity in a medium sends nothing (T = 0 over the infinite
-distance). The camera subpath starts in the sensor's medium.
+distance), and so does next-event estimation towards one whose shadow ray ends in unbounded
+homogeneous fog (``common.media.transmittance``'s ``unbounded``; Mitsuba's ``volpath`` instead
+puts the emitter 2 bounding-sphere radii away). The camera subpath starts in the sensor's medium.
 
 **Densities.** A vertex x_i reached from x_{i-1} has the area density
 
