@@ -78,6 +78,18 @@ def test_equiangular_mode_keeps_nee_for_lights_at_infinity(kind):
                   f"{kind} equiangular under a sky and a sun")
 
 
+@pytest.mark.parametrize("kind", ["lab_nee", "lab_mis"])
+def test_emitters_at_infinity_light_nothing_through_unbounded_fog(kind):
+    """The sky and a sun seen from the sensor's unbounded fog: no light crosses an infinite
+    stretch of it, so the path family renders black, as the bidirectional family does. (Mitsuba's
+    volpath gives 0.00224 here: it puts an emitter at infinity 2 bounding-sphere radii away, so a
+    speck far off that nothing sees changes its image; experiments/results/2026-11-29-env-in-unbounded-fog.md.
+    Before, lab_nee's NEE gave 0.0028 and lab_mis's 0.0014.)"""
+    scene = mi.load_dict(media_scenes.sky_in_unbounded_fog())
+    image = renders(scene, make_integrator(kind, {"max_depth": 6}), 4, [0])
+    assert image.max() == 0, image.max()
+
+
 def test_delta_tracking_shadow_rays_agree_with_volpath():
     scene = mi.load_dict(media_scenes.smoke())
     assert_agrees(lab(scene, transmittance="delta"), reference(scene, name="smoke"), "lab_mis transmittance=delta on smoke")

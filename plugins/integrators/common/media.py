@@ -274,7 +274,9 @@ def unbounded_transmittance(medium, ray: mi.Ray3f, active) -> mi.UnpolarizedSpec
     mei = dr.zeros(mi.MediumInteraction3f)
     mei.p, mei.wavelengths = ray.o, ray.wavelengths
     _, _, sigma_t = medium.get_scattering_coefficients(mei, active)
-    return dr.select(active & (mi.UnpolarizedSpectrum(sigma_t) > 0), 0.0, mi.UnpolarizedSpectrum(1.0))
+    # (a Spectrum again: in spectral variants the select gives a plain 4-vector)
+    return mi.UnpolarizedSpectrum(dr.select(active & (mi.UnpolarizedSpectrum(sigma_t) > 0), 0.0,
+                                            mi.UnpolarizedSpectrum(1.0)))
 
 
 def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, scattered, medium, channel,
@@ -291,7 +293,9 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
     ``equiangular``: None, or the ``Equiangular`` state of the path's vertex, whose medium
     vertices then weigh their samples against equi-angular sampling too. ``unbounded``: an emitter
     at infinity is infinitely far (``transmittance``'s ``unbounded``: none of its light crosses
-    unbounded fog) rather than at Mitsuba's stand-in distance (``volpath``'s, lab_mis's)."""
+    unbounded fog) rather than at Mitsuba's stand-in distance, 2 bounding-sphere radii, where
+    ``volpath`` leaves it (every lab plugin passes True: an invisible speck far away that grows
+    the bounding sphere must not change the image)."""
     from mitsuba_lab.plugins.integrators.common.direct import emitter_sample_contribution
     from mitsuba_lab.plugins.integrators.estimator import Densities
 
