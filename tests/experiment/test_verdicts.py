@@ -224,6 +224,18 @@ def test_the_image_mean_over_the_references_says_biased_only_outside_its_interva
     assert "| biased: +10% |" in md
 
 
+def test_an_image_mean_off_the_references_keeps_a_point_out_of_the_image_verdict():
+    """A strategy missing light the others find (lab_bdpt on the volumetric caustic: its image mean
+    0.9921 of the reference's, its bias^2 spread too thin to resolve with 3 seeds) is left out of
+    the image's "most efficient" verdict, not of a region's (a region's own bias^2 decides there)."""
+    tables = SectionTables()
+    tables.marks = {}
+    point = SimpleNamespace(scene="s", strategy="bdpt", seeds=3, rel_bias2=2.17e-5, rel_bias2_se=1.5e-5,
+                            mean_ratio=0.9921, mean_ratio_se=0.0005)
+    assert tables.left_out_why(point) == "biased here (its image mean)"
+    assert tables.left_out_why(SimpleNamespace(**{**vars(point), "mean_ratio_se": 0.005})) == ""
+
+
 # -- a biased strategy is not named most efficient -------------------------------------------------
 
 @pytest.mark.slow

@@ -45,7 +45,7 @@ class BiasTables:
             p = max(points, key=lambda q: q.time_s)
             half = separation_factor(p.seeds) * p.mean_ratio_se
             gap = abs(p.mean_ratio - 1.0)
-            if separated(gap, p.mean_ratio_se, p.seeds):
+            if mean_biased(p):
                 verdict = f"biased: {100 * (p.mean_ratio - 1):+.2g}%"
             else:
                 verdict = not_resolved(p.seeds, seeds_needed(p.seeds, gap, p.mean_ratio_se))
@@ -86,6 +86,13 @@ class BiasTables:
         if key not in cache:
             cache[key] = region_bias_variance(p, self.folder, ref, rect)
         return cache[key]
+
+
+def mean_biased(p) -> bool:
+    """Whether a point's image mean over the reference's is off 1 by more than its interval
+    (``mean_table``'s "biased": a light an estimator cannot sample, missing over the image)."""
+    ratio, se = getattr(p, "mean_ratio", math.nan), getattr(p, "mean_ratio_se", math.nan)
+    return separated(abs(ratio - 1.0), se, p.seeds)
 
 
 def off_budget_mark(p) -> str:

@@ -22,7 +22,7 @@ from .analysis import (MIN_TRUSTED_TIME_S, PointStats, bias_by_passes, budget_co
                        timing_trusted)
 from ..pipeline.budget import BUDGET_RETRIES, budget_label, missed_budget, off_budget_text, tolerance_text
 from ..pipeline.config import PASS_PARAMETER
-from .bias import BiasTables
+from .bias import BiasTables, mean_biased
 from .veach import VeachSection
 from .verdicts import SEPARATION, UNRELIABLE, best_of, bias_verdict
 from .spectrum import fit_slope, slope_cell, slope_note
@@ -390,14 +390,18 @@ class SectionTables(VeachSection, BiasTables):
 
     def left_out_why(self, p, rect=None) -> str:
         """Why point ``p`` is left out of a "most efficient" verdict (in region ``rect``, or over
-        the image): "biased here" where its bias^2 is resolved there, else "it ignores part of the
-        scene" where it is marked so ("ignores media"); "" for a strategy that may be named."""
+        the image): "biased here" where its bias^2 is resolved there, or over the image where its
+        image mean is off the reference's (``bias.mean_biased``: a bias^2 spread thin over the
+        pixels can stay unresolved while the mean shows it), else "it ignores part of the scene"
+        where it is marked so ("ignores media"); "" for a strategy that may be named."""
         if rect is None:           # (getattr: a point that carries no bias estimate has none resolved)
             bias2, se = getattr(p, "rel_bias2", math.nan), getattr(p, "rel_bias2_se", math.nan)
         else:
             _, bias2, se = self.region_bias(p, self.references[p.scene], rect)
         if math.isfinite(bias2) and bias_verdict(bias2, se, p.seeds)[0] == "biased":
             return "biased here"
+        if rect is None and mean_biased(p):
+            return "biased here (its image mean)"
         return "it ignores part of the scene" if (p.scene, getattr(p, "strategy", None)) in self.marks else ""
 
     def left_out_in(self, scene, rect, points: dict) -> dict:
