@@ -77,21 +77,27 @@ def reference(scene, path, chunks, spp, depth):
     return stack.mean(0), stack.var(0, ddof=1) / len(stack)
 
 
-def through_mask(scene, shape_id, res, sub=4) -> np.ndarray:
-    """Pixels whose sensor rays (sub x sub per pixel) hit the shape ``shape_id`` first."""
-    shapes = [s for s in scene.shapes() if s.id() == shape_id]
-    if not shapes:
-        sys.exit(f"vcm_caustic_diagnosis: the scene has no shape with id '{shape_id}'")
+def pixel_rays(scene, res, sub=4):
+    """The sensor's rays through sub x sub points of every pixel of a res x res film: one batch
+    (a ray per pixel, in row-major order) per point."""
     ys, xs = np.meshgrid(np.arange(res), np.arange(res), indexing="ij")
-    hit = np.zeros((res, res), dtype=bool)
     sensor = scene.sensors()[0]
     for a in range(sub):
         for b in range(sub):
             pos = mi.Point2f(mi.Float((xs.ravel() + (a + 0.5) / sub) / res),
                              mi.Float((ys.ravel() + (b + 0.5) / sub) / res))
-            ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5))
-            si = scene.ray_intersect(ray)
-            hit |= np.array(si.is_valid() & (si.shape == mi.ShapePtr(shapes[0]))).reshape(res, res)
+            yield sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5))[0]
+
+
+def through_mask(scene, shape_id, res, sub=4) -> np.ndarray:
+    """Pixels whose sensor rays (sub x sub per pixel) hit the shape ``shape_id`` first."""
+    shapes = [s for s in scene.shapes() if s.id() == shape_id]
+    if not shapes:
+        sys.exit(f"vcm_caustic_diagnosis: the scene has no shape with id '{shape_id}'")
+    hit = np.zeros((res, res), dtype=bool)
+    for ray in pixel_rays(scene, res, sub):
+        si = scene.ray_intersect(ray)
+        hit |= np.array(si.is_valid() & (si.shape == mi.ShapePtr(shapes[0]))).reshape(res, res)
     return hit
 
 

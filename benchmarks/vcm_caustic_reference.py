@@ -44,7 +44,7 @@ import mitsuba as mi
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from vcm_caustic_diagnosis import ROOT, synced_render, through_mask  # noqa: E402
+from vcm_caustic_diagnosis import ROOT, pixel_rays, synced_render, through_mask  # noqa: E402
 
 from mitsuba_lab.images import read_exr  # noqa: E402
 from mitsuba_lab.metrics import fraction_rect_to_pixels  # noqa: E402
@@ -66,23 +66,17 @@ def reflection_mask(scene, shape_id, res, sub=4) -> np.ndarray:
     """Pixels whose sensor rays (sub x sub per pixel) hit ``shape_id`` and, mirrored there, hit any
     other shape than the fog box (the sphere light or its tube): the light's reflection in the glass, a
     tiny image of high radiance that every estimator finds only by chance (all variance, the same light)."""
-    ys, xs = np.meshgrid(np.arange(res), np.arange(res), indexing="ij")
     out = np.zeros((res, res), dtype=bool)
-    sensor = scene.sensors()[0]
     keep = [s for s in scene.shapes() if s.id() in (shape_id, "fog_box", "floor")]
-    for a in range(sub):
-        for b in range(sub):
-            pos = mi.Point2f(mi.Float((xs.ravel() + (a + 0.5) / sub) / res),
-                             mi.Float((ys.ravel() + (b + 0.5) / sub) / res))
-            ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5))
-            si = scene.ray_intersect(ray)
-            on = si.is_valid() & (si.shape == mi.ShapePtr(keep[[s.id() for s in keep].index(shape_id)]))
-            d = mi.reflect(-ray.d, si.n)
-            hit = scene.ray_intersect(si.spawn_ray(d))
-            other = hit.is_valid()
-            for s in keep:
-                other &= hit.shape != mi.ShapePtr(s)
-            out |= np.array(on & other).reshape(res, res)
+    for ray in pixel_rays(scene, res, sub):
+        si = scene.ray_intersect(ray)
+        on = si.is_valid() & (si.shape == mi.ShapePtr(keep[[s.id() for s in keep].index(shape_id)]))
+        d = mi.reflect(-ray.d, si.n)
+        hit = scene.ray_intersect(si.spawn_ray(d))
+        other = hit.is_valid()
+        for s in keep:
+            other &= hit.shape != mi.ShapePtr(s)
+        out |= np.array(on & other).reshape(res, res)
     return out
 
 
