@@ -73,7 +73,7 @@ from mitsuba_lab.plugins.integrators.common.direct import spectrum_or_zero
 from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
 from mitsuba_lab.plugins.integrators.common.subpath_media import (
     _AUX_KEY, RngSampler, Sides, flight, medium_vertex, path_channel,
-    phase_reverse_pdf, sigma_t_channel, vertex_eval)
+    phase_reverse_pdf, sigma_t_channel, start_medium, vertex_eval)
 from mitsuba_lab.plugins.integrators.common.subpath_media import transmittance as through
 
 from . import splats
@@ -98,7 +98,7 @@ def trace_light(tracer, st, block, vertices, store_lanes):
     aux_rng = mi.PCG32(count)
     aux_rng.seed(mi.sample_tea_64(index, dr.opaque(mi.UInt32, (tracer.channel_key ^ _AUX_KEY) & 0xFFFFFFFF)), index)
     aux = RngSampler(aux_rng)
-    medium = dr.gather(mi.MediumPtr, tracer.emitter_media, st.emitter_index)   # the emitter's (emitter_media)
+    medium, extinguished = start_medium(tracer.emitter_media, st.emitter_index, infinite)
     phase_ctx = mi.PhaseFunctionContext(None, mi.TransportMode.Importance)
     tracing = Technique.LIGHT in w.techniques and tracer.reaches_sensor
 
@@ -123,9 +123,7 @@ def trace_light(tracer, st, block, vertices, store_lanes):
 
     # ---------------- x_1, x_2, ..: the light subpath ----------------
     beta = mi.Spectrum(st.ray_weight) * st.sel_weight
-    # an emitter at infinity in a medium (an environment in the sensor's unbounded fog): its light
-    # crosses an infinite stretch of it, T = 0
-    beta[infinite & (medium != None)] = 0.0  # noqa: E711 (Dr.Jit pointer test)
+    beta[extinguished] = 0.0
     beta_max0 = dr.max(mi.unpolarized_spectrum(beta))
     max_depth = dr.opaque(mi.UInt32, tracer.max_depth if tracer.max_depth > 0 else 0xFFFFFFFF)
     rr_depth = dr.opaque(mi.UInt32, tracer.rr_depth)

@@ -106,6 +106,15 @@ def emitter_media(scene: mi.Scene, sensor: mi.Sensor, floor: float, plugin: str)
     return media
 
 
+def start_medium(emitter_media, emitter_index, infinite):
+    """(medium, extinguished) of light subpaths (photons) from emitter ``emitter_index``: the
+    medium it sits in (``emitter_media``'s, gathered), and whether they carry nothing: an emitter
+    at infinity in a medium (an environment in the sensor's unbounded fog), whose light crosses an
+    infinite stretch of it, T = 0."""
+    medium = dr.gather(mi.MediumPtr, emitter_media, emitter_index)
+    return medium, infinite & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+
+
 @dr.syntax
 def first_transition(scene: mi.Scene, ray: mi.Ray3f, floor: float) -> tuple[mi.Bool, mi.MediumPtr]:
     """(found, medium): the medium on ``ray``'s side of the first medium transition it meets,

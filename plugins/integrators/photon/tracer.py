@@ -45,7 +45,7 @@ from mitsuba_lab.plugins.integrators.common import spawn, spectral
 from mitsuba_lab.plugins.integrators.common.adjoint import adjoint_correction
 from mitsuba_lab.plugins.integrators.common.roulette import russian_roulette
 from mitsuba_lab.plugins.integrators.common.subpath_media import flight
-from mitsuba_lab.plugins.integrators.common.subpath_media import RngSampler, medium_vertex, path_channel
+from mitsuba_lab.plugins.integrators.common.subpath_media import RngSampler, medium_vertex, path_channel, start_medium
 
 from .records import PhotonRecords
 
@@ -221,10 +221,9 @@ class PhotonTracer:
         active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_segments > 0)
         media = self.media
         if dr.hint(media, mode="scalar"):
-            medium = dr.gather(mi.MediumPtr, self.emitter_media, emitter_index)
-            # an emitter at infinity in a medium (an environment in the sensor's unbounded fog): its
-            # light crosses an infinite stretch of it, T = 0 (as lab_bdpt's light subpaths)
-            active &= ~(mi.has_flag(emitter.flags(), mi.EmitterFlags.Infinite) & (medium != None))  # noqa: E711
+            medium, extinguished = start_medium(self.emitter_media, emitter_index,
+                                                mi.has_flag(emitter.flags(), mi.EmitterFlags.Infinite))
+            active &= ~extinguished
             channel = path_channel(index, pass_seed ^ _CHANNEL_KEY)
             aux = mi.PCG32(count)
             aux.seed(mi.sample_tea_64(index, seed ^ _TRACKING_KEY), index)
