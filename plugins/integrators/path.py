@@ -275,8 +275,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                                            | in_medium_nee)
                     L = media.emitter_sampling(scene, sampler, bsdf_ctx, phase_ctx, it, si, bsdf, mei, phase,
                                                scattered, medium, channel, beta, L, estimator.sample_weight,
-                                               n_L, active_em, floor, tracking, ea_here, nee_in_media, grid,
-                                               unbounded=True)
+                                               n_L, active_em, floor, tracking, ea_here, nee_in_media, grid)
                     n_shadow += dr.select(active_em, n_L, 0)
                 # null boundaries are crossed whatever the depth; real vertices scatter below max_depth
                 bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), surface)

@@ -281,7 +281,7 @@ def unbounded_transmittance(medium, ray: mi.Ray3f, active) -> mi.UnpolarizedSpec
 
 def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, scattered, medium, channel,
                      beta, L, sample_weight, n_L: int, active, floor: float, tracking_kind: str = "ratio",
-                     equiangular=None, nee: bool = True, grid=None, unbounded: bool = False):
+                     equiangular=None, nee: bool = True, grid=None):
     """Next-event estimation at a vertex of a path in a scene with media: the surface ``si``
     (its ``bsdf``) or, where ``scattered``, the medium point ``mei`` (its ``phase`` function);
     ``it`` is the vertex as an ``Interaction3f``, ``medium`` the medium the path arrived in.
@@ -291,11 +291,10 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
     null boundaries pass light, other surfaces block it), f and p_B the BSDF's (with its cosine)
     or the phase function's, and w = ``sample_weight(Densities)`` (direct.py's convention).
     ``equiangular``: None, or the ``Equiangular`` state of the path's vertex, whose medium
-    vertices then weigh their samples against equi-angular sampling too. ``unbounded``: an emitter
-    at infinity is infinitely far (``transmittance``'s ``unbounded``: none of its light crosses
-    unbounded fog) rather than at Mitsuba's stand-in distance, 2 bounding-sphere radii, where
-    ``volpath`` leaves it (every lab plugin passes True: an invisible speck far away that grows
-    the bounding sphere must not change the image)."""
+    vertices then weigh their samples against equi-angular sampling too. An emitter at infinity
+    is infinitely far (``transmittance``'s ``unbounded``: none of its light crosses unbounded fog),
+    not at Mitsuba's stand-in distance, 2 bounding-sphere radii, where ``volpath`` leaves it: an
+    invisible speck far away that grows the bounding sphere must not change the image."""
     from mitsuba_lab.plugins.integrators.common.direct import emitter_sample_contribution
     from mitsuba_lab.plugins.integrators.estimator import Densities
 
@@ -304,7 +303,7 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
         sampled = active & (ds.pdf != 0)
         # a surface at a medium boundary sends the shadow ray into the medium on its side
         start = dr.select(~scattered & si.is_medium_transition(), si.target_medium(ds.d), medium)
-        infinite = (mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite) & sampled) if unbounded else None
+        infinite = mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite) & sampled
         T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled, tracking_kind, grid,
                           unbounded=infinite)
         f_bsdf, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), sampled & ~scattered)
