@@ -25,7 +25,6 @@ import difflib
 import math
 from dataclasses import replace
 
-
 from .param_types import Param, ParameterError, _int_at_least, _override, _show  # noqa: F401 (re-exported)
 
 
@@ -152,9 +151,7 @@ LAB_PHOTON = (
 
 
 def _techniques():
-    """``integrators.bdpt.techniques``, which parses lab_bdpt's ``strategies`` and
-    ``only_strategy`` (imported when first needed: this module imports only ``param_types`` of
-    the package when it loads)."""
+    """``integrators.bdpt.techniques`` (parses ``strategies``, ``only_strategy``; imported when first needed)."""
     from mitsuba_lab.plugins.integrators.bdpt import techniques
 
     return techniques
@@ -183,6 +180,9 @@ LAB_BDPT = (
           "(Veach's per-strategy images); empty = every strategy",
           check=lambda v: v == "" or _techniques().Strategy.parse(v) is not None,
           expected="empty or 's,t' with s >= 0, t >= 1 and s + t >= 2"),
+    Param("equiangular", float, 0.5, "share of the camera subpaths' flights in a homogeneous medium drawn equi-angularly "
+          "towards a light (Kulla-Fajardo; the rest free flights, 0: all), their density in every MIS weight; off with "
+          "more than 8 emitters", check=lambda v: 0.0 <= v <= 1.0, expected="a number in [0, 1]"),
 ) + tuple(p for p in _media("distance") if p.name in ("majorants", "majorant_resolution")) + AIM + (
     Param("count_rays", bool, True, "count camera, extension, shadow (NEE), connection, light-subpath and sensor "
           "(light tracing's) rays (ray_counts())"),
@@ -281,7 +281,7 @@ LAB_VCM = (
           "its light subpath (lab_bdpt), or one, to one of them picked uniformly and counted n times, the MIS "
           "weights counting a connection as 1 / (mean vertices per light subpath)", choices=("all", "one")),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
-                                            "max_vertices")) + _vcm_aim() + (
+                                            "max_vertices", "equiangular")) + _vcm_aim() + (
     replace(LAB_BDPT[-1], doc="count rays as lab_bdpt does, and under 'merge' the light vertices merging's grid "
                               "lookups read (ray_counts())"),
 )

@@ -2,13 +2,19 @@
 homogeneous scene (fog behind a null box at sigma_t 2.5, a point light inside fog, a chromatic
 medium inside glass, fog_shafts.xml at 24 x 24) and every heterogeneous case (a spot into smoke in rgb with global
 majorants, a point light inside the plume in mono with the majorant grid). Same tolerance and
-seeds as the suite's cases.
+seeds as the suite's cases. lab_bdpt's equi-angular camera flights (its default ``equiangular``) pass the
+block test against volpathmis on ``ALL_EQUIANGULAR``; power: on fog_shafts, light subpaths whose reverse
+densities leave the mixture out (free flights, r = 1) fail it.
 
     PYTHONPATH=src .venv/bin/python -m pytest -q -s -p no:cacheprovider benchmarks/agreement/test_bdpt_media_matrix.py
 """
 import pytest
 
-from test_bdpt_media import ALL_HETEROGENEOUS, ALL_HOMOGENEOUS, check_heterogeneous, check_homogeneous
+from agreement import SEEDS_LAB, block_test, renders
+from test_bdpt_media import (ALL_EQUIANGULAR, ALL_HETEROGENEOUS, ALL_HOMOGENEOUS, DEPTH, SPP, check_equiangular,
+                             check_heterogeneous, check_homogeneous, load, volpathmis_stack)
+from mitsuba_lab.plugins.integrators.bdpt import camera_flight
+from mitsuba_lab.scene import make_integrator
 
 pytestmark = pytest.mark.slow
 
@@ -21,3 +27,19 @@ def test_lab_bdpt_agrees_with_volpath(name):
 @pytest.mark.parametrize("kind, name, params", ALL_HETEROGENEOUS)
 def test_lab_bdpt_agrees_with_volpath_in_heterogeneous_media(kind, name, params):
     check_heterogeneous(kind, name, params)
+
+
+@pytest.mark.parametrize("name", ALL_EQUIANGULAR)
+def test_equiangular_camera_flights_pass_the_block_test(name):
+    check_equiangular(name)
+
+
+def test_the_block_test_sees_light_subpaths_without_the_mixture(monkeypatch):
+    """Power: the light side's densities of the camera's direction from free flights alone (the
+    mixture's q dropped there; the camera side still mixes) bias fog_shafts past the bound."""
+    monkeypatch.setattr(camera_flight, "mixture", lambda tracer: None)
+    scene = load("fog_shafts.xml")
+    lab = renders(scene, make_integrator("lab_bdpt", {"max_depth": DEPTH}), SPP, SEEDS_LAB)
+    result = block_test(lab, volpathmis_stack(scene))
+    print(f"light side without q: {result.summary()}")
+    assert result.failing

@@ -33,7 +33,8 @@ import mitsuba as mi
 import backend
 import media_scenes
 import mitsuba_lab
-from agreement import SEEDS_LAB, SEEDS_REF, Z_BOUND, assert_agrees, renders, scene_path, z_scores
+from agreement import (SEEDS_LAB, SEEDS_REF, Z_BOUND, assert_agrees, assert_blocks_agree, block_test, renders,
+                       scene_path, z_scores)
 from mitsuba_lab.scene import SceneTraits, load_scene, make_integrator, strategy_applicability
 
 pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier
@@ -113,6 +114,32 @@ def test_strategy_subsets_agree_with_volpath(strategies, name):
     light seen directly through the fog box) and the camera's strategies alone (hit + NEE)."""
     scene = mi.load_dict(SCENES[name]())
     assert_agrees(bdpt(scene, strategies=strategies), reference(scene), f"lab_bdpt {strategies} on {name}")
+
+
+#: Equi-angular camera flights (``bdpt/camera_flight.py``, the default ``equiangular``) against volpathmis by the
+#: block test: a chromatic medium in glass (each segment inside the ball starts at a refraction, so it mixes,
+#: aiming at the area light's centre); the full list, with fog_shafts.xml (a point light behind a louvre, its
+#: flights' first pieces ending at the window's null pane) and its power proof, in
+#: benchmarks/agreement/test_bdpt_media_matrix.py.
+ALL_EQUIANGULAR = ["chromatic_in_glass", "fog_shafts.xml"]
+EQUIANGULAR = ALL_EQUIANGULAR[:1]
+
+
+def volpathmis_stack(scene, spp=SPP):
+    return renders(scene, make_integrator("volpathmis", {"max_depth": DEPTH}), spp, SEEDS_REF)
+
+
+@pytest.mark.parametrize("name", EQUIANGULAR)
+def test_equiangular_camera_flights_pass_the_block_test(name):
+    check_equiangular(name)
+
+
+def check_equiangular(name, **params):
+    """The block test (tests/agreement.py: every 6 x 6 block's grey mean, Sidak bound at family-wise
+    alpha 0.01) of lab_bdpt at its defaults (``params``: others) against volpathmis, 16 seeds a side."""
+    scene = load(name)
+    lab = bdpt(scene, **params) if params or name not in _stacks else _stacks[name][0]
+    return assert_blocks_agree(lab, volpathmis_stack(scene), f"lab_bdpt {params or 'defaults'} on {name}")
 
 
 ALL_HETEROGENEOUS = [("ad_rgb", "spot_into_smoke", {}), ("ad_mono", "point_in_plume", {"majorants": "grid"})]

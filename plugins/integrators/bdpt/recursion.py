@@ -191,7 +191,8 @@ class Recursion:
         dvcm = select(delta, 0.0 * pdf_cam_W, self._m(self.light_paths / pdf_cam_W))
         return SubpathMis(dvcm, 0.0 * pdf_cam_W, 1.0, 0.0 * pdf_cam_W)
 
-    def after_hit(self, state: SubpathMis, dist2, cos_in, transmittance=None) -> SubpathMis:
+    def after_hit(self, state: SubpathMis, dist2, cos_in, transmittance=None, forward=None,
+                  backward=None) -> SubpathMis:
         """State at a new vertex: ``dist2`` the squared segment length, ``cos_in`` |cos| at the new
         vertex (both 1 on a segment to or from an infinite emitter).
 
@@ -202,13 +203,26 @@ class Recursion:
         probabilities, and a mask's null-lobe probability, in the path's sampling channel). T
         enters ``dvcm`` (1 / p_A) only: ``dvc`` and ``dvm`` hold ratios of a vertex's reverse
         density to the next vertex's forward density, which cross the same segment and share
-        its T (it cancels); the T of a connection's own segment is passed with its cosines."""
+        its T (it cancels); the T of a connection's own segment is passed with its cosines.
+
+        Where the two directions sample the segment with different distance densities (lab_bdpt's
+        camera subpaths mix in equi-angular sampling, ``camera_flight``), ``forward`` is the
+        factor by which this subpath's distance density of the new vertex exceeds g T, and
+        ``backward`` the factor of the other direction's density of the previous vertex over the
+        segment: the new vertex's p_A gains ``forward``, the previous vertex's reverse density
+        ``backward``, so ``dvc`` and ``dvm`` (their ratio) gain backward / forward."""
         inv_cos = self._m(1.0 / cos_in)
         pending = self._pending_after_hit(state.pending, inv_cos)
         dvcm = state.dvcm * self._m(dist2) * inv_cos
         if transmittance is not None:
             dvcm = dvcm * self._m(1.0 / transmittance)
-        return SubpathMis(dvcm, state.dvc * inv_cos, state.first, state.dvm * inv_cos, state.merges, pending)
+        dvc, dvm = state.dvc * inv_cos, state.dvm * inv_cos
+        if forward is not None or backward is not None:
+            ratio = self._m((1.0 if backward is None else backward) / (1.0 if forward is None else forward))
+            if forward is not None:
+                dvcm = dvcm * self._m(1.0 / forward)
+            dvc, dvm, pending = dvc * ratio, dvm * ratio, pending * ratio
+        return SubpathMis(dvcm, dvc, state.first, dvm, state.merges, pending)
 
     def _scatter(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta, start_kind, merges=1.0, medium=None):
         """Shared by both sides; only the kind of the subpath's first ratio differs (``merges``:

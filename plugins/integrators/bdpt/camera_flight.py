@@ -1,0 +1,239 @@
+"""Equi-angular sampling in lab_bdpt's camera subpaths: a one-sample mixture of distance densities
+whose value the MIS weights can evaluate for any segment, from either end of a path.
+
+Along the first flight of a camera-subpath segment (from the sensor or a vertex, up to the next
+surface, in a homogeneous medium) the distance t is drawn, with probability q (``equiangular``),
+equi-angularly (Kulla and Fajardo 2012) towards a fixed point c_e of an emitter e picked with the
+scene's emitter-sampling probability P(e) (a point or spot light's position, an area light's
+bounding-box centre; an emitter at infinity has none, and its share draws a free flight), and else
+by a free flight. The equi-angular density is taken over the half-line t >= 0, not up to the
+surface, so that it depends only on the flight's origin o, its direction and c_e:
+
+    p_eq(t; c) = D / ((pi/2 - theta_a) (D^2 + (t - t_c)^2)),   theta_a = atan2(-t_c, D),
+
+t_c the foot of c's perpendicular on the line and D its distance. A draw beyond the surface at
+t_s means the surface is reached. Per unit length at a collision, and as a probability at the
+surface, in the path's sampling channel c (sigma = sigma_t,c):
+
+    p(t)   = q sum_e P(e) p_eq(t; c_e)       + (1 - q F) sigma exp(-sigma t)
+    P(t_s) = q sum_e P(e) (1 - F_eq(t_s; c_e)) + (1 - q F) exp(-sigma t_s)
+
+(F the finite emitters' total P; the throughput carries T sigma_s / p, or T / P). The MIS weights
+(``recursion.Recursion.after_hit``'s ``forward``, ``backward``; the connecting segments' cosines)
+need this density only through its ratio r to the free flight's, sigma exp(-sigma t) or
+exp(-sigma t), which ``ratio`` evaluates from the segment's ends: the camera subpath for the
+segments it samples, the light subpath for the camera's density of the same segments walked the
+other way (each light vertex's reverse density), and every connection, NEE and light-tracing join
+for its own segment. A segment passing null surfaces (a window's pane) mixes only on its first
+flight, to the first surface (``first_surface``), whose end both sides find; later flights are
+free flights (r = 1). Heterogeneous media keep delta tracking (r = 1). Scenes with more than
+``MAX_EMITTERS`` emitters, or with q = 0, use free flights only, the same images as before.
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+
+from mitsuba_lab.plugins.integrators.common import media
+
+#: More emitters than this: no equi-angular sampling (its density sums over them at every segment).
+MAX_EMITTERS = 8
+
+
+def _centre(emitter):
+    """The fixed point an equi-angular flight aims at for ``emitter``, or None (at infinity)."""
+    if mi.has_flag(emitter.flags(), mi.EmitterFlags.Infinite):
+        return None
+    shape = emitter.get_shape()
+    if shape is not None:
+        c = shape.bbox().center()
+        return (float(c[0]), float(c[1]), float(c[2]))
+    it = dr.zeros(mi.Interaction3f, 1)
+    ds, _ = emitter.sample_direction(it, mi.Point2f(0.5, 0.5))
+    return (float(ds.p.x[0]), float(ds.p.y[0]), float(ds.p.z[0]))
+
+
+class EquiangularMixture:
+    """The mixture for one scene: ``q``, and per emitter (in ``scene.emitters()`` order) its
+    sampling probability and fixed point (None at infinity). ``on``: whether any camera flight
+    mixes (q > 0, at most ``MAX_EMITTERS`` emitters, one of them finite); ``passable``: the scene
+    has null surfaces, which a segment's pieces may cross (``first_surface`` casts a ray)."""
+
+    def __init__(self, scene: mi.Scene, q: float):
+        emitters = scene.emitters()
+        self.q = float(q)
+        self.emitters = []
+        if self.q > 0 and 0 < len(emitters) <= MAX_EMITTERS:
+            for i, e in enumerate(emitters):
+                p = float(scene.pdf_emitter(mi.UInt32(i))[0])
+                self.emitters.append((p, _centre(e)))
+        self.finite = sum(p for p, c in self.emitters if c is not None)
+        self.on = self.q > 0 and self.finite > 0
+        self.passable = any(mi.has_flag(s.bsdf().flags(), mi.BSDFFlags.Null) for s in scene.shapes()
+                            if s.bsdf() is not None)
+
+    @staticmethod
+    def off() -> "EquiangularMixture":
+        mix = EquiangularMixture.__new__(EquiangularMixture)
+        mix.q, mix.emitters, mix.finite, mix.on, mix.passable = 0.0, [], 0.0, False, False
+        return mix
+
+    def _aims(self):
+        """(P(e), fixed point) of the finite emitters."""
+        return [(p, mi.Point3f(*c)) for p, c in self.emitters if c is not None]
+
+
+def _angles(o, d, c):
+    """(t_c, D, theta_a, span) of the fixed point ``c`` seen from the half-line o + t d."""
+    to_c = c - o
+    t_c = dr.dot(to_c, d)
+    D = dr.maximum(dr.norm(to_c - t_c * d), 1e-6 * (1.0 + dr.norm(to_c)))
+    theta_a = dr.atan2(-t_c, D)
+    return t_c, D, theta_a, 0.5 * math.pi - theta_a
+
+
+def eq_pdf(o, d, c, t):
+    """p_eq(t; c) over the half-line (per unit length)."""
+    t_c, D, _, span = _angles(o, d, c)
+    return D / (span * (dr.square(D) + dr.square(t - t_c)))
+
+
+def eq_survival(o, d, c, t):
+    """1 - F_eq(t; c): the probability that an equi-angular draw lies beyond t."""
+    t_c, D, theta_a, span = _angles(o, d, c)
+    return dr.clip((0.5 * math.pi - dr.atan2(t - t_c, D)) / span, 0.0, 1.0)
+
+
+def eq_sample(o, d, c, u):
+    """An equi-angular distance over the half-line (inf where the angle rounds past pi/2)."""
+    t_c, D, theta_a, span = _angles(o, d, c)
+    # t = D (tan theta - tan theta_a), written so that it is accurate near t = 0 and turns to
+    # inf where theta rounds to pi/2 or past it (cos <= 0)
+    delta = u * span
+    cos_theta = dr.cos(theta_a + delta)
+    t = D * dr.sin(delta) / (cos_theta * dr.cos(theta_a))
+    return dr.select(cos_theta > 0, dr.maximum(t, 0.0), dr.inf)
+
+
+def _sigma(medium, p, wavelengths, channel, active):
+    """(sigma_s, sigma_t, sigma_t in ``channel``) of the homogeneous ``medium``."""
+    mei = dr.zeros(mi.MediumInteraction3f)
+    mei.p, mei.wavelengths = p, wavelengths
+    sigma_s, _, sigma_t = medium.get_scattering_coefficients(mei, active)
+    return sigma_s, sigma_t, media.channel_value(sigma_t, channel)
+
+
+def _mixed(mix, o, d, t, collides, sigma_c):
+    """(mixture density, free flight's) of reaching distance t (a collision there, or the
+    surface at t), both per unit length at a collision."""
+    free = dr.select(collides, sigma_c, 1.0) * dr.exp(-sigma_c * t)
+    eq = mi.Float(0.0)
+    for p, c in mix._aims():
+        eq += p * dr.select(collides, eq_pdf(o, d, c, t), eq_survival(o, d, c, t))
+    return mix.q * eq + (1.0 - mix.q * mix.finite) * free, free
+
+
+def ratio(mix, medium, o, x, collides, wavelengths, channel, active):
+    """r: the mixture's density of the segment from ``o`` to ``x`` (a collision at x where
+    ``collides``, else x reached: a surface, an emitter, a null surface crossed) over the free
+    flight's, in ``medium`` (1 where it is no homogeneous medium, or the mixture is off)."""
+    if not mix.on:
+        return mi.Float(1.0)
+    use = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+    use &= medium.is_homogeneous()
+    to_x = x - o
+    t = dr.norm(to_x)
+    d = to_x / t
+    _, _, sigma_c = _sigma(medium, o, wavelengths, channel, use)
+    p, free = _mixed(mix, o, d, t, collides, sigma_c)
+    r = p / free
+    return dr.select(use & (free > 0) & (t > 0) & dr.isfinite(r), r, 1.0)
+
+
+def first_surface(scene, mix, o, n, target, floor, active):
+    """(end, crossed): where the first flight from ``o`` (normal ``n``; 0 in a medium) towards
+    ``target`` ends: the first surface before ``target`` where the scene has null surfaces
+    (``crossed``), else ``target``."""
+    if not (mix.on and mix.passable):
+        return target, dr.zeros(mi.Bool, dr.width(active))
+    from mitsuba_lab.plugins.integrators.common import spawn
+
+    it = dr.zeros(mi.Interaction3f)
+    it.p, it.n = o, n
+    ray = spawn.spawn_ray_to(it, target, floor)
+    pi = scene.ray_intersect_preliminary(ray, coherent=False, active=active)
+    crossed = active & pi.is_valid()
+    return dr.select(crossed, ray(pi.t), target), crossed
+
+
+def flight(mix, medium, ray: mi.Ray3f, t_max, u, u_pick, channel, active, exact):
+    """``subpath_media.flight``'s (mei, scattered, weight, T_c) with, in the ``active`` lanes (a
+    homogeneous medium, a segment's first flight), the mixture: ``u_pick`` < q picks an emitter
+    by P(e) and draws t equi-angularly towards its point with ``u``, else (or for an emitter at
+    infinity) a free flight with ``u``. The weight is T sigma_s / p(t) at a collision, T / P(t_max)
+    at the surface; T_c stays the free flight's (the weights' g T; ``ratio`` gives the rest)."""
+    mei_x, scattered_x, weight_x, T_c_x = exact
+    sigma_s, sigma_t, sigma_c = _sigma(medium, ray.o, ray.wavelengths, channel, active)
+    t = -dr.log(1.0 - u) / sigma_c
+    pick = u_pick < mix.q
+    u_e = u_pick / mix.q
+    low = 0.0
+    for p, c in mix.emitters:
+        here = pick & (u_e >= low) & (u_e < low + p)
+        if c is not None:
+            t = dr.select(here, eq_sample(ray.o, ray.d, mi.Point3f(*c), u), t)
+        low += p
+    scattered = active & (t < t_max)
+    t_end = dr.select(scattered, t, t_max)
+    p, _ = _mixed(mix, ray.o, ray.d, t_end, scattered, sigma_c)
+    ok = active & (p > 0) & dr.isfinite(t_end)
+    scattered &= ok
+    tr = dr.exp(-sigma_t * t_end)
+    weight = dr.select(scattered, tr * sigma_s, tr) / dr.select(ok, p, 1.0)
+    weight = dr.select(ok, mi.UnpolarizedSpectrum(weight), 0.0)
+
+    mei = dr.zeros(mi.MediumInteraction3f)
+    mei.t = dr.select(scattered, t_end, dr.inf)
+    mei.p = ray(t_end)
+    mei.wi = -ray.d
+    mei.sh_frame = mi.Frame3f(mei.wi)
+    mei.time, mei.wavelengths, mei.medium = ray.time, ray.wavelengths, medium
+    mei.mint = 0.0
+    mei.sigma_s, mei.sigma_t = sigma_s, sigma_t
+    mei.sigma_n = dr.zeros(mi.Spectrum)
+    mei.combined_extinction = sigma_t
+    mei_x[active] = mei
+    T_c = dr.select(ok, dr.exp(-sigma_c * t_end), 0.0)
+    return (mei_x, dr.select(active, scattered, scattered_x), dr.select(active, weight, weight_x),
+            dr.select(active, T_c, T_c_x))
+
+
+def mixture(tracer):
+    """The light tracer's mixture where it is on, else None."""
+    mix = getattr(tracer, "equiangular", None)
+    return mix if mix is not None and mix.on else None
+
+
+def segment_ratio(scene, mix, medium, x, target, collides, floor, channel, active):
+    """``ratio`` of the segment a camera subpath would sample from the vertex ``x`` (an
+    interaction: a medium vertex has normal 0) to ``target`` (a collision there where
+    ``collides``): of its first flight, to the first surface on the way (``first_surface``)."""
+    if mix is None or not mix.on:
+        return 1.0
+    active = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test; no ray where r = 1 anyway)
+    active &= medium.is_homogeneous()
+    end, crossed = first_surface(scene, mix, x.p, x.n, target, floor, active)
+    return ratio(mix, medium, x.p, end, collides & ~crossed, x.wavelengths, channel, active)
+
+
+def from_sensor(scene, mix, tracer, sensor_p, target, collides, wavelengths, channel, active):
+    """``segment_ratio`` of the camera's first segment, from the sensor's point ``sensor_p``
+    to ``target``, in the sensor's medium (light tracing's joins)."""
+    if mix is None:
+        return 1.0
+    it = dr.zeros(mi.Interaction3f)
+    it.p = sensor_p
+    it.wavelengths = wavelengths
+    return segment_ratio(scene, mix, tracer.sensor_medium, it, target, collides, tracer.floor, channel, active)

@@ -1,0 +1,235 @@
+"""lab_bdpt's equi-angular camera flights (``bdpt/camera_flight.py``) in the MIS weights.
+
+The camera subpaths draw a segment's distance from a mixture (equi-angular towards the lights'
+points with probability q, else a free flight), so a segment's density differs by its direction:
+the camera's is r times the light's g T (r: ``camera_flight.ratio``). The recursion takes r as
+``after_hit``'s ``forward`` on the camera side, ``backward`` on the light side, and on each
+connecting segment's light-end cosine (the camera's density of the light vertex).
+
+1. Random paths (test_bdpt_weights.py's, k = 1 .. 7, 4000 a length, medium vertices, a T on every
+   segment) with a random r per segment (1e-2 .. 1e2): the recursion equals the brute force over
+   p_camera = p_W g T r / d^2 within RTOL (1e-9, float64) and the weights sum to 1.
+2. The same paths' vertices placed in a real homogeneous fog (sigma_t 0.3, a point light and an
+   area light, q = 0.5), every r and T evaluated by the module in float32 from the vertices, as
+   the subpaths evaluate them: the weights sum to 1 within 1e-4.
+Power: q dropped on the light side (its reverse densities from free flights, r = 1) or the
+camera's own r left out of a connection misses the sum by far more than its tolerance.
+3. The flight's sampled distances follow the density ``ratio`` reports: a chi-square test of
+   200 000 flights' outcomes (20 distance bins and the surface) against the mixture's
+   probabilities, p > 1e-4; power: the same test against the free flight's probabilities fails.
+"""
+import numpy as np
+import pytest
+
+import drjit as dr
+import mitsuba as mi
+from test_bdpt_weights import N, RTOL, _max_rel, random_paths
+from mitsuba_lab.plugins.integrators.bdpt import camera_flight
+from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, brute_force_weights, feasible
+
+TOL = 1e-4
+
+
+def mixture_weights(g, mis, r_cam, r_light=None, r_connect=None):
+    """Every strategy's weight by the recursion with the camera's density ratio ``r_cam[i]`` of
+    segment i (x_i x_{i+1}) walked from x_{i+1}; ``r_light``: the light side's value of it
+    (default the same), ``r_connect``: the connections' (default the same)."""
+    k = g["d2"].shape[0]
+    r_light = r_cam if r_light is None else r_light
+    r_connect = r_cam if r_connect is None else r_connect
+    d2, cl, cc, fw, rv, delta, T = g["d2"], g["cos_l"], g["cos_c"], g["to_cam"], g["to_light"], g["delta"], g["T"]
+    pdf_emit = g["pos"] * fw[0]
+    light = {}
+    state = mis.start_light(pdf_emit, g["nee"], cc[0], delta[0])
+    for i in range(1, k):
+        state = mis.after_hit(state, d2[i - 1], cl[i], T[i - 1], backward=r_light[i - 1])
+        light[i] = state
+        state = mis.scatter_light(state, fw[i], rv[i], cc[i], delta[i])
+    camera = {}
+    state = mis.start_camera(rv[k], delta[k])
+    for i in range(k - 1, -1, -1):
+        state = mis.after_hit(state, d2[i], cc[i], T[i], forward=r_cam[i])
+        camera[i] = state
+        if i > 0:
+            state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i], depth=k - i)
+    w = np.zeros((k + 1, N))
+    rc = r_connect
+    for s in range(k + 1):
+        t = k + 1 - s
+        if s == 0:
+            w[s] = mis.hit(camera[0], g["nee"], pdf_emit, g["pos"])
+        elif t == 1 and s == 1:
+            w[s] = mis.emitter_to_camera(rv[1], cc[0] * T[0] * rc[0], d2[0], g["pos"], delta[0])
+        elif s == 1:
+            w[s] = mis.nee(camera[1], g["nee"], pdf_emit, cc[0] * T[0] * rc[0], cl[1] * T[0], d2[0], rv[1], fw[1],
+                           delta[0], depth=k - 1)
+        elif t == 1:
+            w[s] = mis.light_to_camera(light[k - 1], rv[k], cc[k - 1] * T[k - 1] * rc[k - 1], d2[k - 1], rv[k - 1])
+        else:
+            w[s] = mis.connect(light[s - 1], camera[s], fw[s - 1], rv[s - 1], rv[s], fw[s],
+                               cc[s - 1] * T[s - 1] * rc[s - 1], cl[s] * T[s - 1], d2[s - 1], depth=k - s)
+    return np.where(feasible(delta), w, 0.0)
+
+
+def reference(g, beta, r_cam):
+    k = g["d2"].shape[0]
+    p_light, p_camera = np.empty((k + 1, N)), np.empty((k + 1, N))
+    p_light[0] = g["pos"]
+    for i in range(1, k + 1):
+        p_light[i] = g["to_cam"][i - 1] * g["cos_l"][i] * g["T"][i - 1] / g["d2"][i - 1]
+    p_camera[k] = 1.0
+    for i in range(k):
+        p_camera[i] = g["to_light"][i + 1] * g["cos_c"][i] * g["T"][i] * r_cam[i] / g["d2"][i]
+    return brute_force_weights(p_light, p_camera, g["delta"], beta, "all", g["nee"], g["light_paths"])
+
+
+@pytest.mark.parametrize("beta", [1.0, 2.0])
+def test_direction_dependent_densities_equal_brute_force(beta):
+    worst, worst_sum = 0.0, 0.0
+    for k in range(1, 8):
+        g = random_paths(k, seed=4600 + 10 * k + int(beta), media=True)
+        r = np.exp(np.random.default_rng(k).uniform(np.log(1e-2), np.log(1e2), (k, N)))
+        mis = BdptWeights("power", beta, light_paths=g["light_paths"])
+        with np.errstate(all="ignore"):
+            got = mixture_weights(g, mis, r)
+            ref = reference(g, beta, r)
+        worst = max(worst, _max_rel(got, ref))
+        buildable = feasible(g["delta"]).any(axis=0)
+        worst_sum = max(worst_sum, float(np.abs(got.sum(axis=0)[buildable] - 1.0).max()))
+    print(f"beta={beta}: max relative error vs brute force {worst:.2e}, max |sum - 1| {worst_sum:.2e}")
+    assert worst < RTOL and worst_sum < RTOL
+
+
+# -- r and T from a real fog ------------------------------------------------------------------
+SIGMA_T = 0.3
+
+
+def fog_scene():
+    return mi.load_dict({
+        "type": "scene",
+        "point": {"type": "point", "position": [0.2, 1.5, -0.4], "intensity": {"type": "rgb", "value": 5.0}},
+        "area": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([1.0, 2.0, 0.5]),
+                 "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 2.0}}},
+    })
+
+
+@pytest.fixture(scope="module")
+def fog():
+    """(a scene with a point light and an area light, a homogeneous fog around them)."""
+    return fog_scene(), mi.load_dict({"type": "homogeneous", "sigma_t": SIGMA_T, "albedo": 0.8})
+
+
+def _points(a):
+    return mi.Point3f(*(mi.Float(np.ascontiguousarray(c, dtype=np.float32)) for c in a))
+
+
+def fog_paths(k, seed, scene, medium, q=0.5, light_q=None):
+    """``random_paths(k, media=True)`` with vertices in a 4-unit box of fog: T = exp(-sigma_t d),
+    a medium vertex's g = sigma_t, d2 from the points, and r of every segment from the module
+    (``light_q``: the light side's q, for the power check)."""
+    g = random_paths(k, seed, media=True)
+    rng = np.random.default_rng(seed + 7)
+    x = rng.uniform(-2.0, 2.0, (3, k + 1, N))
+    d = np.linalg.norm(x[:, 1:] - x[:, :-1], axis=0)
+    g["d2"] = np.where(g["infinite"][None] & (np.arange(k)[:, None] == 0), 1.0, d * d)
+    medium_vertex = g["medium"]
+    g["cos_l"] = np.where(medium_vertex, SIGMA_T, g["cos_l"])
+    g["cos_c"] = np.where(medium_vertex, SIGMA_T, g["cos_c"])
+    g["T"] = np.exp(-SIGMA_T * d)
+
+    def r_of(q_side):
+        mix = camera_flight.EquiangularMixture(scene, q_side)
+        n = k * N
+        on = dr.full(mi.Bool, True, n)
+        ptr = dr.select(on, mi.MediumPtr(medium), dr.zeros(mi.MediumPtr))
+        o, end = _points(x[:, 1:].reshape(3, -1)), _points(x[:, :-1].reshape(3, -1))
+        collides = mi.Bool(np.ascontiguousarray(medium_vertex[:-1].reshape(-1)))
+        wavelengths = dr.zeros(mi.Ray3f, n).wavelengths
+        r = camera_flight.ratio(mix, ptr, o, end, collides, wavelengths, dr.zeros(mi.UInt32, n), on)
+        return np.broadcast_to(np.asarray(r, dtype=np.float64), (n,)).reshape(k, N)
+
+    r_cam = r_of(q)
+    r_light = r_cam if light_q is None else r_of(light_q)
+    return g, r_cam, r_light
+
+
+def _fog_sums(fog, light_q=None, connect_one=False):
+    worst, spread = 0.0, []
+    for k in range(1, 7):
+        g, r_cam, r_light = fog_paths(k, 5200 + k, *fog, light_q=light_q)
+        spread.append(r_cam)
+        mis = BdptWeights("power", 2.0, light_paths=g["light_paths"])
+        with np.errstate(all="ignore"):
+            w = mixture_weights(g, mis, r_cam, r_light, np.ones_like(r_cam) if connect_one else None)
+        buildable = feasible(g["delta"]).any(axis=0)
+        worst = max(worst, float(np.abs(w.sum(axis=0)[buildable] - 1.0).max()))
+    return worst, np.concatenate([s.reshape(-1) for s in spread])
+
+
+def test_fog_densities_give_weights_that_sum_to_one(fog):
+    worst, r = _fog_sums(fog)
+    print(f"r from {r.min():.3g} to {r.max():.3g}; max |sum - 1| {worst:.2e}")
+    assert worst < TOL and r.max() > 5 and r.min() < 0.9
+
+
+@pytest.mark.parametrize("mistake", ["light side without q", "connections without r"])
+def test_a_wrong_mixture_density_is_caught(fog, mistake):
+    worst, _ = _fog_sums(fog, light_q=0.0 if mistake == "light side without q" else None,
+                         connect_one=mistake == "connections without r")
+    print(f"{mistake}: max |sum - 1| {worst:.2e}")
+    assert worst > 100 * TOL
+
+
+# -- the flight samples the density ratio() reports -------------------------------------------
+def _flight_outcomes(scene, medium, q, n=200_000, t_max=6.0):
+    mix = camera_flight.EquiangularMixture(scene, q)
+    rng = mi.PCG32(n)
+    on = dr.full(mi.Bool, True, n)
+    ptr = dr.select(on, mi.MediumPtr(medium), dr.zeros(mi.MediumPtr))
+    o = mi.Point3f(-1.5, 1.0, 0.3)
+    d = dr.normalize(mi.Vector3f(1.0, 0.2, -0.3))
+    ray = mi.Ray3f(dr.zeros(mi.Point3f, n) + o, dr.zeros(mi.Vector3f, n) + d)
+    exact = (dr.zeros(mi.MediumInteraction3f, n), dr.zeros(mi.Bool, n), dr.zeros(mi.UnpolarizedSpectrum, n),
+             dr.zeros(mi.Float, n))
+    mei, scattered, weight, _ = camera_flight.flight(mix, ptr, ray, mi.Float(t_max), rng.next_float32(),
+                                                     rng.next_float32(), dr.zeros(mi.UInt32, n), on, exact)
+    t = np.where(np.asarray(scattered), np.asarray(mei.t), np.inf)
+    edges = np.linspace(0.0, t_max, 21)
+    counts = np.append(np.histogram(t[np.isfinite(t)], edges)[0], np.isinf(t).sum())
+    # the density ratio() reports times the free flight's, integrated per bin (midpoint rule, 64 a bin)
+    fine = np.linspace(0.0, t_max, 20 * 64 + 1)
+    mid = 0.5 * (fine[1:] + fine[:-1])
+    m = mid.size
+    pts = dr.zeros(mi.Point3f, m) + o + dr.zeros(mi.Vector3f, m) + d * mi.Float(mid.astype(np.float32))
+    on_m = dr.full(mi.Bool, True, m)
+    ptr_m = dr.select(on_m, mi.MediumPtr(medium), dr.zeros(mi.MediumPtr))
+    wl = dr.zeros(mi.Ray3f, m).wavelengths
+    r = np.asarray(camera_flight.ratio(mix, ptr_m, dr.zeros(mi.Point3f, m) + o, pts, dr.full(mi.Bool, True, m), wl,
+                                       dr.zeros(mi.UInt32, m), on_m), dtype=np.float64)
+    density = r * SIGMA_T * np.exp(-SIGMA_T * mid)
+    p_bins = (density * (fine[1] - fine[0])).reshape(20, 64).sum(axis=1)
+    surface = dr.zeros(mi.Point3f, 1) + o + d * t_max
+    r_s = float(camera_flight.ratio(mix, dr.select(dr.full(mi.Bool, True, 1), mi.MediumPtr(medium),
+                                                   dr.zeros(mi.MediumPtr)),
+                                    dr.zeros(mi.Point3f, 1) + o, surface, dr.zeros(mi.Bool, 1),
+                                    dr.zeros(mi.Ray3f, 1).wavelengths, dr.zeros(mi.UInt32, 1),
+                                    dr.full(mi.Bool, True, 1))[0])
+    p = np.append(p_bins, r_s * np.exp(-SIGMA_T * t_max))
+    p_free = np.append(SIGMA_T * np.exp(-SIGMA_T * mid).reshape(20, 64).sum(axis=1) * (fine[1] - fine[0]),
+                       np.exp(-SIGMA_T * t_max))
+    return counts, p, p_free
+
+
+def _chi2_p(counts, p):
+    from scipy.stats import chisquare
+
+    expected = counts.sum() * p / p.sum()
+    return chisquare(counts, expected).pvalue, abs(p.sum() - 1.0)
+
+
+def test_flights_follow_the_reported_density(fog):
+    counts, p, p_free = _flight_outcomes(*fog, 0.5)
+    pvalue, mass = _chi2_p(counts, p)
+    wrong, _ = _chi2_p(counts, p_free)
+    print(f"chi-square p {pvalue:.3g} (mass off 1 by {mass:.1e}); against free flights' p {wrong:.3g}")
+    assert pvalue > 1e-4 and mass < 2e-3 and wrong < 1e-10
