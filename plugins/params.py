@@ -89,7 +89,6 @@ def _media(sampling_default: str) -> tuple[Param, ...]:
               "channel's density alone (volpath). No effect in grey media"),
     )
 
-
 #: lab_nee: the path tracer's and the medium sampling (distance by default: plain NEE).
 LAB_NEE = PATH_TRACER + _media("distance")
 #: lab_mis: the path tracer's and its own.
@@ -156,7 +155,6 @@ def _techniques():
 
     return techniques
 
-
 #: lab_bdpt (bidirectional path tracing).
 LAB_BDPT = (
     Param("max_depth", int, UNBOUNDED, "longest path in segments (light + camera subpath), -1 unbounded",
@@ -180,9 +178,10 @@ LAB_BDPT = (
           "(Veach's per-strategy images); empty = every strategy",
           check=lambda v: v == "" or _techniques().Strategy.parse(v) is not None,
           expected="empty or 's,t' with s >= 0, t >= 1 and s + t >= 2"),
-    Param("equiangular", float, 0.5, "share of the camera subpaths' flights in a homogeneous medium drawn equi-angularly "
-          "towards a light (Kulla-Fajardo; the rest free flights, 0: all), their density in every MIS weight; off with "
-          "more than 8 emitters", check=lambda v: 0.0 <= v <= 1.0, expected="a number in [0, 1]"),
+    Param("equiangular", float, 0.0, "share of camera flights in homogeneous media drawn equi-angularly towards a light "
+          "(the rest free flights; their density in every MIS weight)", check=lambda v: 0.0 <= v <= 1.0, expected="[0, 1]"),
+    Param("equiangular_nee", bool, True, "camera segments in homogeneous media add an equi-angular NEE sample, a "
+          "second s = 1 technique in the MIS weights (lab_mis's; no merging). Both: up to 8 emitters"),
 ) + tuple(p for p in _media("distance") if p.name in ("majorants", "majorant_resolution")) + AIM + (
     Param("count_rays", bool, True, "count camera, extension, shadow (NEE), connection, light-subpath and sensor "
           "(light tracing's) rays (ray_counts())"),
@@ -232,7 +231,6 @@ def _vcm_aim() -> tuple[Param, ...]:
                     "and ppm (merging carries the direct light there, and only the unaimed light subpaths bring it)"),
             aim_at)
 
-
 #: lab_vcm (vertex connection and merging).
 LAB_VCM = (
     Param("mode", str, "vcm", "which techniques: vcm (all), bpt (connections: lab_bdpt), bpm (merging), "
@@ -281,7 +279,7 @@ LAB_VCM = (
           "its light subpath (lab_bdpt), or one, to one of them picked uniformly and counted n times, the MIS "
           "weights counting a connection as 1 / (mean vertices per light subpath)", choices=("all", "one")),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
-                                            "max_vertices", "equiangular")) + _vcm_aim() + (
+                                            "max_vertices", "equiangular", "equiangular_nee")) + _vcm_aim() + (
     replace(LAB_BDPT[-1], doc="count rays as lab_bdpt does, and under 'merge' the light vertices merging's grid "
                               "lookups read (ray_counts())"),
 )

@@ -2,9 +2,9 @@
 homogeneous scene (fog behind a null box at sigma_t 2.5, a point light inside fog, a chromatic
 medium inside glass, fog_shafts.xml at 24 x 24) and every heterogeneous case (a spot into smoke in rgb with global
 majorants, a point light inside the plume in mono with the majorant grid). Same tolerance and
-seeds as the suite's cases. lab_bdpt's equi-angular camera flights (its default ``equiangular``) pass the
-block test against volpathmis on ``ALL_EQUIANGULAR``; power: on fog_shafts, light subpaths whose reverse
-densities leave the mixture out (free flights, r = 1) fail it.
+seeds as the suite's cases. lab_bdpt's equi-angular sampling (equi-angular NEE, its default, and the flights'
+mixture) passes the block test against volpathmis on ``ALL_EQUIANGULAR``; power: on fog_shafts, light
+subpaths whose sums leave either one's density out fail it.
 
     PYTHONPATH=src .venv/bin/python -m pytest -q -s -p no:cacheprovider benchmarks/agreement/test_bdpt_media_matrix.py
 """
@@ -29,17 +29,26 @@ def test_lab_bdpt_agrees_with_volpath_in_heterogeneous_media(kind, name, params)
     check_heterogeneous(kind, name, params)
 
 
-@pytest.mark.parametrize("name", ALL_EQUIANGULAR)
-def test_equiangular_camera_flights_pass_the_block_test(name):
-    check_equiangular(name)
+@pytest.mark.parametrize("name, kind", ALL_EQUIANGULAR)
+def test_equiangular_sampling_passes_the_block_test(name, kind):
+    check_equiangular(name, kind)
 
 
-def test_the_block_test_sees_light_subpaths_without_the_mixture(monkeypatch):
-    """Power: the light side's densities of the camera's direction from free flights alone (the
-    mixture's q dropped there; the camera side still mixes) bias fog_shafts past the bound."""
-    monkeypatch.setattr(camera_flight, "mixture", lambda tracer: None)
+@pytest.mark.parametrize("mistake", ["nee's term left out deeper on the light side", "light side without the mixture"])
+def test_the_block_test_sees_a_wrong_equiangular_density(monkeypatch, mistake):
+    """Power, on fog_shafts: equi-angular NEE's term left out of the light subpaths' sums past their
+    first vertex (``add_equiangular`` a no-op), or the flights' mixture (equiangular = 0.5) left out
+    of the light side's densities of the camera's direction (free flights, r = 1): both fail."""
+    from mitsuba_lab.plugins.integrators.bdpt.recursion import Recursion
+
+    params = {}
+    if mistake.startswith("nee"):
+        monkeypatch.setattr(Recursion, "add_equiangular", lambda self, state, carried, rho: state)
+    else:
+        monkeypatch.setattr(camera_flight, "mixture", lambda tracer: None)
+        params = {"equiangular": 0.5, "equiangular_nee": False}
     scene = load("fog_shafts.xml")
-    lab = renders(scene, make_integrator("lab_bdpt", {"max_depth": DEPTH}), SPP, SEEDS_LAB)
+    lab = renders(scene, make_integrator("lab_bdpt", {"max_depth": DEPTH, **params}), SPP, SEEDS_LAB)
     result = block_test(lab, volpathmis_stack(scene))
-    print(f"light side without q: {result.summary()}")
+    print(f"{mistake}: {result.summary()}")
     assert result.failing

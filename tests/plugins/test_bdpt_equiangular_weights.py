@@ -30,20 +30,30 @@ from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, brute_forc
 TOL = 1e-4
 
 
-def mixture_weights(g, mis, r_cam, r_light=None, r_connect=None):
+def mixture_weights(g, mis, r_cam, r_light=None, r_connect=None, rho=None, rho_light=None):
     """Every strategy's weight by the recursion with the camera's density ratio ``r_cam[i]`` of
     segment i (x_i x_{i+1}) walked from x_{i+1}; ``r_light``: the light side's value of it
-    (default the same), ``r_connect``: the connections' (default the same)."""
+    (default the same), ``r_connect``: the connections' (default the same). ``rho``: equi-angular
+    NEE's density over s = 1's (at x_1; None: no such technique), an extra last row of weights;
+    ``rho_light``: the light side's value of it (default the same)."""
     k = g["d2"].shape[0]
+    rho_light = rho if rho_light is None else rho_light
     r_light = r_cam if r_light is None else r_light
     r_connect = r_cam if r_connect is None else r_connect
     d2, cl, cc, fw, rv, delta, T = g["d2"], g["cos_l"], g["cos_c"], g["to_cam"], g["to_light"], g["delta"], g["T"]
     pdf_emit = g["pos"] * fw[0]
     light = {}
     state = mis.start_light(pdf_emit, g["nee"], cc[0], delta[0])
+    carried = None
     for i in range(1, k):
         state = mis.after_hit(state, d2[i - 1], cl[i], T[i - 1], backward=r_light[i - 1])
+        if carried is not None:
+            state = mis.add_equiangular(state, mis.after_hit(carried, d2[i - 1], cl[i], T[i - 1],
+                                                             backward=r_light[i - 1]), rho_light)
+            carried = None
         light[i] = state
+        if i == 1 and rho is not None:
+            carried = mis.equiangular_term(state, fw[i], cc[i], delta[i])
         state = mis.scatter_light(state, fw[i], rv[i], cc[i], delta[i])
     camera = {}
     state = mis.start_camera(rv[k], delta[k])
@@ -52,26 +62,34 @@ def mixture_weights(g, mis, r_cam, r_light=None, r_connect=None):
         camera[i] = state
         if i > 0:
             state = mis.scatter_camera(state, rv[i], fw[i], cl[i], delta[i], depth=k - i)
-    w = np.zeros((k + 1, N))
+    w = np.zeros((k + 2, N))
     rc = r_connect
+    eq = {} if rho is None or k < 2 else {"rho": rho}       # (x_1 is the sensor when k = 1)
     for s in range(k + 1):
         t = k + 1 - s
+        at_1 = eq if s == 2 else {}                          # (a light subpath's first vertex)
         if s == 0:
-            w[s] = mis.hit(camera[0], g["nee"], pdf_emit, g["pos"])
+            w[s] = mis.hit(camera[0], g["nee"], pdf_emit, g["pos"], **eq)
         elif t == 1 and s == 1:
             w[s] = mis.emitter_to_camera(rv[1], cc[0] * T[0] * rc[0], d2[0], g["pos"], delta[0])
         elif s == 1:
             w[s] = mis.nee(camera[1], g["nee"], pdf_emit, cc[0] * T[0] * rc[0], cl[1] * T[0], d2[0], rv[1], fw[1],
-                           delta[0], depth=k - 1)
+                           delta[0], depth=k - 1, **eq)
+            if eq:
+                w[k + 1] = w[s] * mis._m(rho)
         elif t == 1:
-            w[s] = mis.light_to_camera(light[k - 1], rv[k], cc[k - 1] * T[k - 1] * rc[k - 1], d2[k - 1], rv[k - 1])
+            w[s] = mis.light_to_camera(light[k - 1], rv[k], cc[k - 1] * T[k - 1] * rc[k - 1], d2[k - 1], rv[k - 1],
+                                       **at_1)
         else:
             w[s] = mis.connect(light[s - 1], camera[s], fw[s - 1], rv[s - 1], rv[s], fw[s],
-                               cc[s - 1] * T[s - 1] * rc[s - 1], cl[s] * T[s - 1], d2[s - 1], depth=k - s)
-    return np.where(feasible(delta), w, 0.0)
+                               cc[s - 1] * T[s - 1] * rc[s - 1], cl[s] * T[s - 1], d2[s - 1], depth=k - s, **at_1)
+    ok = np.concatenate([feasible(delta), feasible(delta)[1:2]])
+    return np.where(ok, w, 0.0)
 
 
-def reference(g, beta, r_cam):
+def reference(g, beta, r_cam, rho=None):
+    """The brute force over p_camera with r; with ``rho``, equi-angular NEE's row (density s = 1's
+    times rho) last, computed here directly."""
     k = g["d2"].shape[0]
     p_light, p_camera = np.empty((k + 1, N)), np.empty((k + 1, N))
     p_light[0] = g["pos"]
@@ -80,7 +98,23 @@ def reference(g, beta, r_cam):
     p_camera[k] = 1.0
     for i in range(k):
         p_camera[i] = g["to_light"][i + 1] * g["cos_c"][i] * g["T"][i] * r_cam[i] / g["d2"][i]
-    return brute_force_weights(p_light, p_camera, g["delta"], beta, "all", g["nee"], g["light_paths"])
+    if rho is None or k < 2:
+        w = brute_force_weights(p_light, p_camera, g["delta"], beta, "all", g["nee"], g["light_paths"])
+        return np.concatenate([w, np.zeros((1, N))])
+    ok = feasible(g["delta"])
+    logs = []
+    for s in range(k + 1):
+        log_p = np.log(p_light[:s]).sum(axis=0) + np.log(p_camera[s:]).sum(axis=0)
+        if s == 1:
+            log_p += np.log(g["nee"]) - np.log(p_light[0])
+        if s == k:
+            log_p += np.log(g["light_paths"])
+        logs.append(np.where(ok[s], beta * log_p, -np.inf))
+    logs.append(np.where(ok[1], logs[1] + beta * np.log(rho), -np.inf))
+    logs = np.array(logs)
+    top = logs.max(axis=0)
+    terms = np.exp(logs - np.where(np.isfinite(top), top, 0.0))
+    return terms / np.maximum(terms.sum(axis=0), 1e-300)
 
 
 @pytest.mark.parametrize("beta", [1.0, 2.0])
@@ -98,6 +132,42 @@ def test_direction_dependent_densities_equal_brute_force(beta):
         worst_sum = max(worst_sum, float(np.abs(got.sum(axis=0)[buildable] - 1.0).max()))
     print(f"beta={beta}: max relative error vs brute force {worst:.2e}, max |sum - 1| {worst_sum:.2e}")
     assert worst < RTOL and worst_sum < RTOL
+
+
+@pytest.mark.parametrize("beta", [1.0, 2.0])
+def test_equiangular_nee_equals_brute_force(beta):
+    """A second s = 1 technique (equi-angular NEE, density s = 1's times rho at x_1) with r on
+    every segment: equal to the brute force over all k + 2 techniques, summing to 1."""
+    worst, worst_sum = 0.0, 0.0
+    for k in range(1, 8):
+        g = random_paths(k, seed=4700 + 10 * k + int(beta), media=True)
+        rng = np.random.default_rng(50 + k)
+        r = np.exp(rng.uniform(np.log(1e-2), np.log(1e2), (k, N)))
+        rho = np.exp(rng.uniform(np.log(1e-3), np.log(1e3), N))
+        mis = BdptWeights("power", beta, light_paths=g["light_paths"])
+        with np.errstate(all="ignore"):
+            got = mixture_weights(g, mis, r, rho=rho)
+            ref = reference(g, beta, r, rho)
+        worst = max(worst, _max_rel(got, ref))
+        buildable = feasible(g["delta"]).any(axis=0)
+        worst_sum = max(worst_sum, float(np.abs(got.sum(axis=0)[buildable] - 1.0).max()))
+    print(f"beta={beta}: max relative error vs brute force {worst:.2e}, max |sum - 1| {worst_sum:.2e}")
+    assert worst < RTOL and worst_sum < RTOL
+
+
+def test_equiangular_nee_left_out_of_the_light_side_is_caught():
+    """Power: the light side without equi-angular NEE's term (rho = 0 there)."""
+    g = random_paths(4, seed=17, media=True)
+    rng = np.random.default_rng(3)
+    r = np.ones((4, N))
+    rho = np.exp(rng.uniform(np.log(1e-1), np.log(1e1), N))
+    mis = BdptWeights("power", 2.0, light_paths=g["light_paths"])
+    with np.errstate(all="ignore"):
+        got = mixture_weights(g, mis, r, rho=rho, rho_light=0.0 * rho)
+    buildable = feasible(g["delta"]).any(axis=0)
+    err = float(np.abs(got.sum(axis=0)[buildable] - 1.0).max())
+    print(f"light side without rho: max |sum - 1| {err:.2e}")
+    assert err > 1e3 * RTOL
 
 
 # -- r and T from a real fog ------------------------------------------------------------------

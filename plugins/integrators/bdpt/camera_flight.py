@@ -61,16 +61,19 @@ class EquiangularMixture:
     mixes (q > 0, at most ``MAX_EMITTERS`` emitters, one of them finite); ``passable``: the scene
     has null surfaces, which a segment's pieces may cross (``first_surface`` casts a ray)."""
 
-    def __init__(self, scene: mi.Scene, q: float):
+    def __init__(self, scene: mi.Scene, q: float, nee: bool = False):
         emitters = scene.emitters()
         self.q = float(q)
         self.emitters = []
-        if self.q > 0 and 0 < len(emitters) <= MAX_EMITTERS:
+        if (self.q > 0 or nee) and 0 < len(emitters) <= MAX_EMITTERS:
             for i, e in enumerate(emitters):
                 p = float(scene.pdf_emitter(mi.UInt32(i))[0])
                 self.emitters.append((p, _centre(e)))
         self.finite = sum(p for p, c in self.emitters if c is not None)
-        self.on = self.q > 0 and self.finite > 0
+        #: equi-angular NEE (``nee``), a second s = 1 technique; ``on``: anything to track
+        self.nee = bool(nee) and self.finite > 0
+        self.mixes = self.q > 0 and self.finite > 0
+        self.on = self.mixes or self.nee
         self.passable = any(mi.has_flag(s.bsdf().flags(), mi.BSDFFlags.Null) for s in scene.shapes()
                             if s.bsdf() is not None)
 
@@ -78,6 +81,7 @@ class EquiangularMixture:
     def off() -> "EquiangularMixture":
         mix = EquiangularMixture.__new__(EquiangularMixture)
         mix.q, mix.emitters, mix.finite, mix.on, mix.passable = 0.0, [], 0.0, False, False
+        mix.nee = mix.mixes = False
         return mix
 
     def _aims(self):
@@ -85,18 +89,20 @@ class EquiangularMixture:
         return [(p, mi.Point3f(*c)) for p, c in self.emitters if c is not None]
 
 
-def _angles(o, d, c):
-    """(t_c, D, theta_a, span) of the fixed point ``c`` seen from the half-line o + t d."""
+def _angles(o, d, c, t_b=None):
+    """(t_c, D, theta_a, span) of the fixed point ``c`` seen from the half-line o + t d (from
+    its piece [0, t_b] where ``t_b`` is given)."""
     to_c = c - o
     t_c = dr.dot(to_c, d)
     D = dr.maximum(dr.norm(to_c - t_c * d), 1e-6 * (1.0 + dr.norm(to_c)))
     theta_a = dr.atan2(-t_c, D)
-    return t_c, D, theta_a, 0.5 * math.pi - theta_a
+    theta_b = 0.5 * math.pi if t_b is None else dr.atan2(t_b - t_c, D)
+    return t_c, D, theta_a, theta_b - theta_a
 
 
-def eq_pdf(o, d, c, t):
-    """p_eq(t; c) over the half-line (per unit length)."""
-    t_c, D, _, span = _angles(o, d, c)
+def eq_pdf(o, d, c, t, t_b=None):
+    """p_eq(t; c) over the half-line, or [0, t_b] (per unit length)."""
+    t_c, D, _, span = _angles(o, d, c, t_b)
     return D / (span * (dr.square(D) + dr.square(t - t_c)))
 
 
@@ -106,15 +112,60 @@ def eq_survival(o, d, c, t):
     return dr.clip((0.5 * math.pi - dr.atan2(t - t_c, D)) / span, 0.0, 1.0)
 
 
-def eq_sample(o, d, c, u):
-    """An equi-angular distance over the half-line (inf where the angle rounds past pi/2)."""
-    t_c, D, theta_a, span = _angles(o, d, c)
+def eq_sample(o, d, c, u, t_b=None):
+    """An equi-angular distance over the half-line, or [0, t_b] (inf where the angle rounds
+    past pi/2)."""
+    t_c, D, theta_a, span = _angles(o, d, c, t_b)
     # t = D (tan theta - tan theta_a), written so that it is accurate near t = 0 and turns to
     # inf where theta rounds to pi/2 or past it (cos <= 0)
     delta = u * span
     cos_theta = dr.cos(theta_a + delta)
     t = D * dr.sin(delta) / (cos_theta * dr.cos(theta_a))
     return dr.select(cos_theta > 0, dr.maximum(t, 0.0), dr.inf)
+
+
+def eq_density(mix, o, d, t, t_s):
+    """Equi-angular NEE's density of distance t along the piece [0, t_s] from o: sum_e P(e)
+    p_eq(t; c_e) over the finite emitters."""
+    p = mi.Float(0.0)
+    for p_e, c in mix._aims():
+        p += p_e * eq_pdf(o, d, c, t, t_s)
+    return p
+
+
+def rho(mix, medium, o, x, t_s, r, wavelengths, channel, active):
+    """rho: equi-angular NEE's density of the medium vertex ``x`` along the piece of length
+    ``t_s`` from ``o`` over the camera's own (the free flight's times ``r``, ``ratio``); 0
+    where it cannot build x (no homogeneous medium, or off)."""
+    if mix is None or not mix.nee:
+        return None
+    use = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+    use &= medium.is_homogeneous()
+    to_x = x - o
+    t = dr.norm(to_x)
+    d = to_x / t
+    _, _, sigma_c = _sigma(medium, o, wavelengths, channel, use)
+    value = eq_density(mix, o, d, t, t_s) / (sigma_c * dr.exp(-sigma_c * t) * r)
+    return dr.select(use & (t > 0) & (t < t_s) & dr.isfinite(value), value, 0.0)
+
+
+def beyond(scene, p, d, active):
+    """The distance from the medium point ``p`` along ``d`` to the first surface (inf: none)."""
+    pi = scene.ray_intersect_preliminary(mi.Ray3f(p, d), coherent=False, active=active)
+    return dr.select(active & pi.is_valid(), pi.t, dr.inf)
+
+
+def rho_towards(scene, mix, medium, x, y, r, floor, wavelengths, channel, active):
+    """``rho`` of the medium vertex ``y`` seen from ``x`` (an interaction, normal 0 in a medium):
+    0 where the first flight from x ends at a surface before y, else with the piece's end found
+    beyond y (one ray)."""
+    if mix is None or not mix.nee:
+        return None
+    end, crossed = first_surface(scene, mix, x.p, x.n, y, floor, active)
+    d = dr.normalize(y - x.p)
+    use = active & ~crossed
+    t_s = dr.norm(y - x.p) + beyond(scene, y, d, use)
+    return dr.select(use, rho(mix, medium, x.p, y, t_s, r, wavelengths, channel, use), 0.0)
 
 
 def _sigma(medium, p, wavelengths, channel, active):
@@ -139,7 +190,7 @@ def ratio(mix, medium, o, x, collides, wavelengths, channel, active):
     """r: the mixture's density of the segment from ``o`` to ``x`` (a collision at x where
     ``collides``, else x reached: a surface, an emitter, a null surface crossed) over the free
     flight's, in ``medium`` (1 where it is no homogeneous medium, or the mixture is off)."""
-    if not mix.on:
+    if not mix.mixes:
         return mi.Float(1.0)
     use = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
     use &= medium.is_homogeneous()
@@ -220,7 +271,7 @@ def segment_ratio(scene, mix, medium, x, target, collides, floor, channel, activ
     """``ratio`` of the segment a camera subpath would sample from the vertex ``x`` (an
     interaction: a medium vertex has normal 0) to ``target`` (a collision there where
     ``collides``): of its first flight, to the first surface on the way (``first_surface``)."""
-    if mix is None or not mix.on:
+    if mix is None or not mix.mixes:
         return 1.0
     active = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test; no ray where r = 1 anyway)
     active &= medium.is_homogeneous()
@@ -237,3 +288,69 @@ def from_sensor(scene, mix, tracer, sensor_p, target, collides, wavelengths, cha
     it.p = sensor_p
     it.wavelengths = wavelengths
     return segment_ratio(scene, mix, tracer.sensor_medium, it, target, collides, tracer.floor, channel, active)
+
+
+def _eq_draw(mix, o, d, t_s, u_pick, u):
+    """(t, density): equi-angular NEE's distance along [0, t_s] from o towards the point of an
+    emitter picked by P(e) with ``u_pick`` (density 0 where one at infinity is picked)."""
+    t, low = mi.Float(dr.inf), 0.0
+    for p, c in mix.emitters:
+        if c is not None:
+            here = (u_pick >= low) & (u_pick < low + p)
+            t = dr.select(here, eq_sample(o, d, mi.Point3f(*c), u, t_s), t)
+        low += p
+    ok = t < t_s
+    return t, dr.select(ok, eq_density(mix, o, d, t, t_s), 0.0)
+
+
+def equiangular_nee(scene, cp, mix, sampler, ray, si, medium, beta, state, prev_p, here, channel, phase_ctx,
+                    active):
+    """Equi-angular NEE on the camera segment ``ray`` (its first flight, in the homogeneous
+    ``medium``, up to the surface ``si``): a point x drawn equi-angularly towards a light's point
+    (``_eq_draw``), light sampled from it through the media, weighted against every strategy
+    with the camera state at x as its flight would have found it (``state`` before the flight,
+    ``prev_p`` where the segment starts, x ``here`` segments from the sensor):
+
+        beta T(x) sigma_s(x) / p_E(t) f_p L_e T / p_nee  w_E,   w_E = w_nee(rho) rho^beta."""
+    from mitsuba_lab.plugins.integrators.common.direct import spectrum_or_zero
+    from mitsuba_lab.plugins.integrators.common.subpath_media import medium_vertex, phase_reverse_pdf
+    from mitsuba_lab.plugins.integrators.common.subpath_media import transmittance as through
+
+    from .light_subpath import float_or_zero, strategy_mask
+    from .techniques import Technique
+
+    w, table, floor = cp.weights, cp.table, cp.offset_floor
+    on = active & strategy_mask(cp.only, 1, here + 1) & (Technique.NEE in w.techniques)
+    u_pick, u = sampler.next_1d(), sampler.next_1d()
+    t, p_t = _eq_draw(mix, ray.o, ray.d, si.t, u_pick, u)
+    on &= p_t > 0
+    sigma_s, sigma_t, sigma_c = _sigma(medium, ray.o, ray.wavelengths, channel, on)
+    mei = dr.zeros(mi.MediumInteraction3f)
+    mei.t, mei.p, mei.wi = t, ray(t), -ray.d
+    mei.sh_frame = mi.Frame3f(mei.wi)
+    mei.time, mei.wavelengths, mei.medium = ray.time, ray.wavelengths, medium
+    mei.sigma_s, mei.sigma_t, mei.combined_extinction = sigma_s, sigma_t, sigma_t
+    v = medium_vertex(mei, ray.wavelengths)
+    ds, em_weight = scene.sample_emitter_direction(v, sampler.next_2d(), False, on)
+    on &= ds.pdf > 0
+    infinite = table.at_infinity(ds.emitter, on)
+    T, T_c = through(scene, medium, v, ds.p, sampler, channel, floor, on, cp.tracking, unbounded=infinite)
+    phase = medium.phase_function()
+    f, pdf_fwd = phase.eval_pdf(phase_ctx, mei, ds.d, on)
+    pdf_rev = phase_reverse_pdf(phase, phase_ctx, mei, ds.d, on)
+    dist2 = dr.select(infinite, 1.0, dr.square(ds.dist))
+    cos_light = dr.select(ds.delta | infinite, 1.0, dr.abs(dr.dot(ds.n, ds.d)))
+    pdf_nee = dr.select(ds.delta, ds.pdf, ds.pdf * cos_light / dist2)
+    pdf_pos, pdf_dir, delta = table.emission(ds.emitter, cos_light, pdf_nee, on, ds.p, -ds.d)
+    # the weights' geometry: from where the segment starts (as the light side evaluates it)
+    t_mis = dr.norm(v.p - prev_p)
+    t_s = dr.select(si.is_valid(), dr.norm(si.p - prev_p), dr.inf)
+    r = ratio(mix, medium, prev_p, v.p, True, ray.wavelengths, channel, on)
+    rho_x = rho(mix, medium, prev_p, v.p, t_s, r, ray.wavelengths, channel, on)
+    mis = w.after_hit(state, dr.square(t_mis), sigma_c, dr.exp(-sigma_c * t_mis), forward=r)
+    r_nee = segment_ratio(scene, mix, medium, v, ds.p, False, floor, channel, on)
+    w_nee = w.nee(mis, pdf_nee, pdf_pos * pdf_dir, cos_light * T_c * r_nee, sigma_c * T_c, dist2, pdf_fwd, pdf_rev,
+                  delta, here, True, rho=rho_x)
+    w_e = float_or_zero(w_nee * w._m(rho_x))
+    value = beta * mi.Spectrum(dr.exp(-sigma_t * t) * sigma_s / p_t) * mi.Spectrum(f) * em_weight * mi.Spectrum(T) * w_e
+    return dr.select(on & (rho_x > 0), spectrum_or_zero(value), 0.0)

@@ -174,7 +174,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         # where each emitter's light subpaths start (a one-line error where its rays disagree)
         tracer.emitter_media = emitter_media(scene, sensor, floor, self.ESTIMATOR.plugin_name) if media else None
         # equi-angular flights in the camera subpaths (``camera_flight``; off where equiangular = 0)
-        tracer.equiangular = EquiangularMixture(scene, v.get("equiangular", 0.0)) if media else None
+        tracer.equiangular = (EquiangularMixture(scene, v.get("equiangular", 0.0), v.get("equiangular_nee", False))
+                              if media else None)
         tracer.sensor_medium = (mi.MediumPtr(sensor.get_medium()) if media and sensor.get_medium() is not None
                                 else dr.zeros(mi.MediumPtr, 1))
         inv_area, axis = sensor_constants(sensor, self.ESTIMATOR.plugin_name)

@@ -86,7 +86,7 @@ from mitsuba_lab.plugins.integrators.common.subpath_media import transmittance a
 
 from . import camera_flight, splats
 from .endpoints import nee_density
-from .media_connections import connect_to_light_subpath
+from .media_connections import connect_to_light_subpath, splat_emitter, splat_vertex
 from .techniques import Technique
 from .vertices import NONE
 from .weights import SubpathMis
@@ -115,23 +115,7 @@ def trace_light(tracer, st, block, vertices, store_lanes):
     # ---------------- s = 1, t = 1: the emitter point seen directly, through the media ----------------
     u0 = mi.Point2f(rng.next_float32(), rng.next_float32())
     if dr.hint(tracing, mode="scalar"):
-        si0 = mi.SurfaceInteraction3f(ps, ray.wavelengths)
-        active0 = on_surface & (pmf > 0) & strategy_mask(only, 1, 1)
-        ds0, we0 = sensor.sample_direction(si0, u0, active0)
-        active0 &= ds0.pdf > 0
-        tally(tracer.counters, "sensor", active0)
-        si0.wi = si0.to_local(ds0.d)
-        cos0 = mi.Frame3f.cos_theta(si0.wi)
-        active0 &= cos0 > 0
-        T0, T0_c = through(scene, medium, si0, ds0.p, aux, channel, floor, active0, tracer.tracking)
-        active0 &= dr.max(T0) > 0
-        le0 = emitter.eval(si0, active0)
-        T0_c *= camera_flight.from_sensor(scene, mix, tracer, ds0.p, si0.p, False, si0.wavelengths, channel,
-                                           active0)
-        w0 = w.emitter_to_camera(sensor_pdf(ds0, we0), cos0 * T0_c, dr.square(ds0.dist),
-                                 pdf_pos, st.delta_pos)
-        value0 = le0 * cos0 * st.pos_weight * st.sel_weight * we0 * mi.Spectrum(T0) * float_or_zero(w0) * scale
-        splats.splat(block, ds0.uv, si0.wavelengths, value0, active0)
+        splat_emitter(tracer, st, block, ps, medium, u0, aux, channel, mix, scale)
 
     # ---------------- x_1, x_2, ..: the light subpath ----------------
     beta = mi.Spectrum(st.ray_weight) * st.sel_weight
@@ -156,6 +140,9 @@ def trace_light(tracer, st, block, vertices, store_lanes):
     # (the start of the light's last flight) and whether that is a collision (``camera_flight``)
     piece_o = mi.Point3f(ps.p) if mix is not None else 0.0
     piece_collides = mi.Bool(False) if mix is not None else False
+    # equi-angular NEE: s = 1's term folded at the first vertex, until rho is known at the second
+    eq_nee = mix is not None and mix.nee and not w.merging
+    e_dvc, e_dvm, e_beyond = (mi.Float(0), mi.Float(0), mi.Float(dr.inf)) if eq_nee else (0.0, 0.0, 0.0)
     active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_depth > 1)
     while dr.hint(active, max_iterations=-1, label="lab_bdpt light subpath in media"):
         si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
@@ -204,6 +191,12 @@ def trace_light(tracer, st, block, vertices, store_lanes):
             back = camera_flight.ratio(mix, medium, v.p, piece_o, piece_collides, ray.wavelengths, channel,
                                        in_medium & ~(start_here & infinite))
             mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dist2, g_in, seg, backward=back)
+        if dr.hint(eq_nee, mode="scalar"):
+            second = in_medium & piece_collides & (at == 2)
+            rho = camera_flight.rho(mix, medium, v.p, piece_o, dr.norm(v.p - piece_o) + e_beyond, back,
+                                    ray.wavelengths, channel, second)
+            e_after = w.after_hit(SubpathMis(0.0 * e_dvc, e_dvc, first, e_dvm), dist2, g_in, seg, backward=back)
+            mis = w.add_equiangular(mis, e_after, dr.select(second, rho, 0.0))
         splat_on = smooth & strategy_mask(only, at + 1, 1)
         # the medium on the far side of a surface vertex (a medium transition's other side)
         beyond = dr.select(surface & si.is_medium_transition(), si.target_medium(ray.d), medium)
@@ -223,23 +216,9 @@ def trace_light(tracer, st, block, vertices, store_lanes):
         # ---------- t = 1: join x_at to the sensor, through the media ----------
         u_sensor = mi.Point2f(rng.next_float32(), rng.next_float32())
         if dr.hint(tracing, mode="scalar"):
-            ds, we = sensor.sample_direction(v, u_sensor, splat_on)
-            connect = splat_on & (ds.pdf > 0)
-            tally(tracer.counters, "sensor", connect)
             sides = Sides(si.n, dr.dot(si.n, ray.d), scattered, medium, beyond)
-            T, T_c = through(scene, sides.toward(ds.d), v, ds.p, aux, channel, floor, connect, tracer.tracking)
-            connect &= dr.max(T) > 0
-            T_c *= camera_flight.from_sensor(scene, mix, tracer, ds.p, v.p, scattered, v.wavelengths, channel,
-                                                 connect)
-            f_surface, rev_surface = transported(bsdf, si, si.to_local(ds.d), connect & ~scattered)
-            f_phase, _ = phase.eval_pdf(phase_ctx, mei, ds.d, connect & scattered)
-            rev_phase = phase_reverse_pdf(phase, phase_ctx, mei, ds.d, connect & scattered)
-            f_cam = dr.select(scattered, mi.Spectrum(f_phase), f_surface)
-            g_cam = dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, ds.d)))
-            w_cam = w.light_to_camera(mis, sensor_pdf(ds, we), g_cam * T_c,
-                                      dr.square(ds.dist), dr.select(scattered, rev_phase, rev_surface), scattered)
-            value = beta * f_cam * we * mi.Spectrum(T) * float_or_zero(w_cam) * scale
-            splats.splat(block, ds.uv, v.wavelengths, value, connect)
+            splat_vertex(tracer, w, block, v, si, bsdf, mei, phase, scattered, sides, beta, mis, sigma_c, u_sensor,
+                         splat_on, aux, channel, mix, scale, at)
 
         # ---------- the next direction: adjoint BSDF sampling, or the phase function ----------
         going = vertex & (depth + 1 < max_depth)
@@ -256,6 +235,11 @@ def trace_light(tracer, st, block, vertices, store_lanes):
                                         dr.select(scattered, rev_phase, rev_surface),
                                         dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, wo_world))), delta_lobe,
                                         scattered)
+        if dr.hint(eq_nee, mode="scalar"):
+            e_first = going & scattered & (at == 1)
+            e_term = w.equiangular_term(mis, phase_pdf, sigma_c)
+            e_dvc, e_dvm = dr.select(e_first, e_term.dvc, 0.0), dr.select(e_first, e_term.dvm, 0.0)
+            e_beyond = dr.select(e_first, camera_flight.beyond(scene, v.p, -wo_phase, e_first), dr.inf)
         dvcm = dr.select(vertex, float_or_zero(scattered_mis.dvcm), dvcm)
         dvc = dr.select(vertex, float_or_zero(scattered_mis.dvc), dvc)
         first = dr.select(vertex, mi.Float(scattered_mis.first), first)
@@ -332,6 +316,8 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
     mix = cp.equiangular if cp.equiangular is not None and cp.equiangular.on else None
     fresh = dr.full(mi.Bool, True, lanes) if mix is not None else True
     r_first = dr.full(mi.Float, 1.0, lanes) if mix is not None else 1.0
+    eq_nee = mix is not None and mix.nee and not merging     # equi-angular NEE, and rho of the last vertex
+    rho_prev = dr.zeros(mi.Float, lanes) if eq_nee else None
     pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
     tally(cp.counters, "camera", active)
 
@@ -342,9 +328,13 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
         si = spawn.behind_null_face(scene, ray, si, floor, active)
         in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+        if dr.hint(eq_nee, mode="scalar"):
+            L += camera_flight.equiangular_nee(scene, cp, mix, sampler, ray, si, medium, beta,
+                                               SubpathMis(dvcm, dvc, first, dvm), prev_p, depth + 1, channel, phase_ctx,
+                                               in_medium & fresh & medium.is_homogeneous() & (depth + 1 < max_depth))
         u_flight = sampler.next_1d()
         flown = flight(medium, ray, si.t, u_flight, sampler, channel, in_medium, cp.tracking)
-        if dr.hint(mix is not None, mode="scalar"):
+        if dr.hint(mix is not None and mix.mixes, mode="scalar"):
             flown = camera_flight.flight(mix, medium, ray, si.t, u_flight, sampler.next_1d(), channel,
                                          in_medium & fresh & medium.is_homogeneous(), flown)
         mei, scattered, w_flight, p_flight = flown
@@ -372,6 +362,11 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
                                          in_medium & fresh & ~escaped)
             r_here = dr.select(fresh, r_here, r_first)
             mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dist2, g_in, seg, forward=r_here)
+        rho_here = None
+        if dr.hint(eq_nee, mode="scalar"):
+            t_s = dr.select(si.is_valid(), dr.norm(si.p - prev_p), dr.inf)
+            rho_here = camera_flight.rho(mix, medium, prev_p, v.p, t_s, r_here, ray.wavelengths, channel,
+                                         scattered & fresh)
 
         # ---------------- s = 0: the camera subpath reaches an emitter ----------------
         if dr.hint(emitter_hits, mode="scalar"):
@@ -382,7 +377,7 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
             pdf_nee = nee_density(scene, prev_it, ds, infinite, hit & ((here > 1) | ~infinite))
             cos_light = dr.select(infinite, 1.0, dr.abs(dr.dot(si.n, ray.d)))
             pdf_pos, pdf_dir, _ = table.emission(emitter, cos_light, pdf_nee, hit, si.p, -ray.d)
-            w_hit = w.hit(mis, pdf_nee, pdf_pos * pdf_dir, dr.select(infinite, 0.0, pdf_pos))
+            w_hit = w.hit(mis, pdf_nee, pdf_pos * pdf_dir, dr.select(infinite, 0.0, pdf_pos), rho=rho_prev)
             L += beta * float_or_zero(w_hit) * emitter.eval(si, hit)
 
         # a surface with a smooth lobe is x_here for NEE, connections and merges whichever lobe
@@ -410,7 +405,7 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         g_cam = dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, ds.d)))
         r = camera_flight.segment_ratio(scene, mix, sides.toward(ds.d), v, ds.p, False, floor, channel, nee_on)
         w_nee = w.nee(mis, pdf_nee, pdf_pos * pdf_dir, cos_light * T_c * r, g_cam * T_c, dist2, pdf_fwd, pdf_rev,
-                      delta, here, scattered)
+                      delta, here, scattered, rho=rho_here)
         L += dr.select(nee_on, spectrum_or_zero(beta * f * em_weight * mi.Spectrum(T) * float_or_zero(w_nee)), 0.0)
 
         # ---------------- s >= 2: connections to the light subpath ----------------
@@ -450,6 +445,8 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         if dr.hint(mix is not None, mode="scalar"):
             r_first = dr.select(vertex, 1.0, dr.select(passing & fresh, r_here, r_first))
             fresh = vertex | (fresh & ~passing)
+        if dr.hint(eq_nee, mode="scalar"):
+            rho_prev = dr.select(vertex, rho_here, rho_prev)
         # ---------------- a null boundary: passed, no vertex ----------------
         seg[passing] *= bs.pdf
         beta[passing] *= bsdf_weight
