@@ -174,9 +174,9 @@ def test_equiangular_nee_left_out_of_the_light_side_is_caught():
 SIGMA_T = 0.3
 
 
-def fog_scene():
+def fog_scene(**shapes):
     return mi.load_dict({
-        "type": "scene",
+        "type": "scene", **shapes,
         "point": {"type": "point", "position": [0.2, 1.5, -0.4], "intensity": {"type": "rgb", "value": 5.0}},
         "area": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([1.0, 2.0, 0.5]),
                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 2.0}}},
@@ -303,3 +303,68 @@ def test_flights_follow_the_reported_density(fog):
     wrong, _ = _chi2_p(counts, p_free)
     print(f"chi-square p {pvalue:.3g} (mass off 1 by {mass:.1e}); against free flights' p {wrong:.3g}")
     assert pvalue > 1e-4 and mass < 2e-3 and wrong < 1e-10
+
+
+# -- equi-angular NEE's rho from a real fog, and its draws ------------------------------------
+def test_rho_from_both_ends_gives_weights_that_sum_to_one(fog):
+    """rho of x_1 evaluated as the camera does (the piece's end: a ray from x_2 through x_1 to a
+    floor plane at y = -3) and as the light side does (|x_2 - x_1| plus ``beyond`` x_1): the
+    weights of all k + 2 techniques sum to 1 within TOL (float32 geometry) on every path whose
+    segment x_2 x_1 is unoccluded."""
+    scene = fog_scene(floor={"type": "rectangle", "bsdf": {"type": "diffuse"},
+                             "to_world": mi.ScalarTransform4f().translate([0, -3, 0]).rotate([1, 0, 0], -90).scale(50)})
+    mix = camera_flight.EquiangularMixture(scene, 0.0, nee=True)
+    medium = fog[1]
+    worst, positive = 0.0, 0
+    for k in range(2, 7):
+        g, _, _ = fog_paths(k, 5300 + k, *fog)
+        rng = np.random.default_rng(k)
+        x1 = rng.uniform(-2.0, 2.0, (3, N)).astype(np.float32)
+        x2 = x1 + rng.normal(0.0, 1.0, (3, N)).astype(np.float32)
+        x2[1] = np.abs(x2[1]) + 0.1 + x1[1]                   # x_2 above x_1: the ray goes down to the floor
+        on = dr.full(mi.Bool, True, N)
+        ptr = dr.select(on, mi.MediumPtr(medium), dr.zeros(mi.MediumPtr))
+        wl, ch = dr.zeros(mi.Ray3f, N).wavelengths, dr.zeros(mi.UInt32, N)
+        p1, p2 = _points(x1), _points(x2)
+        d = dr.normalize(p1 - p2)
+        t_cam = scene.ray_intersect_preliminary(mi.Ray3f(p2, d), active=on).t
+        t_light = dr.norm(p1 - p2) + camera_flight.beyond(scene, p1, d, on)
+        visible = np.asarray(t_cam > dr.norm(p1 - p2))      # (a segment through the area light: no path)
+        rho_c = np.asarray(camera_flight.rho(mix, ptr, p2, p1, t_cam, 1.0, wl, ch, on), dtype=np.float64)
+        rho_l = np.asarray(camera_flight.rho(mix, ptr, p2, p1, t_light, 1.0, wl, ch, on), dtype=np.float64)
+        positive += int((rho_c > 0).sum())
+        g["medium"][1] = True
+        mis = BdptWeights("power", 2.0, light_paths=g["light_paths"])
+        with np.errstate(all="ignore"):
+            w = mixture_weights(g, mis, np.ones((k, N)), rho=rho_c, rho_light=rho_l)
+        buildable = feasible(g["delta"]).any(axis=0) & visible
+        worst = max(worst, float(np.abs(w.sum(axis=0)[buildable] - 1.0).max()))
+    print(f"{positive} paths with rho > 0; max |sum - 1| {worst:.2e}")
+    assert worst < TOL and positive > 10000
+
+
+def test_equiangular_nee_draws_follow_its_density(fog):
+    """``_eq_draw``'s distances over [0, 6] from a point passing the point light: a chi-square test
+    of 200 000 draws in 20 bins against ``eq_density`` integrated per bin, p > 1e-4; power: against
+    the uniform density it fails."""
+    scene, _ = fog
+    mix = camera_flight.EquiangularMixture(scene, 0.0, nee=True)
+    n, t_s = 200_000, 6.0
+    rng = mi.PCG32(n)
+    o = dr.zeros(mi.Point3f, n) + mi.Point3f(-1.5, 1.0, 0.3)
+    d = dr.zeros(mi.Vector3f, n) + dr.normalize(mi.Vector3f(1.0, 0.2, -0.3))
+    t, p = camera_flight._eq_draw(mix, o, d, mi.Float(t_s), rng.next_float32(), rng.next_float32())
+    t, p = np.asarray(t), np.asarray(p)
+    counts = np.histogram(t[p > 0], np.linspace(0.0, t_s, 21))[0]
+    fine = np.linspace(0.0, t_s, 20 * 64 + 1)
+    mid = mi.Float((0.5 * (fine[1:] + fine[:-1])).astype(np.float32))
+    m = dr.width(mid)
+    dens = np.asarray(camera_flight.eq_density(mix, dr.zeros(mi.Point3f, m) + mi.Point3f(-1.5, 1.0, 0.3),
+                                               dr.zeros(mi.Vector3f, m) + dr.normalize(mi.Vector3f(1.0, 0.2, -0.3)),
+                                               mid, mi.Float(t_s)), dtype=np.float64)
+    # only the point light's share draws (P(e) of the finite emitters, here both)
+    p_bins = (dens * (fine[1] - fine[0])).reshape(20, 64).sum(axis=1)
+    pvalue, mass = _chi2_p(counts, p_bins)
+    wrong, _ = _chi2_p(counts, np.ones(20))
+    print(f"chi-square p {pvalue:.3g}; mass {p_bins.sum():.4f}; against uniform p {wrong:.3g}")
+    assert pvalue > 1e-4 and abs(p_bins.sum() - 1.0) < 2e-3 and wrong < 1e-10

@@ -1,7 +1,22 @@
-"""Equi-angular sampling in lab_bdpt's camera subpaths: a one-sample mixture of distance densities
-whose value the MIS weights can evaluate for any segment, from either end of a path.
+"""Equi-angular sampling (Kulla and Fajardo 2012) in lab_bdpt's camera subpaths, two kinds, each
+with a density the MIS weights evaluate for any path, from either end.
 
-Along the first flight of a camera-subpath segment (from the sensor or a vertex, up to the next
+**Equi-angular NEE** (``equiangular_nee``, on by default; lab_mis's technique). On the first flight
+of each camera segment in a homogeneous medium (from the sensor or a vertex to the next surface,
+t_s away), the camera also draws a point x equi-angularly over [0, t_s] towards a light's fixed
+point c_e (e picked by P(e), below) and samples a light from x (``equiangular_nee``); the path goes
+on from the free flight as before. This is a second s = 1 technique: its density is s = 1's times
+
+    rho = sum_e P(e) p_eq(t; c_e, [0, t_s]) / p_camera(x)     (``rho``; p_camera: g T, times r below)
+
+so every sum that holds s = 1's term holds it 1 + rho^beta times, and its own weight is s = 1's
+times rho^beta (``Recursion.nee``, ``hit``; at a light subpath's first vertex ``connect`` and
+``light_to_camera``; past it ``equiangular_term`` and ``add_equiangular``). rho is needed only at a
+light subpath's first vertex, whose piece end beyond it the light side finds with one ray
+(``beyond``, ``rho_towards``); the camera knows its own (its flight's surface). Not with merging
+(lab_vcm's modes vcm, bpm and ppm leave it out).
+
+**The flights' mixture** (``equiangular`` = q, off by default). Along the first flight of a camera-subpath segment (from the sensor or a vertex, up to the next
 surface, in a homogeneous medium) the distance t is drawn, with probability q (``equiangular``),
 equi-angularly (Kulla and Fajardo 2012) towards a fixed point c_e of an emitter e picked with the
 scene's emitter-sampling probability P(e) (a point or spot light's position, an area light's
@@ -26,8 +41,11 @@ segments it samples, the light subpath for the camera's density of the same segm
 other way (each light vertex's reverse density), and every connection, NEE and light-tracing join
 for its own segment. A segment passing null surfaces (a window's pane) mixes only on its first
 flight, to the first surface (``first_surface``), whose end both sides find; later flights are
-free flights (r = 1). Heterogeneous media keep delta tracking (r = 1). Scenes with more than
-``MAX_EMITTERS`` emitters, or with q = 0, use free flights only, the same images as before.
+free flights (r = 1). On fog_shafts the mixture gained little (its draws towards a light behind a
+surface mostly land past that surface; experiments/results/2026-11-29-bdpt-equiangular.md).
+
+Heterogeneous media keep delta tracking (neither kind runs there). Scenes with more than
+``MAX_EMITTERS`` emitters, or with both kinds off, render the images from before (free flights only).
 """
 from __future__ import annotations
 
@@ -61,17 +79,19 @@ class EquiangularMixture:
     mixes (q > 0, at most ``MAX_EMITTERS`` emitters, one of them finite); ``passable``: the scene
     has null surfaces, which a segment's pieces may cross (``first_surface`` casts a ray)."""
 
-    def __init__(self, scene: mi.Scene, q: float, nee: bool = False):
+    def __init__(self, scene: mi.Scene, q: float, nee: str = "off"):
         emitters = scene.emitters()
         self.q = float(q)
         self.emitters = []
-        if (self.q > 0 or nee) and 0 < len(emitters) <= MAX_EMITTERS:
+        if (self.q > 0 or nee != "off") and 0 < len(emitters) <= MAX_EMITTERS:
             for i, e in enumerate(emitters):
                 p = float(scene.pdf_emitter(mi.UInt32(i))[0])
                 self.emitters.append((p, _centre(e)))
         self.finite = sum(p for p, c in self.emitters if c is not None)
-        #: equi-angular NEE (``nee``), a second s = 1 technique; ``on``: anything to track
-        self.nee = bool(nee) and self.finite > 0
+        #: equi-angular NEE (``nee``: off, on the camera's first segment, on all), a second s = 1
+        #: technique; ``on``: anything to track
+        self.nee = nee != "off" and self.finite > 0
+        self.nee_all = self.nee and nee == "all"
         self.mixes = self.q > 0 and self.finite > 0
         self.on = self.mixes or self.nee
         self.passable = any(mi.has_flag(s.bsdf().flags(), mi.BSDFFlags.Null) for s in scene.shapes()
@@ -81,7 +101,7 @@ class EquiangularMixture:
     def off() -> "EquiangularMixture":
         mix = EquiangularMixture.__new__(EquiangularMixture)
         mix.q, mix.emitters, mix.finite, mix.on, mix.passable = 0.0, [], 0.0, False, False
-        mix.nee = mix.mixes = False
+        mix.nee = mix.nee_all = mix.mixes = False
         return mix
 
     def _aims(self):
@@ -147,6 +167,13 @@ def rho(mix, medium, o, x, t_s, r, wavelengths, channel, active):
     _, _, sigma_c = _sigma(medium, o, wavelengths, channel, use)
     value = eq_density(mix, o, d, t, t_s) / (sigma_c * dr.exp(-sigma_c * t) * r)
     return dr.select(use & (t > 0) & (t < t_s) & dr.isfinite(value), value, 0.0)
+
+
+def nee_segment(mix, depth):
+    """Whether equi-angular NEE runs on the camera segment leaving the vertex ``depth`` segments
+    from the sensor (all, or only the sensor's: mode first, which the light side knows without
+    knowing how far its vertices lie from the sensor)."""
+    return True if mix.nee_all else depth == 0
 
 
 def beyond(scene, p, d, active):

@@ -86,9 +86,10 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     Homogeneous participating media: both subpaths scatter in them (free flights in one colour
     channel per sample, the phase function at medium vertices, null boundaries passed without a
     vertex), every strategy's connecting segment carries its transmittance, and the MIS weights
-    use the distance-sampling densities (``media_paths``); the camera subpaths mix equi-angular
-    flights towards the lights into their first flight of each segment (``equiangular``: its
-    share; ``camera_flight``), their density in every weight. Heterogeneous media: delta tracking
+    use the distance-sampling densities (``media_paths``); each camera segment's first flight in a
+    homogeneous medium adds an equi-angular NEE sample towards the lights (``equiangular_nee``,
+    lab_mis's technique, a second s = 1 strategy in the weights; not with merging), and may mix
+    equi-angular distances into the flight itself (``equiangular``; ``camera_flight``). Heterogeneous media: delta tracking
     (``majorants``: ``global`` or ``grid``), ratio-tracked connections and deterministic
     stand-in densities in the weights; ``hide_emitters`` with media is refused in one line. Light-subpath seeds come from the
     render's seed; each pass has its own.
@@ -174,7 +175,7 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         # where each emitter's light subpaths start (a one-line error where its rays disagree)
         tracer.emitter_media = emitter_media(scene, sensor, floor, self.ESTIMATOR.plugin_name) if media else None
         # equi-angular flights in the camera subpaths (``camera_flight``; off where equiangular = 0)
-        tracer.equiangular = (EquiangularMixture(scene, v.get("equiangular", 0.0), v.get("equiangular_nee", False))
+        tracer.equiangular = (EquiangularMixture(scene, v.get("equiangular", 0.0), v.get("equiangular_nee", "off"))
                               if media else None)
         tracer.sensor_medium = (mi.MediumPtr(sensor.get_medium()) if media and sensor.get_medium() is not None
                                 else dr.zeros(mi.MediumPtr, 1))

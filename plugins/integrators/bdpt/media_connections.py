@@ -61,7 +61,7 @@ def connection(scene, cp, x, si, bsdf, mei, phase, scattered, sides, beta, mis: 
     mix = cp.equiangular
     r = camera_flight.segment_ratio(scene, mix, sides.toward(d), x, y.p, y_in_medium, floor, channel, use)
     rho = None
-    if mix is not None and mix.nee and cp.grid is None:     # (equi-angular NEE's, at a light subpath's first vertex)
+    if mix is not None and mix.nee_all and cp.grid is None:   # (equi-angular NEE's, at a light subpath's first vertex)
         rho = camera_flight.rho_towards(scene, mix, sides.toward(d), x, y.p, r, floor, x.wavelengths, channel,
                                         use & y_in_medium & (depth_y == 1))
     weight = w.connect(mis_y, mis, dr.select(y_in_medium, pdf_y_fwd_p, pdf_y_fwd_s),

@@ -49,13 +49,10 @@ given c: the estimator is unbiased with c random. A connection's contribution ca
 spectrum's T (exact: Beer-Lambert in homogeneous media through null boundaries,
 ``common.media.transmittance``), its weight only T_c.
 
-**Equi-angular camera flights** (``camera_flight``, ``equiangular`` = q > 0). A camera segment's
-first flight in a homogeneous medium draws its distance from a mixture of free flights and
-equi-angular sampling towards the lights' points, so the camera's density of a segment is r times
-the light's (g T): the camera passes r to ``after_hit`` (``forward``) and, on each connecting
-segment, with the light end's cosine; the light subpath evaluates r of each segment walked back
-from its vertex (``backward``) and of its joins to the sensor. Connections (``media_connections``)
-evaluate it from the camera vertex.
+**Equi-angular sampling** (``camera_flight``): equi-angular NEE along each camera segment's first
+flight, a second s = 1 technique whose density ratio rho enters the sums that hold s = 1's term, and
+optionally a mixture of equi-angular and free flights, whose density ratio r enters ``after_hit``
+(camera: ``forward``; light: ``backward``) and each connecting segment.
 
 **Heterogeneous media** (``subpath_media.Tracking``, compiled only where the scene has one).
 The subpaths' flights there are the path family's delta tracking (``common.media.free_flight``,
@@ -141,7 +138,7 @@ def trace_light(tracer, st, block, vertices, store_lanes):
     piece_o = mi.Point3f(ps.p) if mix is not None else 0.0
     piece_collides = mi.Bool(False) if mix is not None else False
     # equi-angular NEE: s = 1's term folded at the first vertex, until rho is known at the second
-    eq_nee = mix is not None and mix.nee and not w.merging
+    eq_nee = mix is not None and mix.nee_all and not w.merging
     e_dvc, e_dvm, e_beyond = (mi.Float(0), mi.Float(0), mi.Float(dr.inf)) if eq_nee else (0.0, 0.0, 0.0)
     active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_depth > 1)
     while dr.hint(active, max_iterations=-1, label="lab_bdpt light subpath in media"):
@@ -331,7 +328,8 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         if dr.hint(eq_nee, mode="scalar"):
             L += camera_flight.equiangular_nee(scene, cp, mix, sampler, ray, si, medium, beta,
                                                SubpathMis(dvcm, dvc, first, dvm), prev_p, depth + 1, channel, phase_ctx,
-                                               in_medium & fresh & medium.is_homogeneous() & (depth + 1 < max_depth))
+                                               in_medium & fresh & medium.is_homogeneous() & (depth + 1 < max_depth)
+                                               & camera_flight.nee_segment(mix, depth))
         u_flight = sampler.next_1d()
         flown = flight(medium, ray, si.t, u_flight, sampler, channel, in_medium, cp.tracking)
         if dr.hint(mix is not None and mix.mixes, mode="scalar"):
@@ -366,7 +364,7 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         if dr.hint(eq_nee, mode="scalar"):
             t_s = dr.select(si.is_valid(), dr.norm(si.p - prev_p), dr.inf)
             rho_here = camera_flight.rho(mix, medium, prev_p, v.p, t_s, r_here, ray.wavelengths, channel,
-                                         scattered & fresh)
+                                         scattered & fresh & camera_flight.nee_segment(mix, depth))
 
         # ---------------- s = 0: the camera subpath reaches an emitter ----------------
         if dr.hint(emitter_hits, mode="scalar"):
