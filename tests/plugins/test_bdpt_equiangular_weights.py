@@ -313,7 +313,7 @@ def test_rho_from_both_ends_gives_weights_that_sum_to_one(fog):
     segment x_2 x_1 is unoccluded."""
     scene = fog_scene(floor={"type": "rectangle", "bsdf": {"type": "diffuse"},
                              "to_world": mi.ScalarTransform4f().translate([0, -3, 0]).rotate([1, 0, 0], -90).scale(50)})
-    mix = camera_flight.EquiangularMixture(scene, 0.0, nee=True)
+    mix = camera_flight.EquiangularMixture(scene, 0.0, nee="all")
     medium = fog[1]
     worst, positive = 0.0, 0
     for k in range(2, 7):
@@ -348,7 +348,7 @@ def test_equiangular_nee_draws_follow_its_density(fog):
     of 200 000 draws in 20 bins against ``eq_density`` integrated per bin, p > 1e-4; power: against
     the uniform density it fails."""
     scene, _ = fog
-    mix = camera_flight.EquiangularMixture(scene, 0.0, nee=True)
+    mix = camera_flight.EquiangularMixture(scene, 0.0, nee="all")
     n, t_s = 200_000, 6.0
     rng = mi.PCG32(n)
     o = dr.zeros(mi.Point3f, n) + mi.Point3f(-1.5, 1.0, 0.3)

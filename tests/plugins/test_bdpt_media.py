@@ -121,7 +121,7 @@ def test_strategy_subsets_agree_with_volpath(strategies, name):
 #: (each segment inside the ball starts at a refraction, so both run there, aiming at the area light's centre);
 #: the full list, with fog_shafts.xml (a point light behind a louvre, the flights' first pieces ending at the
 #: window's null pane) and the power proofs, in benchmarks/agreement/test_bdpt_media_matrix.py.
-EQUIANGULAR_PARAMS = {"nee": {}, "mixture": {"equiangular": 0.5, "equiangular_nee": False}}
+EQUIANGULAR_PARAMS = {"nee": {}, "mixture": {"equiangular": 0.5, "equiangular_nee": "off"}}
 ALL_EQUIANGULAR = [(name, kind) for name in ("chromatic_in_glass", "fog_shafts.xml") for kind in EQUIANGULAR_PARAMS]
 EQUIANGULAR = ALL_EQUIANGULAR[:2]
 

@@ -375,7 +375,8 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
             pdf_nee = nee_density(scene, prev_it, ds, infinite, hit & ((here > 1) | ~infinite))
             cos_light = dr.select(infinite, 1.0, dr.abs(dr.dot(si.n, ray.d)))
             pdf_pos, pdf_dir, _ = table.emission(emitter, cos_light, pdf_nee, hit, si.p, -ray.d)
-            w_hit = w.hit(mis, pdf_nee, pdf_pos * pdf_dir, dr.select(infinite, 0.0, pdf_pos), rho=rho_prev)
+            w_hit = w.hit(mis, pdf_nee, pdf_pos * pdf_dir, dr.select(infinite, 0.0, pdf_pos),
+                          **({"rho": rho_prev} if eq_nee else {}))    # (lab_vcm's ppm weights take none)
             L += beta * float_or_zero(w_hit) * emitter.eval(si, hit)
 
         # a surface with a smooth lobe is x_here for NEE, connections and merges whichever lobe
