@@ -179,9 +179,10 @@ LAB_BDPT = (
           check=lambda v: v == "" or _techniques().Strategy.parse(v) is not None,
           expected="empty or 's,t' with s >= 0, t >= 1 and s + t >= 2"),
     Param("equiangular", float, 0.0, "share of camera flights in homogeneous media drawn equi-angularly towards a light "
-          "(the rest free flights; their density in every MIS weight)", check=lambda v: 0.0 <= v <= 1.0, expected="[0, 1]"),
-    Param("equiangular_nee", str, "all", "camera segments in homogeneous media that add an equi-angular NEE sample, a "
-          "2nd s = 1 technique (lab_mis's; not with merging): off, first (the sensor's), all", choices=("off", "first", "all")),
+          "(the rest free flights; their density in every MIS weight). Both kinds: scenes of at most 8 emitters",
+          check=lambda v: 0.0 <= v <= 1.0, expected="a number in [0, 1]"),
+    Param("equiangular_nee", str, "all", "camera segments in homogeneous media adding an equi-angular NEE sample, a 2nd "
+          "s = 1 technique (lab_mis's; not with merging): off, first (the sensor's), all", choices=("off", "first", "all")),
 ) + tuple(p for p in _media("distance") if p.name in ("majorants", "majorant_resolution")) + AIM + (
     Param("count_rays", bool, True, "count camera, extension, shadow (NEE), connection, light-subpath and sensor "
           "(light tracing's) rays (ray_counts())"),
