@@ -6,7 +6,7 @@ extinguished, and lab_bdpt's weights gave the escaping piece a capped optical de
 next-event estimation tracked the grid: image means 0.07 (path family), 0.51 (lab_bdpt) against the
 twin's 0.698.
 
-Tolerance: |z| <= 4.5 for each image mean (4 seeds x 64 spp against volpath's 4 x 256 on the twin;
+Tolerance: |z| <= Z_BOUND (5, tests/agreement.py) for each image mean (4 seeds x 64 spp against volpath's 4 x 256 on the twin;
 the renders' spread about 0.1-0.2%); the bug missed by z 170-1000.
 """
 import numpy as np
@@ -15,9 +15,9 @@ import pytest
 import mitsuba as mi
 import backend  # noqa: F401 (the variant)
 import media_scenes
+from agreement import Z_BOUND
 from mitsuba_lab.scene import make_integrator
 
-Z_BOUND = 4.5
 _cache = {}
 
 
