@@ -19,11 +19,14 @@ from mitsuba_lab.plugins.scene_traits import SceneTraits
 
 from . import chain
 from .estimator import PSSMLT
+from .frozen import FrozenRounds
 from .sampler import PrimarySampleSampler
 
 #: The most primary-sample dimensions a chain stores (chains x MAX_DIMS x 16 bytes);
 #: a path reading more draws the rest afresh at every step (``chain`` module docstring).
 MAX_DIMS = 256
+#: Full lock-step rounds recorded once per render and replayed (``frozen.FrozenRounds``).
+FREEZE_ROUNDS = False
 
 
 @dataclass
@@ -277,7 +280,10 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     def _frozen_rounds(self, chains, evaluate, splat, captured: list):
         """``frozen.FrozenRounds`` for the full rounds of a render (``captured``: the Dr.Jit values
         ``evaluate`` and ``splat`` read besides the chains'), or None to trace every round."""
-        return None
+        if not FREEZE_ROUNDS:
+            return None
+        # (the path loop counts its rays into the counters' array: an input too)
+        return FrozenRounds(chains, evaluate, splat, captured + [vars(self.counters)], self.ESTIMATOR.plugin_name)
 
     def _count(self, chains: chain.MarkovChains) -> None:
         """The acceptance statistics of every step the chains took so far (continued renders
