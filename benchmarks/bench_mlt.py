@@ -18,10 +18,13 @@ should be 0), and the medians over the rounds are printed:
 
 Every clock starts and stops after ``dr.sync_thread()`` (``render.timed_kernels``; the chains'
 own clock in ``mlt/integrator.py`` synchronises too). ``--freeze`` also times lab_mmlt with
-``mlt.mmlt.FREEZE_ROUNDS`` on.
+``mlt.mmlt.FREEZE_ROUNDS`` on and lab_pssmlt with it off (``mlt.integrator.FREEZE_ROUNDS``: on
+by default; off, every round is traced).
+
+``--profile`` splits a lab_pssmlt lock-step round into its parts instead (``profile``).
 
     PYTHONPATH=src .venv/bin/python benchmarks/bench_mlt.py [--scenes door.xml cornell_box.xml]
-        [--res 32] [--spp 64] [--rounds 3] [--max-depth 8] [--freeze]
+        [--res 32] [--spp 64] [--rounds 3] [--max-depth 8] [--freeze] [--profile]
 """
 from __future__ import annotations
 
@@ -29,6 +32,7 @@ import argparse
 import os
 import statistics
 import sys
+import time
 
 import drjit as dr
 import mitsuba as mi
@@ -51,27 +55,30 @@ def log(*args):
 
 
 def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze: bool) -> dict:
+    from mitsuba_lab.plugins.integrators.mlt import integrator as pssmlt
     from mitsuba_lab.plugins.integrators.mlt import mmlt
 
     scene = load_scene(os.path.join(ROOT, "scenes", scene_name), res=res)
     pixels = res * res
     plugins = {name: make_integrator(name, {"max_depth": depth})
                for name in ("lab_mis", "lab_bdpt", "lab_pssmlt", "lab_mmlt")}
-    methods = [(name, plugin, False) for name, plugin in plugins.items()]
+    default = pssmlt.FREEZE_ROUNDS
+    methods = [(name, plugin, default if name == "lab_pssmlt" else False) for name, plugin in plugins.items()]
     if freeze:
         methods.append(("lab_mmlt frozen", plugins["lab_mmlt"], True))
+        methods.append(("lab_pssmlt traced", plugins["lab_pssmlt"], False))
     times = {name: [] for name, _, _ in methods}
     chain_times = {name: [] for name, _, _ in methods}
     strategies, misses = [], 0
 
     def run(plugin, frozen, seed):
-        mmlt.FREEZE_ROUNDS = frozen
+        mmlt.FREEZE_ROUNDS = pssmlt.FREEZE_ROUNDS = frozen
         try:
             if hasattr(plugin, "ray_counts"):
                 plugin.ray_counts(reset=True)
             return timed_kernels(lambda: mi.render(scene, integrator=plugin, spp=spp, seed=seed))
         finally:
-            mmlt.FREEZE_ROUNDS = False
+            mmlt.FREEZE_ROUNDS, pssmlt.FREEZE_ROUNDS = False, default
 
     for name, plugin, frozen in methods:                   # warm-up: compiles every kernel
         log(f"{scene_name}: warm-up {name} {run(plugin, frozen, 0)[1]:.2f} s")
@@ -101,14 +108,124 @@ def table(results: list[dict], args) -> None:
         mis, bdpt = med(t["lab_mis"]), med(t["lab_bdpt"])
         n = med(r["strategies"])
         strategy = bdpt / n
-        rows = [("lab_mmlt", "")] + ([("lab_mmlt frozen", " frozen")] if "lab_mmlt frozen" in t else [])
-        for key, label in rows:
-            ps, mm = med(c["lab_pssmlt"]), med(c[key])
-            whole = med(t["lab_pssmlt"])
+        rows = [("lab_pssmlt", "lab_mmlt", "")]
+        if "lab_mmlt frozen" in t:
+            rows.append(("lab_pssmlt traced", "lab_mmlt frozen", " (lab_pssmlt traced, lab_mmlt frozen)"))
+        for ps_key, key, label in rows:
+            ps, mm = med(c[ps_key]), med(c[key])
+            whole = med(t[ps_key])
             print(f"| {r['scene']}{label} | {mis * 1e6:.2f} us | {ps * 1e6:.2f} us ({whole * 1e6:.2f}) | "
                   f"**{ps / mis:.2f}** | {bdpt * 1e6:.2f} us | {n:.2f} | {strategy * 1e6:.2f} us | "
                   f"{mm * 1e6:.2f} us ({med(t[key]) * 1e6:.2f}) | **{mm / strategy:.2f}** | {mm / bdpt:.2f} |")
         print(f"  (kernels compiled in the timed renders: {r['misses']}; target {TARGET}x)")
+
+
+def profile(scene_name: str, res: int, depth: int, rounds: int, steps: int = 8) -> None:
+    """A lab_pssmlt lock-step round by part, per mutation, on the chains of a warm-up render (its
+    defaults), against a lab_mis sample (a render at 64 per pixel, and one at as many samples as
+    there are chains); medians of ``rounds`` alternating rounds of ``steps`` lock-steps each, every
+    clock after ``dr.sync_thread()``:
+
+    * trace: Python building the round's kernels (the path loop's trace dominates; no kernel runs);
+    * path kernel: the path loop with the lazy proposal (reads, mutation, writes) and the weights;
+      beside it the same path loop on fresh numbers (the primary sample's hash, no chain state),
+      so their difference is the state's share of the kernel;
+    * splat of the current sample and of the proposal (each in a kernel of its own here);
+    * accept: the state's update (the flat arrays of chains x dims);
+    * the whole round, traced, and frozen (``frozen.FrozenRounds``, recorded before the clock).
+    """
+    from mitsuba_lab.plugins.integrators.bdpt import splats
+    from mitsuba_lab.plugins.integrators.mlt import chain
+    from mitsuba_lab.plugins.integrators.mlt import integrator as pssmlt
+    from mitsuba_lab.plugins.integrators.mlt.frozen import FrozenRounds
+    from mitsuba_lab.plugins.integrators.path import KernelPlan
+    from mitsuba_lab.plugins.scene_traits import SceneTraits
+
+    scene = load_scene(os.path.join(ROOT, "scenes", scene_name), res=res)
+    pixels = res * res
+    mis = make_integrator("lab_mis", {"max_depth": depth})
+    ps = make_integrator("lab_pssmlt", {"max_depth": depth})
+    saved, pssmlt.FREEZE_ROUNDS = pssmlt.FREEZE_ROUNDS, False
+    try:
+        mi.render(scene, integrator=ps, spp=64, seed=0)
+    finally:
+        pssmlt.FREEZE_ROUNDS = saved
+    chains = ps._held.chains
+    n = chains.chains
+    narrow = max(1, n // pixels)
+    for spp in (64, narrow):
+        mi.render(scene, integrator=mis, spp=spp, seed=0)
+    sensor = scene.sensors()[0]
+    block = splats.new_block(sensor.film())
+    ps._plan = (scene, KernelPlan.of(SceneTraits.from_scene(scene), ps.estimator))
+
+    def evaluate(samples, active=True):
+        value, payload, _ = ps.evaluate(scene, sensor, samples, res, res, active)
+        return value, payload
+
+    def splat(payload, weight):
+        splats.splat(block, payload[1], type(mi.Ray3f().wavelengths)(), payload[0] * weight, weight > 0)
+
+    frozen = FrozenRounds(chains, evaluate, splat, [scene, sensor, block, vars(ps.counters)], "lab_pssmlt")
+    frozen()
+    parts = ("trace", "path kernel (lazy proposal)", "path kernel, fresh numbers", "splat current",
+             "splat proposal", "accept", "round traced", "round frozen", "lab_mis sample (64/px)",
+             f"lab_mis sample ({narrow}/px: {narrow * pixels} lanes)")
+    times = {k: [] for k in parts}
+
+    def clock():
+        dr.sync_thread()
+        return time.perf_counter()
+
+    for r in range(rounds):
+        for spp, key in ((64, parts[8]), (narrow, parts[9])):
+            t = clock()
+            dr.eval(mi.render(scene, integrator=mis, spp=spp, seed=r + 1))
+            times[key].append((clock() - t) / (pixels * spp))
+        acc = dict.fromkeys(parts[:6], 0.0)
+        for _ in range(steps):
+            index = chains.step_index()
+            key = chains.step_key(index)
+            t = clock()
+            value, payload = evaluate(chain.PrimarySamples(n, chains.tail_keys(key)))
+            t1 = time.perf_counter()
+            dr.eval(value, *payload)
+            acc[parts[2]] += clock() - t1
+            t = clock()
+            samples, large = chains.propose(key, index)
+            value, payload = evaluate(samples)
+            a, w_current, w_proposal = chains.weigh(value)
+            t1 = time.perf_counter()
+            acc[parts[0]] += t1 - t
+            dr.eval(value, *payload, a, w_current, w_proposal, samples.reads)
+            t2 = clock()
+            acc[parts[1]] += t2 - t1
+            splat(chains.payload, w_current)
+            dr.eval(block.tensor())
+            t3 = clock()
+            splat(payload, w_proposal)
+            dr.eval(block.tensor())
+            t4 = clock()
+            chains.accept(key, samples, value, payload, a, large)
+            dr.eval(*chains.arrays())
+            acc[parts[3]] += t3 - t2
+            acc[parts[4]] += t4 - t3
+            acc[parts[5]] += clock() - t4
+        for k, v in acc.items():
+            times[k].append(v / (steps * n))
+        for key, step in ((parts[6], lambda: chain.step(chains, evaluate, splat)), (parts[7], frozen)):
+            t = clock()
+            for _ in range(steps):
+                step()
+            times[key].append((clock() - t) / (steps * n))
+        log(f"  round {r}: " + ", ".join(f"{k} {v[-1] * 1e6:.2f}" for k, v in times.items()))
+    whole = med(times[parts[6]])
+    print(f"\n{scene_name}: lab_pssmlt's round by part, us per mutation (median of {rounds} rounds x {steps} "
+          f"lock-steps, {n} chains, {chains.dims} dims stored, {res}x{res}, max_depth {depth}; {versions()})")
+    print("| part | us per mutation | share of the traced round |\n|---|---|---|")
+    for k in parts:
+        print(f"| {k} | {med(times[k]) * 1e6:.3f} | {med(times[k]) / whole:.2f} |")
+    print(f"  (frozen recordings: {frozen.recordings})")
 
 
 def main(argv=None) -> int:
@@ -118,8 +235,14 @@ def main(argv=None) -> int:
     parser.add_argument("--spp", type=int, default=64)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--max-depth", type=int, default=8)
-    parser.add_argument("--freeze", action="store_true", help="also time lab_mmlt with frozen rounds")
+    parser.add_argument("--freeze", action="store_true",
+                        help="also time lab_mmlt with frozen rounds and lab_pssmlt with traced ones")
+    parser.add_argument("--profile", action="store_true", help="split a lab_pssmlt round into its parts")
     args = parser.parse_args(argv)
+    if args.profile:
+        for s in args.scenes:
+            profile(s, args.res, args.max_depth, args.rounds)
+        return 0
     results = [measure(s, args.res, args.spp, args.max_depth, args.rounds, args.freeze) for s in args.scenes]
     table(results, args)
     return 0

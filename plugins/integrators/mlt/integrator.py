@@ -25,8 +25,11 @@ from .sampler import PrimarySampleSampler
 #: The most primary-sample dimensions a chain stores (chains x MAX_DIMS x 16 bytes);
 #: a path reading more draws the rest afresh at every step (``chain`` module docstring).
 MAX_DIMS = 256
-#: Full lock-step rounds recorded once per render and replayed (``frozen.FrozenRounds``).
-FREEZE_ROUNDS = False
+#: Full lock-step rounds recorded once per render and replayed (``frozen.FrozenRounds``): a traced
+#: round's Python (the path loop's trace) is paid once per render, not per round; the same images.
+#: Not in spectral variants nor with ``majorants`` = grid (values the round reads that the frozen
+#: function cannot take as inputs: the spectral tables, the grid kept on the integrator).
+FREEZE_ROUNDS = True
 
 
 @dataclass
@@ -284,7 +287,7 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     def _frozen_rounds(self, chains, evaluate, splat, captured: list):
         """``frozen.FrozenRounds`` for the full rounds of a render (``captured``: the Dr.Jit values
         ``evaluate`` and ``splat`` read besides the chains'), or None to trace every round."""
-        if not FREEZE_ROUNDS:
+        if not FREEZE_ROUNDS or mi.is_spectral or (self._plan[1].media and self.majorants == "grid"):
             return None
         # (the path loop counts its rays into the counters' array: an input too)
         return FrozenRounds(chains, evaluate, splat, captured + [vars(self.counters)], self.ESTIMATOR.plugin_name)
