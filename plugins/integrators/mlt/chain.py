@@ -117,9 +117,6 @@ class PrimarySamples:
         self.dims = dims if state is not None else 0
         self.lazy = lazy
         self.lane = dr.arange(mi.UInt32, lanes)
-        #: Per lane, how many numbers the evaluation read (numbers 0 .. reads - 1), where it says
-        #: (``MarkovChains.prefix_reads``); set by the caller after the evaluation.
-        self.reads = None
 
     def get(self, dim, active=True):
         fresh = uniform(self.keys, dim)
@@ -149,8 +146,7 @@ class LazyProposal:
     then a large step draws it afresh, and a small step adds a normal of standard deviation
     sigma sqrt(iteration - last) (the sum of the accepted small steps it missed), wrapped. The
     proposal and the step's ``stamp`` are written to ``proposal`` and ``stamps``; accepting a
-    chain copies its numbers stamped this step (with ``stamps`` None nothing is stamped: the
-    chains know which numbers were read from their count, ``MarkovChains.prefix_reads``). In distribution this is the eager step (every
+    chain copies its numbers stamped this step. In distribution this is the eager step (every
     stored number moved at every accepted step): the numbers no path read influence nothing."""
     chains: int
     sigma: float
@@ -160,7 +156,7 @@ class LazyProposal:
     large: object               # Bool per chain
     last: object                # UInt32 per stored number
     proposal: object            # Float per stored number (written)
-    stamps: object              # UInt32 per stored number (written), or None
+    stamps: object              # UInt32 per stored number (written)
     stamp: object               # the step's stamp (opaque UInt32)
 
     def __post_init__(self):
@@ -183,8 +179,7 @@ class LazyProposal:
         spread = self.sigma * dr.sqrt(mi.Float(iteration - last))
         value = dr.select(large, xi, wrap(u + spread * math.sqrt(2.0) * dr.erfinv(2.0 * xi - 1.0)))
         dr.scatter(self.proposal, value, index, stored)
-        if self.stamps is not None:
-            dr.scatter(self.stamps, self.stamp, index, stored)
+        dr.scatter(self.stamps, self.stamp, index, stored)
         return value
 
 
@@ -266,13 +261,7 @@ class MarkovChains:
     ``payload`` (a tuple of Dr.Jit arrays of width ``chains``) are set by ``start``. ``lazy``
     (the normal small step only: Kelemen's exponential one is always eager): steps mutate only
     the numbers a path reads (``LazyProposal``), with the counters ``iteration``, ``last_large``
-    and ``last`` and the buffers ``proposal`` and ``stamps`` (chains x dims x 16 bytes in all).
-
-    ``prefix_reads``: every evaluation reads its numbers in order, 0, 1, 2, ..., and reports how
-    many per lane (``PrimarySamples.reads``, as lab_pssmlt's single-stream sampler does), so the
-    numbers a proposal read are those below that count: the lazy steps then stamp nothing (one
-    scatter less per number read) and accepting copies the numbers below the count, the same
-    numbers the stamps mark."""
+    and ``last`` and the buffers ``proposal`` and ``stamps`` (chains x dims x 16 bytes in all)."""
     chains: int
     dims: int
     key: object                 # the render's key (``seed_key``)
@@ -285,7 +274,6 @@ class MarkovChains:
     counts: ChainCounts = field(default=None)
     steps: int = 0
     lazy: bool = True
-    prefix_reads: bool = False
 
     def __post_init__(self):
         if self.small_step not in MLT_SMALL_STEPS:
@@ -300,7 +288,7 @@ class MarkovChains:
         self.last = dr.zeros(mi.UInt32, self.chains * self.dims)
         if self.lazy:
             self.proposal = dr.zeros(mi.Float, self.chains * self.dims)
-            self.stamps = None if self.prefix_reads else dr.zeros(mi.UInt32, self.chains * self.dims)
+            self.stamps = dr.zeros(mi.UInt32, self.chains * self.dims)
 
     # -- start ------------------------------------------------------------------------
 
@@ -389,12 +377,7 @@ class MarkovChains:
             chain = self.flat % self.chains
             moves_here = dr.gather(mi.Bool, moves, chain)
             next_iteration = dr.gather(mi.UInt32, self.iteration, chain) + 1
-            if samples.lazy is not None and self.prefix_reads:      # the numbers its path read
-                if samples.reads is None:
-                    raise ValueError("prefix_reads: the evaluation did not say how many numbers it read")
-                moves_here &= self.flat // self.chains < dr.gather(mi.UInt32, samples.reads, chain)
-                self.u = dr.select(moves_here, self.proposal, self.u)
-            elif samples.lazy is not None:
+            if samples.lazy is not None:             # the numbers its path read
                 moves_here &= self.stamps == samples.lazy.stamp
                 self.u = dr.select(moves_here, self.proposal, self.u)
             else:                                    # every number

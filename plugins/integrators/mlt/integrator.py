@@ -137,9 +137,6 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     PARAMETERS = PSSMLT.PARAMETERS
     #: Chains take their starts in the bootstrap's order (lab_mmlt: lanes grouped by path length).
     SORT_STARTS = False
-    #: A path reads its numbers in order and ``evaluate`` says how many (``MarkovChains.prefix_reads``;
-    #: lab_mmlt's two interleaved streams do not).
-    PREFIX_READS = True
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
@@ -217,8 +214,7 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         # ---------------- The chains ----------------
         stats.chains = n_chains = self.chains
         stats.dims = dims = min(stats.dims_read_max, MAX_DIMS)
-        chains = chain.MarkovChains(n_chains, dims, key, self.large_step, self.small_step, self.sigma,
-                                    prefix_reads=self.PREFIX_READS)
+        chains = chain.MarkovChains(n_chains, dims, key, self.large_step, self.small_step, self.sigma)
         starts = chains.start(boot_keys, values, boot_value, boot_payload, sort=self.SORT_STARTS)
         stats.distinct_starts = int(np.unique(starts).size)
         del boot_value, boot_payload, boot_keys
@@ -334,7 +330,6 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         aperture_u = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
         ray, ray_weight = sensor.sample_ray_differential(shutter, wavelength_u, film_u, aperture_u)
         L, _, _ = self.sample(scene, sampler, ray, sensor.get_medium(), mi.Bool(active))
-        samples.reads = sampler.dim
         value, f = target(mi.Spectrum(ray_weight * L), ray.wavelengths, active)
         position = mi.Point2f(film_u.x * width, film_u.y * height)
         payload = (f, position, ray.wavelengths) if mi.is_spectral else (f, position)

@@ -129,7 +129,6 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     ESTIMATOR = MMLT
     PARAMETERS = MMLT.PARAMETERS
     SORT_STARTS = True
-    PREFIX_READS = False     # (two interleaved streams: the numbers read are not a prefix)
 
     def __init__(self, props: mi.Properties):
         values = plugin_settings(self.ESTIMATOR.plugin_name, props, self.PARAMETERS, "integrator")
