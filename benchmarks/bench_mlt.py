@@ -69,7 +69,7 @@ def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze
         methods.append(("lab_pssmlt traced", plugins["lab_pssmlt"], False))
     times = {name: [] for name, _, _ in methods}
     chain_times = {name: [] for name, _, _ in methods}
-    strategies, misses = [], 0
+    strategies, rays, lengths, misses = [], [], [], 0
 
     def run(plugin, frozen, seed):
         mmlt.FREEZE_ROUNDS = pssmlt.FREEZE_ROUNDS = frozen
@@ -92,8 +92,13 @@ def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze
             if name == "lab_bdpt":
                 counts = plugin.ray_counts(reset=True)
                 strategies.append(sum(counts[k] for k in STRATEGY_RAYS) / (pixels * spp))
+                rays.append(sum(counts.values()) / (pixels * spp))
+            if name == "lab_mmlt":
+                per_length = plugin.mlt_stats()["chains_per_length"]
+                lengths.append(sum((k + 1) * c for k, c in enumerate(per_length)) / max(sum(per_length), 1))
         log(f"  round {i}: " + ", ".join(f"{n} {times[n][-1] * 1e6:.2f} us" for n in times))
-    return {"scene": scene_name, "times": times, "chain": chain_times, "strategies": strategies, "misses": misses}
+    return {"scene": scene_name, "times": times, "chain": chain_times, "strategies": strategies, "misses": misses,
+            "rays": rays, "lengths": lengths}
 
 
 def table(results: list[dict], args) -> None:
@@ -118,6 +123,10 @@ def table(results: list[dict], args) -> None:
                   f"**{ps / mis:.2f}** | {bdpt * 1e6:.2f} us | {n:.2f} | {strategy * 1e6:.2f} us | "
                   f"{mm * 1e6:.2f} us ({med(t[key]) * 1e6:.2f}) | **{mm / strategy:.2f}** | {mm / bdpt:.2f} |")
         print(f"  (kernels compiled in the timed renders: {r['misses']}; target {TARGET}x)")
+        # a path of k segments needs k rays (k - 1 traced and a connection, or k traced), none shared
+        print(f"  ({r['scene']}: lab_bdpt traces {med(r['rays']):.2f} rays per sample, {med(r['rays']) / n:.2f} per "
+              f"strategy; lab_mmlt's chains hold paths of {med(r['lengths']):.2f} segments on average, so a "
+              f"mutation traces at least that many rays)")
 
 
 def profile(scene_name: str, res: int, depth: int, rounds: int, steps: int = 8) -> None:
@@ -197,7 +206,7 @@ def profile(scene_name: str, res: int, depth: int, rounds: int, steps: int = 8) 
             a, w_current, w_proposal = chains.weigh(value)
             t1 = time.perf_counter()
             acc[parts[0]] += t1 - t
-            dr.eval(value, *payload, a, w_current, w_proposal, samples.reads)
+            dr.eval(value, *payload, a, w_current, w_proposal)
             t2 = clock()
             acc[parts[1]] += t2 - t1
             splat(chains.payload, w_current)
