@@ -85,7 +85,7 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
 
     Hachisuka, Kaplanyan and Dachsbacher 2014 ("Multiplexed Metropolis light transport"), as
     pbrt-v4's ``MLTIntegrator`` makes it, over lab_bdpt's subpaths and MIS weights, with
-    lab_pssmlt's chains (``mlt/chain.py``: lock-step chains, lazy normal steps, expected-value
+    lab_pssmlt's chains (``mlt/chain.py``: lock-step chains, eager steps, expected-value
     splatting, bootstrap and start in proportion to the target). The primary sample holds two
     interleaved streams (pbrt-v4's ``MLTSampler`` streams): the camera's first number picks the
     strategy (s, t) with s + t = k + 1 vertices (each of the k + 1 with probability 1 / (k + 1)),
