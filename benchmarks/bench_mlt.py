@@ -21,10 +21,11 @@ own clock in ``mlt/integrator.py`` synchronises too). ``--freeze`` also times la
 ``mlt.mmlt.FREEZE_ROUNDS`` on and lab_pssmlt with it off (``mlt.integrator.FREEZE_ROUNDS``: on
 by default; off, every round is traced).
 
-``--profile`` splits a lab_pssmlt lock-step round into its parts instead (``profile``).
+``--profile`` splits a lab_pssmlt lock-step round into its parts instead (``profile``; ``--lazy``
+with lazy normal steps).
 
     PYTHONPATH=src .venv/bin/python benchmarks/bench_mlt.py [--scenes door.xml cornell_box.xml]
-        [--res 32] [--spp 64] [--rounds 3] [--max-depth 8] [--freeze] [--profile]
+        [--res 32] [--spp 64] [--rounds 3] [--max-depth 8] [--freeze] [--profile [--lazy]]
 """
 from __future__ import annotations
 
@@ -129,16 +130,18 @@ def table(results: list[dict], args) -> None:
               f"mutation traces at least that many rays)")
 
 
-def profile(scene_name: str, res: int, depth: int, rounds: int, steps: int = 8) -> None:
+def profile(scene_name: str, res: int, depth: int, rounds: int, lazy: bool, steps: int = 8) -> None:
     """A lab_pssmlt lock-step round by part, per mutation, on the chains of a warm-up render (its
-    defaults), against a lab_mis sample (a render at 64 per pixel, and one at as many samples as
-    there are chains); medians of ``rounds`` alternating rounds of ``steps`` lock-steps each, every
-    clock after ``dr.sync_thread()``:
+    defaults; ``lazy``: the normal steps made lazily, as before 2026-11-29-mlt-speed.md), against
+    a lab_mis sample (a render at 64 per pixel, and one at as many samples as there are chains);
+    medians of ``rounds`` alternating rounds of ``steps`` lock-steps each, every clock after
+    ``dr.sync_thread()``:
 
     * trace: Python building the round's kernels (the path loop's trace dominates; no kernel runs);
-    * path kernel: the path loop with the lazy proposal (reads, mutation, writes) and the weights;
-      beside it the same path loop on fresh numbers (the primary sample's hash, no chain state),
-      so their difference is the state's share of the kernel;
+    * proposal kernel (eager steps): every stored number moved, chains x dims;
+    * path kernel: the path loop reading the proposal (lazy: reading, mutating and writing each
+      number it reads) and the weights; beside it the same path loop on fresh numbers (the primary
+      sample's hash, no chain state), so their difference is the state's share of the kernel;
     * splat of the current sample and of the proposal (each in a kernel of its own here);
     * accept: the state's update (the flat arrays of chains x dims);
     * the whole round, traced, and frozen (``frozen.FrozenRounds``, recorded before the clock).
@@ -154,6 +157,7 @@ def profile(scene_name: str, res: int, depth: int, rounds: int, steps: int = 8) 
     pixels = res * res
     mis = make_integrator("lab_mis", {"max_depth": depth})
     ps = make_integrator("lab_pssmlt", {"max_depth": depth})
+    ps.LAZY_STEPS = lazy
     saved, pssmlt.FREEZE_ROUNDS = pssmlt.FREEZE_ROUNDS, False
     try:
         mi.render(scene, integrator=ps, spp=64, seed=0)
@@ -177,7 +181,7 @@ def profile(scene_name: str, res: int, depth: int, rounds: int, steps: int = 8) 
 
     frozen = FrozenRounds(chains, evaluate, splat, [scene, sensor, block, vars(ps.counters)], "lab_pssmlt")
     frozen()
-    parts = ("trace", "path kernel (lazy proposal)", "path kernel, fresh numbers", "splat current",
+    parts = ("trace", "proposal kernel", "path kernel", "path kernel, fresh numbers", "splat current",
              "splat proposal", "accept", "round traced", "round frozen", "lab_mis sample (64/px)",
              f"lab_mis sample ({narrow}/px: {narrow * pixels} lanes)")
     times = {k: [] for k in parts}
@@ -187,28 +191,32 @@ def profile(scene_name: str, res: int, depth: int, rounds: int, steps: int = 8) 
         return time.perf_counter()
 
     for r in range(rounds):
-        for spp, key in ((64, parts[8]), (narrow, parts[9])):
+        for spp, key in ((64, parts[9]), (narrow, parts[10])):
             t = clock()
             dr.eval(mi.render(scene, integrator=mis, spp=spp, seed=r + 1))
             times[key].append((clock() - t) / (pixels * spp))
-        acc = dict.fromkeys(parts[:6], 0.0)
+        acc = dict.fromkeys(parts[:7], 0.0)
         for _ in range(steps):
             index = chains.step_index()
             key = chains.step_key(index)
-            t = clock()
             value, payload = evaluate(chain.PrimarySamples(n, chains.tail_keys(key)))
-            t1 = time.perf_counter()
+            t = clock()
             dr.eval(value, *payload)
-            acc[parts[2]] += clock() - t1
+            acc[parts[3]] += clock() - t
             t = clock()
             samples, large = chains.propose(key, index)
+            if samples.lazy is None:
+                dr.eval(samples.state)
+                t1 = clock()
+                acc[parts[1]] += t1 - t
+                t = t1
             value, payload = evaluate(samples)
             a, w_current, w_proposal = chains.weigh(value)
             t1 = time.perf_counter()
             acc[parts[0]] += t1 - t
             dr.eval(value, *payload, a, w_current, w_proposal)
             t2 = clock()
-            acc[parts[1]] += t2 - t1
+            acc[parts[2]] += t2 - t1
             splat(chains.payload, w_current)
             dr.eval(block.tensor())
             t3 = clock()
@@ -217,20 +225,21 @@ def profile(scene_name: str, res: int, depth: int, rounds: int, steps: int = 8) 
             t4 = clock()
             chains.accept(key, samples, value, payload, a, large)
             dr.eval(*chains.arrays())
-            acc[parts[3]] += t3 - t2
-            acc[parts[4]] += t4 - t3
-            acc[parts[5]] += clock() - t4
+            acc[parts[4]] += t3 - t2
+            acc[parts[5]] += t4 - t3
+            acc[parts[6]] += clock() - t4
         for k, v in acc.items():
             times[k].append(v / (steps * n))
-        for key, step in ((parts[6], lambda: chain.step(chains, evaluate, splat)), (parts[7], frozen)):
+        for key, step in ((parts[7], lambda: chain.step(chains, evaluate, splat)), (parts[8], frozen)):
             t = clock()
             for _ in range(steps):
                 step()
             times[key].append((clock() - t) / (steps * n))
         log(f"  round {r}: " + ", ".join(f"{k} {v[-1] * 1e6:.2f}" for k, v in times.items()))
-    whole = med(times[parts[6]])
-    print(f"\n{scene_name}: lab_pssmlt's round by part, us per mutation (median of {rounds} rounds x {steps} "
-          f"lock-steps, {n} chains, {chains.dims} dims stored, {res}x{res}, max_depth {depth}; {versions()})")
+    whole = med(times[parts[7]])
+    print(f"\n{scene_name}: lab_pssmlt's round by part ({'lazy' if lazy else 'eager'} steps), us per mutation "
+          f"(median of {rounds} rounds x {steps} lock-steps, {n} chains, {chains.dims} dims stored, {res}x{res}, "
+          f"max_depth {depth}; {versions()})")
     print("| part | us per mutation | share of the traced round |\n|---|---|---|")
     for k in parts:
         print(f"| {k} | {med(times[k]) * 1e6:.3f} | {med(times[k]) / whole:.2f} |")
@@ -247,10 +256,11 @@ def main(argv=None) -> int:
     parser.add_argument("--freeze", action="store_true",
                         help="also time lab_mmlt with frozen rounds and lab_pssmlt with traced ones")
     parser.add_argument("--profile", action="store_true", help="split a lab_pssmlt round into its parts")
+    parser.add_argument("--lazy", action="store_true", help="profile lab_pssmlt with lazy normal steps")
     args = parser.parse_args(argv)
     if args.profile:
         for s in args.scenes:
-            profile(s, args.res, args.max_depth, args.rounds)
+            profile(s, args.res, args.max_depth, args.rounds, args.lazy)
         return 0
     results = [measure(s, args.res, args.spp, args.max_depth, args.rounds, args.freeze) for s in args.scenes]
     table(results, args)
