@@ -25,7 +25,8 @@ by default; off, every round is traced).
 with lazy normal steps).
 
     PYTHONPATH=src .venv/bin/python benchmarks/bench_mlt.py [--scenes door.xml cornell_box.xml]
-        [--res 32] [--spp 64] [--rounds 3] [--max-depth 8] [--freeze] [--profile [--lazy]]
+        [--res 32] [--spp 64] [--rounds 3] [--max-depth 8] [--freeze] [--wide 32768 ...]
+        [--profile [--lazy]]
 """
 from __future__ import annotations
 
@@ -55,7 +56,7 @@ def log(*args):
     print(*args, file=sys.stderr, flush=True)
 
 
-def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze: bool) -> dict:
+def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze: bool, wide=()) -> dict:
     from mitsuba_lab.plugins.integrators.mlt import integrator as pssmlt
     from mitsuba_lab.plugins.integrators.mlt import mmlt
 
@@ -68,6 +69,9 @@ def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze
     if freeze:
         methods.append(("lab_mmlt frozen", plugins["lab_mmlt"], True))
         methods.append(("lab_pssmlt traced", plugins["lab_pssmlt"], False))
+    for n in wide:          # (wider lock-steps: not the defaults)
+        methods.append((f"lab_pssmlt {n} chains", make_integrator("lab_pssmlt", {"max_depth": depth, "chains": n}),
+                        default))
     times = {name: [] for name, _, _ in methods}
     chain_times = {name: [] for name, _, _ in methods}
     strategies, rays, lengths, misses = [], [], [], 0
@@ -99,7 +103,24 @@ def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze
                 lengths.append(sum((k + 1) * c for k, c in enumerate(per_length)) / max(sum(per_length), 1))
         log(f"  round {i}: " + ", ".join(f"{n} {times[n][-1] * 1e6:.2f} us" for n in times))
     return {"scene": scene_name, "times": times, "chain": chain_times, "strategies": strategies, "misses": misses,
-            "rays": rays, "lengths": lengths}
+            "rays": rays, "lengths": lengths, "path_rays": path_rays(scene, plugins, pixels, spp)}
+
+
+def path_rays(scene, plugins: dict, pixels: int, spp: int) -> tuple[float, float]:
+    """(rays per lab_mis sample, rays per lab_pssmlt mutation), untimed. The chains' rays are those
+    of the mutations 2x the render's count adds to it with the same seed: the same bootstrap (its
+    size then depends on ``bootstrap`` alone) and the same first mutations, so the difference is
+    the later mutations' alone."""
+    def rays(name, n):
+        plugin = plugins[name]
+        plugin.ray_counts(reset=True)
+        mi.render(scene, integrator=plugin, spp=n, seed=99)
+        return sum(plugin.ray_counts(reset=True).values())
+
+    chains = plugins["lab_pssmlt"]
+    assert chains.bootstrap_for(pixels * 2 * spp) == chains.bootstrap_for(pixels * spp), "bootstrap grows"
+    mutations = rays("lab_pssmlt", 2 * spp) - rays("lab_pssmlt", spp)
+    return rays("lab_mis", spp) / (pixels * spp), mutations / (pixels * spp)
 
 
 def table(results: list[dict], args) -> None:
@@ -123,11 +144,17 @@ def table(results: list[dict], args) -> None:
             print(f"| {r['scene']}{label} | {mis * 1e6:.2f} us | {ps * 1e6:.2f} us ({whole * 1e6:.2f}) | "
                   f"**{ps / mis:.2f}** | {bdpt * 1e6:.2f} us | {n:.2f} | {strategy * 1e6:.2f} us | "
                   f"{mm * 1e6:.2f} us ({med(t[key]) * 1e6:.2f}) | **{mm / strategy:.2f}** | {mm / bdpt:.2f} |")
+        for name in (k for k in c if k.endswith(" chains")):
+            print(f"  ({r['scene']}: {name}: {med(c[name]) * 1e6:.2f} us per mutation ({med(t[name]) * 1e6:.2f}), "
+                  f"{med(c[name]) / mis:.2f}x a lab_mis sample)")
         print(f"  (kernels compiled in the timed renders: {r['misses']}; target {TARGET}x)")
         # a path of k segments needs k rays (k - 1 traced and a connection, or k traced), none shared
         print(f"  ({r['scene']}: lab_bdpt traces {med(r['rays']):.2f} rays per sample, {med(r['rays']) / n:.2f} per "
               f"strategy; lab_mmlt's chains hold paths of {med(r['lengths']):.2f} segments on average, so a "
               f"mutation traces at least that many rays)")
+        mis_rays, chain_rays = r["path_rays"]
+        print(f"  ({r['scene']}: a lab_mis sample traces {mis_rays:.2f} rays, a lab_pssmlt mutation {chain_rays:.2f}: "
+              f"the chains' paths are {chain_rays / mis_rays:.2f}x as long)")
 
 
 def profile(scene_name: str, res: int, depth: int, rounds: int, lazy: bool, steps: int = 8) -> None:
@@ -255,6 +282,8 @@ def main(argv=None) -> int:
     parser.add_argument("--max-depth", type=int, default=8)
     parser.add_argument("--freeze", action="store_true",
                         help="also time lab_mmlt with frozen rounds and lab_pssmlt with traced ones")
+    parser.add_argument("--wide", type=int, nargs="*", default=[],
+                        help="also time lab_pssmlt with these chain counts (wider lock-steps)")
     parser.add_argument("--profile", action="store_true", help="split a lab_pssmlt round into its parts")
     parser.add_argument("--lazy", action="store_true", help="profile lab_pssmlt with lazy normal steps")
     args = parser.parse_args(argv)
@@ -262,7 +291,8 @@ def main(argv=None) -> int:
         for s in args.scenes:
             profile(s, args.res, args.max_depth, args.rounds, args.lazy)
         return 0
-    results = [measure(s, args.res, args.spp, args.max_depth, args.rounds, args.freeze) for s in args.scenes]
+    results = [measure(s, args.res, args.spp, args.max_depth, args.rounds, args.freeze, args.wide)
+               for s in args.scenes]
     table(results, args)
     return 0
 
