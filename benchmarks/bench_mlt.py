@@ -17,9 +17,9 @@ should be 0), and the medians over the rounds are printed:
   camera segment (``camera`` and ``extension`` rays: the s = 0 strategy at its hit).
 
 Every clock starts and stops after ``dr.sync_thread()`` (``render.timed_kernels``; the chains'
-own clock in ``mlt/integrator.py`` synchronises too). ``--freeze`` also times lab_mmlt with
-``mlt.mmlt.FREEZE_ROUNDS`` on and lab_pssmlt with it off (``mlt.integrator.FREEZE_ROUNDS``: on
-by default; off, every round is traced).
+own clock in ``mlt/integrator.py`` synchronises too). Both chain estimators freeze their full
+rounds by default (``mlt.integrator.FREEZE_ROUNDS``, ``mlt.mmlt.FREEZE_ROUNDS``); ``--freeze``
+also times both with every round traced.
 
 ``--profile`` splits a lab_pssmlt lock-step round into its parts instead (``profile``; ``--lazy``
 with lazy normal steps).
@@ -64,10 +64,11 @@ def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze
     pixels = res * res
     plugins = {name: make_integrator(name, {"max_depth": depth})
                for name in ("lab_mis", "lab_bdpt", "lab_pssmlt", "lab_mmlt")}
-    default = pssmlt.FREEZE_ROUNDS
-    methods = [(name, plugin, default if name == "lab_pssmlt" else False) for name, plugin in plugins.items()]
+    defaults = {"lab_pssmlt": pssmlt.FREEZE_ROUNDS, "lab_mmlt": mmlt.FREEZE_ROUNDS}
+    default = defaults["lab_pssmlt"]
+    methods = [(name, plugin, defaults.get(name, False)) for name, plugin in plugins.items()]
     if freeze:
-        methods.append(("lab_mmlt frozen", plugins["lab_mmlt"], True))
+        methods.append(("lab_mmlt traced", plugins["lab_mmlt"], False))
         methods.append(("lab_pssmlt traced", plugins["lab_pssmlt"], False))
     for n in wide:          # (wider lock-steps: not the defaults)
         methods.append((f"lab_pssmlt {n} chains", make_integrator("lab_pssmlt", {"max_depth": depth, "chains": n}),
@@ -83,7 +84,7 @@ def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze
                 plugin.ray_counts(reset=True)
             return timed_kernels(lambda: mi.render(scene, integrator=plugin, spp=spp, seed=seed))
         finally:
-            mmlt.FREEZE_ROUNDS, pssmlt.FREEZE_ROUNDS = False, default
+            mmlt.FREEZE_ROUNDS, pssmlt.FREEZE_ROUNDS = defaults["lab_mmlt"], defaults["lab_pssmlt"]
 
     for name, plugin, frozen in methods:                   # warm-up: compiles every kernel
         log(f"{scene_name}: warm-up {name} {run(plugin, frozen, 0)[1]:.2f} s")
@@ -136,8 +137,8 @@ def table(results: list[dict], args) -> None:
         n = med(r["strategies"])
         strategy = bdpt / n
         rows = [("lab_pssmlt", "lab_mmlt", "")]
-        if "lab_mmlt frozen" in t:
-            rows.append(("lab_pssmlt traced", "lab_mmlt frozen", " (lab_pssmlt traced, lab_mmlt frozen)"))
+        if "lab_mmlt traced" in t:
+            rows.append(("lab_pssmlt traced", "lab_mmlt traced", " (every round traced)"))
         for ps_key, key, label in rows:
             ps, mm = med(c[ps_key]), med(c[key])
             whole = med(t[ps_key])
@@ -171,7 +172,9 @@ def profile(scene_name: str, res: int, depth: int, rounds: int, lazy: bool, step
       sample's hash, no chain state), so their difference is the state's share of the kernel;
     * splat of the current sample and of the proposal (each in a kernel of its own here);
     * accept: the state's update (the flat arrays of chains x dims);
-    * the whole round, traced, and frozen (``frozen.FrozenRounds``, recorded before the clock).
+    * the whole round, traced, and frozen (``frozen.FrozenRounds``, recorded before the clock);
+    * kernel only: the execution time of the largest kernel (Dr.Jit's kernel history) per lane, of
+      the frozen rounds (their path kernel) and of lab_mis's renders.
     """
     from mitsuba_lab.plugins.integrators.bdpt import splats
     from mitsuba_lab.plugins.integrators.mlt import chain
@@ -210,18 +213,24 @@ def profile(scene_name: str, res: int, depth: int, rounds: int, lazy: bool, step
     frozen()
     parts = ("trace", "proposal kernel", "path kernel", "path kernel, fresh numbers", "splat current",
              "splat proposal", "accept", "round traced", "round frozen", "lab_mis sample (64/px)",
-             f"lab_mis sample ({narrow}/px: {narrow * pixels} lanes)")
+             f"lab_mis sample ({narrow}/px: {narrow * pixels} lanes)", "kernel only: frozen round's path kernel",
+             "kernel only: lab_mis (64/px)", f"kernel only: lab_mis ({narrow}/px)")
     times = {k: [] for k in parts}
 
     def clock():
         dr.sync_thread()
         return time.perf_counter()
 
+    def largest_kernel(history) -> float:
+        """Seconds per lane of the longest kernel in ``history``."""
+        k = max(history, key=lambda k: k.get("execution_time", 0.0))
+        return k["execution_time"] * 1e-3 / k["size"]
+
     for r in range(rounds):
-        for spp, key in ((64, parts[9]), (narrow, parts[10])):
-            t = clock()
-            dr.eval(mi.render(scene, integrator=mis, spp=spp, seed=r + 1))
-            times[key].append((clock() - t) / (pixels * spp))
+        for spp, key, kernel in ((64, parts[9], parts[12]), (narrow, parts[10], parts[13])):
+            _, wall, history = timed_kernels(lambda: mi.render(scene, integrator=mis, spp=spp, seed=r + 1))
+            times[key].append(wall / (pixels * spp))
+            times[kernel].append(largest_kernel(history))
         acc = dict.fromkeys(parts[:7], 0.0)
         for _ in range(steps):
             index = chains.step_index()
@@ -262,6 +271,8 @@ def profile(scene_name: str, res: int, depth: int, rounds: int, lazy: bool, step
             for _ in range(steps):
                 step()
             times[key].append((clock() - t) / (steps * n))
+        _, _, history = timed_kernels(frozen)
+        times[parts[11]].append(largest_kernel(history))
         log(f"  round {r}: " + ", ".join(f"{k} {v[-1] * 1e6:.2f}" for k, v in times.items()))
     whole = med(times[parts[7]])
     print(f"\n{scene_name}: lab_pssmlt's round by part ({'lazy' if lazy else 'eager'} steps), us per mutation "
@@ -281,7 +292,7 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--max-depth", type=int, default=8)
     parser.add_argument("--freeze", action="store_true",
-                        help="also time lab_mmlt with frozen rounds and lab_pssmlt with traced ones")
+                        help="also time lab_pssmlt and lab_mmlt with every round traced")
     parser.add_argument("--wide", type=int, nargs="*", default=[],
                         help="also time lab_pssmlt with these chain counts (wider lock-steps)")
     parser.add_argument("--profile", action="store_true", help="split a lab_pssmlt round into its parts")
