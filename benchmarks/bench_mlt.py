@@ -25,7 +25,7 @@ also times both with every round traced.
 with lazy normal steps).
 
     PYTHONPATH=src .venv/bin/python benchmarks/bench_mlt.py [--scenes door.xml cornell_box.xml]
-        [--res 32] [--spp 64] [--rounds 3] [--max-depth 8] [--freeze] [--wide 32768 ...]
+        [--res 32] [--spp 64] [--rounds 3] [--max-depth 8] [--freeze] [--lazy] [--wide 32768 ...]
         [--profile [--lazy]]
 """
 from __future__ import annotations
@@ -56,7 +56,8 @@ def log(*args):
     print(*args, file=sys.stderr, flush=True)
 
 
-def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze: bool, wide=()) -> dict:
+def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze: bool, wide=(),
+            lazy: bool = False) -> dict:
     from mitsuba_lab.plugins.integrators.mlt import integrator as pssmlt
     from mitsuba_lab.plugins.integrators.mlt import mmlt
 
@@ -70,6 +71,11 @@ def measure(scene_name: str, res: int, spp: int, depth: int, rounds: int, freeze
     if freeze:
         methods.append(("lab_mmlt traced", plugins["lab_mmlt"], False))
         methods.append(("lab_pssmlt traced", plugins["lab_pssmlt"], False))
+    if lazy:                # (the lazy normal steps the plugins made before 2026-11-29-mlt-speed.md)
+        for name in ("lab_pssmlt", "lab_mmlt"):
+            plugin = make_integrator(name, {"max_depth": depth})
+            plugin.LAZY_STEPS = True
+            methods.append((f"{name} lazy steps", plugin, defaults[name]))
     for n in wide:          # (wider lock-steps: not the defaults)
         methods.append((f"lab_pssmlt {n} chains", make_integrator("lab_pssmlt", {"max_depth": depth, "chains": n}),
                         default))
@@ -145,9 +151,10 @@ def table(results: list[dict], args) -> None:
             print(f"| {r['scene']}{label} | {mis * 1e6:.2f} us | {ps * 1e6:.2f} us ({whole * 1e6:.2f}) | "
                   f"**{ps / mis:.2f}** | {bdpt * 1e6:.2f} us | {n:.2f} | {strategy * 1e6:.2f} us | "
                   f"{mm * 1e6:.2f} us ({med(t[key]) * 1e6:.2f}) | **{mm / strategy:.2f}** | {mm / bdpt:.2f} |")
-        for name in (k for k in c if k.endswith(" chains")):
+        for name in (k for k in c if k.endswith((" chains", " lazy steps"))):
+            base = "lab_mmlt" if name.startswith("lab_mmlt") else "lab_pssmlt"
             print(f"  ({r['scene']}: {name}: {med(c[name]) * 1e6:.2f} us per mutation ({med(t[name]) * 1e6:.2f}), "
-                  f"{med(c[name]) / mis:.2f}x a lab_mis sample)")
+                  f"{med(c[name]) / mis:.2f}x a lab_mis sample, {med(c[name]) / med(c[base]):.2f}x {base}'s)")
         print(f"  (kernels compiled in the timed renders: {r['misses']}; target {TARGET}x)")
         # a path of k segments needs k rays (k - 1 traced and a connection, or k traced), none shared
         print(f"  ({r['scene']}: lab_bdpt traces {med(r['rays']):.2f} rays per sample, {med(r['rays']) / n:.2f} per "
@@ -296,13 +303,14 @@ def main(argv=None) -> int:
     parser.add_argument("--wide", type=int, nargs="*", default=[],
                         help="also time lab_pssmlt with these chain counts (wider lock-steps)")
     parser.add_argument("--profile", action="store_true", help="split a lab_pssmlt round into its parts")
-    parser.add_argument("--lazy", action="store_true", help="profile lab_pssmlt with lazy normal steps")
+    parser.add_argument("--lazy", action="store_true",
+                        help="also time both chain estimators with lazy normal steps (--profile: profile those)")
     args = parser.parse_args(argv)
     if args.profile:
         for s in args.scenes:
             profile(s, args.res, args.max_depth, args.rounds, args.lazy)
         return 0
-    results = [measure(s, args.res, args.spp, args.max_depth, args.rounds, args.freeze, args.wide)
+    results = [measure(s, args.res, args.spp, args.max_depth, args.rounds, args.freeze, args.wide, args.lazy)
                for s in args.scenes]
     table(results, args)
     return 0
