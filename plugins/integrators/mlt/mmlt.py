@@ -28,7 +28,7 @@ from .sampler import PrimarySampleSampler
 
 #: Russian roulette never starts (pbrt-v4's MLTIntegrator has none: the state picks the length).
 NO_ROULETTE = 1 << 30
-#: Full lock-step rounds recorded once per render and replayed (``frozen.FrozenRounds``): 1.7-2.4x
+#: Full lock-step rounds recorded once per render and replayed (``frozen.FrozenRounds``): 1.7-2.5x
 #: cheaper per mutation at the default chains, the same images (2026-11-29-mlt-speed.md; two sweeps
 #: had aborted inside a recording before the garbage collector was kept out of it). False traces
 #: every round.
