@@ -287,7 +287,7 @@ class MarkovChains:
         # (the lazy steps' counters: accepted iterations, the last accepted large step's, and per number)
         self.iteration = dr.zeros(mi.UInt32, self.chains)
         self.last_large = dr.zeros(mi.UInt32, self.chains)
-        self.last = dr.zeros(mi.UInt32, self.chains * self.dims)
+        self.last = dr.zeros(mi.UInt32, self.chains * self.dims) if self.lazy else None
         if self.lazy:
             self.proposal = dr.zeros(mi.Float, self.chains * self.dims)
             self.stamps = dr.zeros(mi.UInt32, self.chains * self.dims)
@@ -404,7 +404,8 @@ class MarkovChains:
         self.steps += 1
 
     def arrays(self) -> tuple:
-        return (self.u, self.value, *self.payload, *self.counts.arrays(), self.iteration, self.last_large, self.last)
+        last = () if self.last is None else (self.last,)
+        return (self.u, self.value, *self.payload, *self.counts.arrays(), self.iteration, self.last_large, *last)
 
     #: Every attribute holding Dr.Jit arrays that a step reads or writes (``frozen.FrozenRounds``).
     STATE = ("key", "u", "value", "payload", "counts", "lane", "flat", "iteration", "last_large", "last",
