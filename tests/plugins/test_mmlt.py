@@ -10,7 +10,8 @@ The block test (tests/agreement.py): the Cornell box at 16 x 16, max_depth 4, 16
 each), bootstrap 16384 paths (4096 per length); every render is an independent bootstrap and set
 of chains, so b's error is in the renders' spread, which the z-scores include (|z| bound 3.42).
 Measured (loaded 2-core machine, llvm_ad_rgb): max |z| 2.22 with one population per length (2.38
-with the length in the state); image mean ratio 0.978 (0.981), which is the reference's noise:
+with the length in the state; 2.06 with the eager steps and frozen rounds of 2026-11-29); image mean
+ratio 0.978 (0.981; 0.978), which is the reference's noise:
 the image means are lab_mmlt 0.13725 +- 0.00060 (seeds 0-15) and `path` 0.13985 +- 0.00245 (its
 32 spp, seeds 1000-1015), while `path` at 4 x 1024 spp gives 0.13683 +- 0.00066, lab_bdpt
 0.13710 +- 0.00006, and 32 more lab_mmlt renders (seeds 100-131) 0.13739 +- 0.00035. Resolution:
