@@ -43,8 +43,10 @@ def is_null(bsdf) -> mi.Bool:
     return null
 
 
-def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor) -> float:
-    """Median width of one pixel at the first surfaces the camera sees, in scene units."""
+def first_hits(scene: mi.Scene, sensor: mi.Sensor):
+    """The probe pixels' centre rays carried to the first surface the camera sees (through
+    null-BSDF surfaces): (surface interactions, each pixel's width there; both Dr.Jit arrays,
+    one lane per probe pixel, a grid of at most PROBES_PER_SIDE per film side)."""
     film = sensor.film()
     size = np.array(film.crop_size(), dtype=np.int64)
     offset = np.array(film.crop_offset(), dtype=np.int64)
@@ -68,7 +70,12 @@ def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor) -> float:
     # a pixel's neighbour ray, carried to the centre ray's hit distance (ray differentials are one pixel apart)
     dx = (ray.o_x + ray.d_x * t) - (ray.o + ray.d * t)
     dy = (ray.o_y + ray.d_y * t) - (ray.o + ray.d * t)
-    width = dr.sqrt(dr.maximum(dr.norm(dx) * dr.norm(dy), 0.0))
+    return si, dr.sqrt(dr.maximum(dr.norm(dx) * dr.norm(dy), 0.0))
+
+
+def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor) -> float:
+    """Median width of one pixel at the first surfaces the camera sees, in scene units."""
+    si, width = first_hits(scene, sensor)
     valid = np.array(si.is_valid() & dr.isfinite(width) & (width > 0))
     widths = np.array(width)[valid]
     if widths.size == 0:
