@@ -4,7 +4,7 @@
 and the new one (``density_radius.first_radius``: the footprint, or the radius at which the median
 probe pixel's disc holds ``K_EXPECTED`` light vertices of one iteration, capped), with r_density
 and the cap, for lab_vcm's modes vcm (its default aim) and ppm and lab_photon (the block test's
-20,000 photons per pass and the default 200,000; ``direct = nee`` stores from the second segment).
+20,000 photons per pass and the default; ``direct = nee`` stores from the second segment).
 
 ``--save DIR`` / ``--compare DIR``: renders of lab_vcm's default mode and ppm and lab_photon at
 fixed seeds (run with ``PYTHONPATH`` at the code to save from: this script needs only

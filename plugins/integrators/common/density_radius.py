@@ -22,11 +22,12 @@ iterations and the image stays noisy at small counts (aimed emission, ``aim_at``
 brings light subpaths there).
 
 The probe is counted work from a fixed seed: r_1 is a function of the scene, the plugin's
-settings and the film, never of the render's seed or load. Its approximations each make r_density
-larger, never smaller: probe light subpaths take at most PROBE_SEGMENTS segments, with BSDF
-sampling and no roulette (renders use roulette from ``rr_depth`` on), and pass through media
-(no attenuation, no medium vertices); camera pixels whose first surface has delta lobes alone
-(glass, mirrors: merging happens behind them) are left out of the median.
+settings and the film, never of the render's seed or load. Approximations: probe light subpaths
+take at most PROBE_SEGMENTS segments, with BSDF sampling and no roulette (renders use roulette
+from ``rr_depth`` on and may go deeper: fewer vertices counted, a larger r_density); they pass
+through media unattenuated, storing no medium vertex (more surface vertices counted in fog, a
+smaller r_density); camera pixels whose first surface has delta lobes alone (glass, mirrors:
+merging happens behind them) are left out of the median.
 """
 from __future__ import annotations
 

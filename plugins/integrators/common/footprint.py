@@ -1,4 +1,6 @@
-"""A pixel's footprint in the scene: the default merging radius of lab_vcm and lab_photon.
+"""A pixel's footprint in the scene: the default merging radius of lab_vcm and lab_photon where
+light vertices are dense enough (``density_radius.first_radius`` takes a larger one where a probe
+light pass finds them sparse at the median pixel; this module's probe pixels are its too).
 
 Merging blurs light over a disc of radius r; a disc about one pixel wide where the camera
 looks is as much blur as the film can show, so the first radius is the median, over a grid of
