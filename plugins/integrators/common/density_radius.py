@@ -9,7 +9,7 @@ above a small stage). So the default r_1 is
 
 r_density: a *probe* light pass (PROBE_LIGHT_SUBPATHS light subpaths from a fixed seed, emitters
 chosen by power as the renders choose them, area lights' directions aimed as the plugin's ``aim``
-and ``aim_at`` aim them) keeps its vertices at smooth surfaces, each standing for N / 4096 of a
+and ``aim_at`` aim them) keeps its vertices at smooth surfaces, each standing for N / 2048 of a
 render's N light subpaths per iteration. At each probe pixel's first camera hit with a smooth lobe
 (the footprint's pixel grid), a nearest-neighbour estimate of the density of light vertices facing
 the hit's way (normals within ``kernels.NORMAL_COS``, as merging accepts them) gives r_j, the
@@ -47,7 +47,7 @@ from .kernels import NORMAL_COS
 #: grazing_camera.xml (experiments/results/2026-11-29-ppm-density-radius.md)
 K_EXPECTED = 1.0 / 64
 #: light subpaths of the probe pass (its vertices are scaled to the render's subpaths per iteration)
-PROBE_LIGHT_SUBPATHS = 4096
+PROBE_LIGHT_SUBPATHS = 2048
 #: at most this many segments per probe light subpath
 PROBE_SEGMENTS = 4
 #: the density at a camera hit is estimated from the nearest light vertices holding this many times
@@ -166,19 +166,34 @@ def density_radii(hits, hit_normals, points, normals, weights, need: float) -> n
         return radii
     target = max(need, PROBE_NEIGHBOURS * float(weights.mean()))
     squares = (points * points).sum(axis=1)
+    nearest = min(len(points), 4 * PROBE_NEIGHBOURS)
     for start in range(0, len(hits), _ROWS):
         h, hn = hits[start:start + _ROWS], hit_normals[start:start + _ROWS]
         d2 = np.maximum((h * h).sum(axis=1)[:, None] + squares[None, :] - 2.0 * h @ points.T, 0.0)
         d2[hn @ normals.T <= NORMAL_COS] = np.inf
-        order = np.argsort(d2, axis=1, kind="stable")
+        w = np.where(np.isfinite(d2), weights[None, :], 0.0)
+        facing = w.sum(axis=1)                            # all the weight facing each hit's way
+        held = np.minimum(target, facing)                 # T, or all of it
+        # the nearest few vertices of each row in order (all of them where those hold less than ``held``)
+        order = np.argpartition(d2, nearest - 1, axis=1)[:, :nearest] if nearest < len(points) else \
+            np.tile(np.arange(len(points)), (len(h), 1))
         rows = np.arange(len(h))[:, None]
-        total = np.cumsum(np.where(np.isfinite(d2[rows, order]), weights[order], 0.0), axis=1)
-        held = np.minimum(target, total[:, -1])           # T, or all the vertices facing this way
+        order = np.take_along_axis(order, np.argsort(d2[rows, order], axis=1, kind="stable"), axis=1)
+        total = np.cumsum(w[rows, order], axis=1)
+        short = total[:, -1] < held * (1.0 - 1e-12)
+        if short.any():
+            full = np.argsort(d2[short], axis=1, kind="stable")
+            r_short = np.zeros(int(short.sum()))
+            cum = np.cumsum(np.take_along_axis(w[short], full, axis=1), axis=1)
+            first = np.argmax(cum >= held[short, None] * (1.0 - 1e-12), axis=1)
+            r_short = np.take_along_axis(d2[short], full[np.arange(len(full)), first][:, None], axis=1)[:, 0]
         first = np.argmax(total >= held[:, None] * (1.0 - 1e-12), axis=1)
-        r_held = np.sqrt(d2[rows[:, 0], order[rows[:, 0], first]])
+        r2 = d2[rows[:, 0], order[rows[:, 0], first]]
+        if short.any():
+            r2[short] = r_short
         with np.errstate(divide="ignore", invalid="ignore"):
-            r = r_held * np.sqrt(need / held)
-        radii[start:start + len(h)] = np.where(total[:, -1] >= need * (1.0 - 1e-12), r, np.inf)
+            r = np.sqrt(r2) * np.sqrt(need / held)
+        radii[start:start + len(h)] = np.where(facing >= need * (1.0 - 1e-12), r, np.inf)
     return radii
 
 
