@@ -3,8 +3,8 @@
 * On a floor seen from 1 cm above it (stiff/grazing_camera.xml at 16x16), an iteration's light
   vertices are so sparse that a pixel-wide disc holds one about once in 10^5 merges: lab_vcm's
   ppm at the old default (the footprint, given as ``radius``) renders the floor black at 32 spp,
-  and at the new default merges light some of its pixels (at least 3 of 128; about 10 expected). The radius is a function of the scene and the settings: the same
-  value on every call, whatever the render's seed.
+  and at the new default merges light some of its pixels (at least 3 of 128; about 10 expected).
+  The radius is a function of the scene and the settings: the same value on every call.
 * ``density_radii`` on vertices of a known density: uniform on a plane, rho per unit area, the
   disc that holds ``need`` of them has radius sqrt(need / (pi rho)); tolerance 25% (a
   16-neighbour estimate); vertices facing the other way are not counted.

@@ -10,16 +10,16 @@ above a small stage). So the default r_1 is
 r_density: a *probe* light pass (PROBE_LIGHT_SUBPATHS light subpaths from a fixed seed, emitters
 chosen by power as the renders choose them, area lights' directions aimed as the plugin's ``aim``
 and ``aim_at`` aim them) keeps its vertices at smooth surfaces, each standing for N / 2048 of a
-render's N light subpaths per iteration. At each probe pixel's first camera hit with a smooth lobe
-(the footprint's pixel grid), a nearest-neighbour estimate of the density of light vertices facing
-the hit's way (normals within ``kernels.NORMAL_COS``, as merging accepts them) gives r_j, the
-radius of the disc that holds K_EXPECTED vertices of one iteration; r_density is the median of r_j.
-cap: the diagonal of the box around those camera hits over CAP_DIVISOR, so the blur stays a small
-part of what the camera sees. Where light vertices are dense the footprint is the larger and
-nothing changes (every scene of issue 17); where the cap is reached (inf: the probe put no vertex
-near the median pixel), merges there find a light vertex less often than once in 1 / K_EXPECTED
-iterations and the image stays noisy at small counts (aimed emission, ``aim_at`` the seen shapes,
-brings light subpaths there).
+render's N light subpaths per iteration. At the first camera hits with a smooth lobe of the
+footprint's probe pixels (every k-th of them, at most MEDIAN_PIXELS), a nearest-neighbour estimate
+of the density of light vertices facing the hit's way (normals within ``kernels.NORMAL_COS``, as
+merging accepts them) gives r_j, the radius of the disc that holds K_EXPECTED vertices of one
+iteration; r_density is the median of r_j. cap: the diagonal of the box around those camera hits
+over CAP_DIVISOR, so the blur stays a small part of what the camera sees. Where light vertices
+are dense the footprint is the larger and nothing changes (every scene of issue 17); where the
+cap is reached (r_density inf: the probe put no vertex near the median pixel), merges there find
+a light vertex less often than once in 1 / K_EXPECTED iterations and the image stays noisy at
+small counts (aimed emission, ``aim_at`` the seen shapes, brings light subpaths there).
 
 The probe is counted work from a fixed seed: r_1 is a function of the scene, the plugin's
 settings and the film, never of the render's seed or load. Approximations: probe light subpaths
@@ -57,6 +57,8 @@ PROBE_NEIGHBOURS = 16
 PROBE_SEED = 0x2C1B3C6D
 #: r_density is at most the diagonal of the box around the probe's camera hits over this
 CAP_DIVISOR = 8.0
+#: r_density is the median over at most this many of the footprint's probe pixels (evenly strided)
+MEDIAN_PIXELS = 256
 #: probe pixels compared at once with every light vertex (bounds the distance matrix's memory)
 _ROWS = 64
 
@@ -165,12 +167,12 @@ def density_radii(hits, hit_normals, points, normals, weights, need: float) -> n
     if len(points) == 0:
         return radii
     target = max(need, PROBE_NEIGHBOURS * float(weights.mean()))
-    squares = (points * points).sum(axis=1)
     nearest = min(len(points), 4 * PROBE_NEIGHBOURS)
     for start in range(0, len(hits), _ROWS):
         h, hn = hits[start:start + _ROWS], hit_normals[start:start + _ROWS]
-        d2 = np.maximum((h * h).sum(axis=1)[:, None] + squares[None, :] - 2.0 * h @ points.T, 0.0)
-        d2[hn @ normals.T <= NORMAL_COS] = np.inf
+        # (coordinate by coordinate: no BLAS call, whose threads only wait on a busy machine)
+        d2 = sum((h[:, k, None] - points[None, :, k]) ** 2 for k in range(3))
+        d2[sum(hn[:, k, None] * normals[None, :, k] for k in range(3)) <= NORMAL_COS] = np.inf
         w = np.where(np.isfinite(d2), weights[None, :], 0.0)
         facing = w.sum(axis=1)                            # all the weight facing each hit's way
         held = np.minimum(target, facing)                 # T, or all of it
@@ -210,6 +212,9 @@ def first_radius(scene: mi.Scene, sensor: mi.Sensor, light_subpaths: float, max_
     hits = np.array(si.p, dtype=np.float64).T[keep]
     hit_normals = np.array(si.n, dtype=np.float64).T[keep]
     cap = float(np.linalg.norm(hits.max(axis=0) - hits.min(axis=0))) / CAP_DIVISOR
+    # every k-th of them, at most MEDIAN_PIXELS (the median needs no more; the count's cost is linear in them)
+    step = -(-len(hits) // MEDIAN_PIXELS)
+    hits, hit_normals = hits[::step], hit_normals[::step]
     points, normals, weights = light_vertices(scene, min(max_segments, PROBE_SEGMENTS), first_segment, aim)
     radii = density_radii(hits, hit_normals, points.astype(np.float64), normals.astype(np.float64), weights,
                           K_EXPECTED / light_subpaths)
