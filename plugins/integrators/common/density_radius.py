@@ -24,10 +24,11 @@ small counts (aimed emission, ``aim_at`` the seen shapes, brings light subpaths 
 The probe is counted work from a fixed seed: r_1 is a function of the scene, the plugin's
 settings and the film, never of the render's seed or load. Approximations: probe light subpaths
 take at most PROBE_SEGMENTS segments, with BSDF sampling and no roulette (renders use roulette
-from ``rr_depth`` on and may go deeper: fewer vertices counted, a larger r_density); they pass
-through media unattenuated, storing no medium vertex (more surface vertices counted in fog, a
-smaller r_density); camera pixels whose first surface has delta lobes alone (glass, mirrors:
-merging happens behind them) are left out of the median.
+from ``rr_depth`` on and may go deeper: fewer vertices counted, a larger r_density); scenes with
+participating media keep the footprint (the probe does not trace media: light that reaches a
+surface only after scattering in fog would be missing from it); camera pixels whose first
+surface has delta lobes alone (glass, mirrors: merging happens behind them) are left out of the
+median.
 """
 from __future__ import annotations
 
@@ -37,6 +38,8 @@ from dataclasses import dataclass
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+
+from mitsuba_lab.plugins.scene_traits import SceneTraits
 
 from .footprint import NULL_CROSSINGS, first_hits, is_null, pixel_footprint
 from .kernels import NORMAL_COS
@@ -203,8 +206,13 @@ def first_radius(scene: mi.Scene, sensor: mi.Sensor, light_subpaths: float, max_
                  first_segment: int = 1, aim=None) -> FirstRadius:
     """The default r_1 (module docstring) for a render tracing ``light_subpaths`` light subpaths per
     iteration, each storing vertices from segment ``first_segment`` to ``max_segments``, emitted
-    with ``aim`` (an ``aim.AimedEmission`` or None)."""
+    with ``aim`` (an ``aim.AimedEmission`` or None). In scenes with media, the footprint (r_density
+    and the cap NaN: not probed)."""
     footprint = pixel_footprint(scene, sensor)
+    if SceneTraits.from_scene(scene).media:
+        # (the probe does not trace media: in fog_lantern.xml the floor's photons after a bounce come
+        # from the fog, and the probe would find none)
+        return FirstRadius(footprint, footprint, math.nan, math.nan, 0)
     si, _ = first_hits(scene, sensor)
     keep = np.array(si.is_valid() & mi.has_flag(si.bsdf().flags(), mi.BSDFFlags.Smooth))
     if not keep.any() or light_subpaths <= 0:
