@@ -10,16 +10,18 @@ above a small stage). So the default r_1 is
 r_density: a *probe* light pass (PROBE_LIGHT_SUBPATHS light subpaths from a fixed seed, emitters
 chosen by power as the renders choose them, area lights' directions aimed as the plugin's ``aim``
 and ``aim_at`` aim them) keeps its vertices at smooth surfaces, each standing for N / 2048 of a
-render's N light subpaths per iteration. At the first camera hits with a smooth lobe of the
-footprint's probe pixels (every k-th of them, at most MEDIAN_PIXELS), a nearest-neighbour estimate
-of the density of light vertices facing the hit's way (normals within ``kernels.NORMAL_COS``, as
-merging accepts them) gives r_j, the radius of the disc that holds K_EXPECTED vertices of one
-iteration; r_density is the median of r_j. cap: the diagonal of the box around those camera hits
-over CAP_DIVISOR, so the blur stays a small part of what the camera sees. Where light vertices
-are dense the footprint is the larger and nothing changes (every scene of issue 17); where the
-cap is reached (r_density inf: the probe put no vertex near the median pixel), merges there find
-a light vertex less often than once in 1 / K_EXPECTED iterations and the image stays noisy at
-small counts (aimed emission, ``aim_at`` the seen shapes, brings light subpaths there).
+render's N light subpaths per iteration (where it puts no vertex near the median pixel, it is
+traced again with 4 times the subpaths, up to PROBE_MAX_LIGHT_SUBPATHS). At the first camera hits
+with a smooth lobe of the footprint's probe pixels (every k-th of them, at most MEDIAN_PIXELS), a
+nearest-neighbour estimate of the density of light vertices facing the hit's way (normals within
+``kernels.NORMAL_COS``, as merging accepts them) gives r_j, the radius of the disc that holds
+K_EXPECTED vertices of one iteration; r_density is the median of r_j. cap: the diagonal of the box
+around those camera hits over CAP_DIVISOR, so the blur stays a small part of what the camera sees.
+Where light vertices are dense the footprint is the larger and nothing changes (every scene of
+issue 17); where the cap is reached, merges at the median pixel find a light vertex less often
+than once in 1 / K_EXPECTED iterations and the image stays noisy at small counts (huge_dim_light.xml;
+aimed emission, ``aim_at`` the seen shapes, brings light subpaths there). r_density is inf where
+even the largest probe puts no vertex near the median pixel.
 
 The probe is counted work from a fixed seed: r_1 is a function of the scene, the plugin's
 settings and the film, never of the render's seed or load. Approximations: probe light subpaths
@@ -51,6 +53,9 @@ from .kernels import NORMAL_COS
 K_EXPECTED = 1.0 / 64
 #: light subpaths of the probe pass (its vertices are scaled to the render's subpaths per iteration)
 PROBE_LIGHT_SUBPATHS = 2048
+#: where the median probe pixel's disc holds no probe vertex, the probe is traced again with 4 times
+#: the light subpaths, up to this many (huge_dim_light.xml: about 2e-4 of them reach the stage)
+PROBE_MAX_LIGHT_SUBPATHS = 32768
 #: at most this many segments per probe light subpath
 PROBE_SEGMENTS = 4
 #: the density at a camera hit is estimated from the nearest light vertices holding this many times
@@ -90,7 +95,8 @@ def _channel_mean(spectrum):
     return total * (1.0 / len(value))
 
 
-def light_vertices(scene: mi.Scene, max_segments: int, first_segment: int = 1, aim=None):
+def light_vertices(scene: mi.Scene, max_segments: int, first_segment: int = 1, aim=None,
+                   subpaths: int = PROBE_LIGHT_SUBPATHS):
     """The probe's light vertices at smooth surfaces: (points (V, 3), normals (V, 3), weights (V,)),
     a vertex's weight the expected count of such vertices per light subpath of the render that
     it stands for (its emitter's selection probability by power over the probe's rays from it).
@@ -99,7 +105,7 @@ def light_vertices(scene: mi.Scene, max_segments: int, first_segment: int = 1, a
     empty = np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
     if not emitters or max_segments < first_segment:
         return empty
-    per_emitter = max(1, PROBE_LIGHT_SUBPATHS // len(emitters))
+    per_emitter = max(1, subpaths // len(emitters))
     n = per_emitter * len(emitters)
     lane = dr.arange(mi.UInt32, n)
     index = lane // per_emitter
@@ -223,8 +229,14 @@ def first_radius(scene: mi.Scene, sensor: mi.Sensor, light_subpaths: float, max_
     # every k-th of them, at most MEDIAN_PIXELS (the median needs no more; the count's cost is linear in them)
     step = -(-len(hits) // MEDIAN_PIXELS)
     hits, hit_normals = hits[::step], hit_normals[::step]
-    points, normals, weights = light_vertices(scene, min(max_segments, PROBE_SEGMENTS), first_segment, aim)
-    radii = density_radii(hits, hit_normals, points.astype(np.float64), normals.astype(np.float64), weights,
-                          K_EXPECTED / light_subpaths)
-    density = float(np.median(radii))
+    subpaths = PROBE_LIGHT_SUBPATHS
+    while True:
+        points, normals, weights = light_vertices(scene, min(max_segments, PROBE_SEGMENTS), first_segment, aim,
+                                                  subpaths)
+        density = float(np.median(density_radii(hits, hit_normals, points, normals, weights,
+                                                 K_EXPECTED / light_subpaths)))
+        # (no vertex near the median pixel: a larger probe, to tell sparse from absent)
+        if math.isfinite(density) or subpaths >= PROBE_MAX_LIGHT_SUBPATHS:
+            break
+        subpaths *= 4
     return FirstRadius(max(footprint, min(density, cap)), footprint, density, cap, len(points))
