@@ -8,6 +8,7 @@
 * ``density_radii`` on vertices of a known density: uniform on a plane, rho per unit area, the
   disc that holds ``need`` of them has radius sqrt(need / (pi rho)); tolerance 25% (a
   16-neighbour estimate); vertices facing the other way are not counted.
+* A scene with participating media keeps the footprint (the probe traces no media).
 """
 import math
 
@@ -62,3 +63,11 @@ def test_the_density_radius_of_uniform_vertices_is_the_discs(need):
     # the same vertices facing down are not merged with at a floor's hits
     assert np.isinf(density_radius.density_radii(hits, np.tile([0.0, 1.0, 0.0], (50, 1)), points, -up, weights,
                                                  need)).all()
+
+
+def test_a_scene_with_media_keeps_the_footprint():
+    # (the probe traces no media: fog_lantern's floor gets its photons after a bounce from the fog, which
+    # a probe through clear air never brings there; it would take the cap, 20x the footprint)
+    scene = load_scene("scenes/fog_lantern.xml", res=RES)
+    probe = density_radius.first_radius(scene, scene.sensors()[0], 20000, 7, first_segment=2)
+    assert probe.radius == probe.footprint and math.isnan(probe.density)
