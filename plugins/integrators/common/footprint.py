@@ -75,9 +75,10 @@ def first_hits(scene: mi.Scene, sensor: mi.Sensor):
     return si, dr.sqrt(dr.maximum(dr.norm(dx) * dr.norm(dy), 0.0))
 
 
-def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor) -> float:
-    """Median width of one pixel at the first surfaces the camera sees, in scene units."""
-    si, width = first_hits(scene, sensor)
+def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor, hits=None) -> float:
+    """Median width of one pixel at the first surfaces the camera sees, in scene units (``hits``:
+    ``first_hits``'s answer, if the caller has it)."""
+    si, width = hits or first_hits(scene, sensor)
     valid = np.array(si.is_valid() & dr.isfinite(width) & (width > 0))
     widths = np.array(width)[valid]
     if widths.size == 0:
