@@ -11,18 +11,18 @@ r_density: a *probe* light pass (PROBE_LIGHT_SUBPATHS light subpaths from a fixe
 chosen by power as the renders choose them, area lights' directions aimed as the plugin's ``aim``
 and ``aim_at`` aim them) keeps its vertices at smooth surfaces, each standing for N / 2048 of a
 render's N light subpaths per iteration (a quarter of it is traced first, and where that finds
-r_density under half the footprint it is not traced whole; where it puts no vertex near the
-median pixel, it is traced again with 4 times the subpaths, up to PROBE_MAX_LIGHT_SUBPATHS). At the first camera hits
-with a smooth lobe of the footprint's probe pixels (every k-th of them, at most MEDIAN_PIXELS), a
-nearest-neighbour estimate of the density of light vertices facing the hit's way (normals within
-``kernels.NORMAL_COS``, as merging accepts them) gives r_j, the radius of the disc that holds
-K_EXPECTED vertices of one iteration; r_density is the median of r_j. cap: the diagonal of the box
-around those camera hits over CAP_DIVISOR, so the blur stays a small part of what the camera sees.
-Where light vertices are dense the footprint is the larger and nothing changes (every scene of
-issue 17); where the cap is reached, merges at the median pixel find a light vertex less often
-than once in 1 / K_EXPECTED iterations and the image stays noisy at small counts (huge_dim_light.xml;
-aimed emission, ``aim_at`` the seen shapes, brings light subpaths there). r_density is inf where
-even the largest probe puts no vertex near the median pixel.
+r_density under half the footprint it is not traced whole; where it puts no vertex near the median
+pixel, it is traced again with 4 times the subpaths, up to PROBE_MAX_LIGHT_SUBPATHS). At the first
+camera hits with a smooth lobe of the footprint's probe pixels (every k-th of them, at most
+MEDIAN_PIXELS), a nearest-neighbour estimate of the density of light vertices facing the hit's way
+(normals within ``kernels.NORMAL_COS``, as merging accepts them) gives r_j, the radius of the disc
+that holds K_EXPECTED vertices of one iteration; r_density is the median of r_j. cap: the diagonal
+of the box around those camera hits over CAP_DIVISOR, so the blur stays a small part of what the
+camera sees. Where light vertices are dense the footprint is the larger and nothing changes (every
+scene of issue 17); where the cap is reached, merges at the median pixel find a light vertex less
+often than once in 1 / K_EXPECTED iterations and the image stays noisy at small counts
+(huge_dim_light.xml; aimed emission, ``aim_at`` the seen shapes, brings light subpaths there).
+r_density is inf where even the largest probe puts no vertex near the median pixel.
 
 The probe is counted work from a fixed seed: r_1 is a function of the scene, the plugin's
 settings and the film, never of the render's seed or load. Approximations: probe light subpaths
@@ -31,7 +31,8 @@ from ``rr_depth`` on and may go deeper: fewer vertices counted, a larger r_densi
 participating media keep the footprint (the probe does not trace media: light that reaches a
 surface only after scattering in fog would be missing from it); camera pixels whose first
 surface has delta lobes alone (glass, mirrors: merging happens behind them) are left out of the
-median.
+median; every smooth vertex counts (lab_vcm's ``merge_vertices = caustic`` merges with fewer), at
+the plugin's ``light_paths`` (its pilot may choose more).
 """
 from __future__ import annotations
 
@@ -236,9 +237,9 @@ def first_radius(scene: mi.Scene, sensor: mi.Sensor, light_subpaths: float, max_
                                                   subpaths)
         density = float(np.median(density_radii(hits, hit_normals, points, normals, weights,
                                                  K_EXPECTED / light_subpaths)))
-        # a quarter of the probe first: where it already finds r_density under half the footprint the
-        # footprint wins (the estimate's error is about 12% in r); otherwise the whole probe, and where it
-        # puts no vertex near the median pixel, a larger one, to tell sparse from absent
+        # a quarter of the probe first: where it already finds r_density under half the footprint, the
+        # footprint wins (the estimate's error is about 12% in r); otherwise the whole probe, and where
+        # it puts no vertex near the median pixel, a larger one, to tell sparse from absent
         if math.isfinite(density) and (density < footprint / 2 or subpaths >= PROBE_LIGHT_SUBPATHS):
             break
         if subpaths >= PROBE_MAX_LIGHT_SUBPATHS:
