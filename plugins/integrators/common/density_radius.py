@@ -49,9 +49,9 @@ from .footprint import NULL_CROSSINGS, first_hits, is_null, pixel_footprint
 from .kernels import NORMAL_COS
 
 #: light vertices of one iteration that the median probe pixel's disc should hold in expectation: a
-#: merge there finds one about once in 64 iterations. The footprint gives 0.04-2 on the lab's scenes
-#: where merging converges (sds.xml 0.04, caustic.xml 0.07, the Cornell box 2) and below 1e-5 on
-#: grazing_camera.xml (experiments/results/2026-11-29-ppm-density-radius.md)
+#: merge there finds one about once in 64 iterations. The footprint holds 0.03-2 on the lab's scenes
+#: where merging converges (sds.xml 0.03 in mode vcm, 0.06 in ppm; caustic.xml 0.12; the Cornell box
+#: 1.5-1.9) and below 1e-5 on grazing_camera.xml (experiments/results/2026-11-29-ppm-density-radius.md)
 K_EXPECTED = 1.0 / 64
 #: light subpaths of the probe pass (its vertices are scaled to the render's subpaths per iteration)
 PROBE_LIGHT_SUBPATHS = 2048
