@@ -212,26 +212,10 @@ def test_frozen_rounds_give_the_traced_rounds_image(monkeypatch):
     gives the same image, up to the order of the splats' float atomics (tolerance: 1e-4 of the
     largest pixel; measured 0 to 3e-5 on the door). Power: the step's number off by one in the
     frozen rounds (other random numbers, the same distribution) moves pixels by far more."""
-    from mitsuba_lab.plugins.integrators.mlt import frozen, mmlt
+    from frozen_rounds import frozen_against_traced
+    from mitsuba_lab.plugins.integrators.mlt import mmlt
 
-    scene = load_scene(scene_path("cornell_box.xml"), res=16)
-    integrator = make_integrator("lab_mmlt", {"max_depth": 2, "chains": 512, "bootstrap": 4096})
-    images = {}
-    for freeze in (False, True):
-        monkeypatch.setattr(mmlt, "FREEZE_ROUNDS", freeze)
-        images[freeze], _ = render(scene, integrator, spp=8, seed=5)     # 4 full rounds
-        assert (integrator.mlt_stats()["frozen_recordings"] > 0) == freeze
-    scale = images[False][..., :3].max()
-    diff = abs(images[True] - images[False])[..., :3].max() / scale
-    original = frozen.FrozenRounds.__call__
-
-    def off_by_one(self):
-        self.chains.step_index = lambda: mmlt.mi.UInt32(self.chains.steps + 1)
-        original(self)
-
-    monkeypatch.setattr(frozen.FrozenRounds, "__call__", off_by_one)
-    wrong, _ = render(scene, integrator, spp=8, seed=5)
-    wrong_diff = abs(wrong - images[False])[..., :3].max() / scale
-    print(f"frozen against traced: largest difference {diff:.2g} of the largest pixel; off by one {wrong_diff:.2g}")
-    assert diff < 1e-4
-    assert wrong_diff > 1e-4
+    result = frozen_against_traced(monkeypatch, "lab_mmlt", mmlt, {"max_depth": 2})
+    assert result.recordings[False] == 0 and result.recordings[True] > 0
+    assert result.diff < 1e-4
+    assert result.wrong_diff > 1e-4

@@ -192,33 +192,14 @@ def test_frozen_rounds_give_the_traced_rounds_image(monkeypatch):
     splats' float atomics (tolerance: 1e-4 of the largest pixel), and the same ray counts. Power:
     the step's number off by one in the frozen rounds (other random numbers, the same
     distribution) moves pixels by far more."""
-    from mitsuba_lab.plugins.integrators.mlt import frozen
+    from frozen_rounds import frozen_against_traced
     from mitsuba_lab.plugins.integrators.mlt import integrator as pssmlt
 
-    scene = load_scene(scene_path("cornell_box.xml"), res=16)
-    integrator = make_integrator("lab_pssmlt", {"max_depth": 3, "chains": 512, "bootstrap": 4096})
-    images, rays = {}, {}
-    for freeze in (False, True):
-        monkeypatch.setattr(pssmlt, "FREEZE_ROUNDS", freeze)
-        integrator.ray_counts(reset=True)
-        images[freeze], _ = render(scene, integrator, spp=8, seed=5)     # 4 full rounds
-        rays[freeze] = integrator.ray_counts(reset=True)
-        assert integrator.mlt_stats()["frozen_recordings"] == (1 if freeze else 0)
-    scale = images[False][..., :3].max()
-    diff = abs(images[True] - images[False])[..., :3].max() / scale
-    original = frozen.FrozenRounds.__call__
-
-    def off_by_one(self):
-        self.chains.step_index = lambda: pssmlt.mi.UInt32(self.chains.steps + 1)
-        original(self)
-
-    monkeypatch.setattr(frozen.FrozenRounds, "__call__", off_by_one)
-    wrong, _ = render(scene, integrator, spp=8, seed=5)
-    wrong_diff = abs(wrong - images[False])[..., :3].max() / scale
-    print(f"frozen against traced: largest difference {diff:.2g} of the largest pixel; off by one {wrong_diff:.2g}")
-    assert rays[True] == rays[False]
-    assert diff < 1e-4
-    assert wrong_diff > 1e-4
+    result = frozen_against_traced(monkeypatch, "lab_pssmlt", pssmlt, {"max_depth": 3})
+    assert result.recordings == {False: 0, True: 1}
+    assert result.rays[True] == result.rays[False]
+    assert result.diff < 1e-4
+    assert result.wrong_diff > 1e-4
 
 
 @pytest.mark.parametrize("plugin", ["lab_pssmlt", "lab_mmlt"])
