@@ -57,6 +57,10 @@ ESTIMATORS = {
     # a radius set by hand: grazing_camera's floor, black at ppm's automatic radius (a pixel's width)
     "ppm_r0.2": ("lab_vcm", {"mode": "ppm", "radius": 0.2}, False),
     "photon": ("lab_photon", {"photons_per_pass": 20000}, False),
+    # huge_dim_light.xml only (its shapes' ids): the light's directions aimed at the stage (aim.py), so
+    # that a share of its light subpaths reach it instead of about 2e-4
+    "ppm_aim_stage": ("lab_vcm", {"mode": "ppm", "aim": 0.9, "aim_at": "floor,back_wall"}, False),
+    "photon_aim_stage": ("lab_photon", {"photons_per_pass": 20000, "aim": 0.9, "aim_at": "floor,back_wall"}, False),
 }
 MAX_DEPTH = 8
 RES = 24

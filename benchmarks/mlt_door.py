@@ -21,7 +21,8 @@ renders, ``--pilots``), then each seed renders that many. Plans (``--plans``), e
 so each chain runs at least that many mutations; between 256 and 8192); ``boot``: a bootstrap that
 grows with the budget, ``--boot-share`` x pixels x N paths (between 100000 and ``--boot-cap``);
 ``long+boot``.
-``--freeze``: lab_mmlt's rounds frozen in every plan (``mlt.mmlt.FREEZE_ROUNDS``).
+``--freeze``: lab_mmlt's rounds frozen in every plan (``mlt.mmlt.FREEZE_ROUNDS``; the default since
+2026-11-29-mlt-speed.md, so the flag changes nothing now).
 
     PYTHONPATH=src python benchmarks/mlt_door.py count --spp 256 --seeds 0 1 2
     PYTHONPATH=src python benchmarks/mlt_door.py slit --spp 1024

@@ -31,7 +31,8 @@ _ORDER = (
     "scene_traits", "samplers.layout", "integrators.common.spectral",
     "integrators.common.adjoint", "integrators.common.counters", "integrators.common.roulette",
     "integrators.common.spawn", "integrators.common.direct", "integrators.common.aim",
-    "integrators.common.support", "integrators.common.footprint", "integrators.common.grid",
+    "integrators.common.support", "integrators.common.footprint", "integrators.common.density_radius",
+    "integrators.common.grid",
     "integrators.common.majorants", "integrators.common.media", "integrators.common.equiangular",
     "integrators.common.subpath_media",
     # the path tracers

@@ -131,8 +131,8 @@ LAB_PHOTON = (
     Param("passes", int, 16, "passes (photon maps) averaged", **_int_at_least(1)),
     Param("alpha", float, 2.0 / 3.0, "radius reduction r_{i+1}^2 = r_i^2 (i + alpha) / (i + 1)",
           check=lambda v: 0.0 < v < 1.0, expected="a number in (0, 1)"),
-    Param("radius", float, 0.0, "first-pass radius in scene units; 0 = automatic (one pixel's width at the "
-          "first surfaces the camera sees)",
+    Param("radius", float, 0.0, "first-pass radius in scene units; 0 = automatic: a pixel's width where the camera "
+          "looks, or wider where photons are sparse there (1/64 per pass in it: common/density_radius.py)",
           check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
     Param("radius_volume", float, 0.0, "first-pass radius r_v,1 of the ball volumetric photons are gathered in "
           "(scenes with participating media), in scene units; 0 = automatic (the surfaces' first radius); "
@@ -237,8 +237,8 @@ LAB_VCM = (
     Param("mode", str, "vcm", "which techniques: vcm (all), bpt (connections: lab_bdpt), bpm (merging), "
           "ppm (merging at the first smooth camera vertex), lt (light tracing), pt (path tracing: lab_mis)",
           choices=VCM_MODES),
-    Param("radius", float, 0.0, "first iteration's merging radius r_1 in scene units; 0 = automatic "
-          "(one pixel's width at the first surfaces the camera sees)",
+    Param("radius", float, 0.0, "first iteration's merging radius r_1 in scene units; 0 = automatic: a pixel's "
+          "width where the camera looks, or wider where light vertices are sparse there (common/density_radius.py)",
           check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
     Param("radius_volume", float, 0.0, "first iteration's radius r_v,1 of the ball medium vertices merge in "
           "(scenes with participating media), in scene units; 0 = automatic (the surfaces' r_1); "

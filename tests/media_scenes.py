@@ -254,3 +254,28 @@ def sky_in_unbounded_fog() -> dict:
     scene["sky"] = environment(1.0)
     scene["sun"] = {"type": "directional", "direction": [-0.6, -1.0, -0.4], "irradiance": rgb(1.5)}
     return scene
+
+
+def _sky_smoke_medium() -> dict:
+    return {"type": "heterogeneous", "albedo": 0.8,
+            "sigma_t": {"type": "gridvolume", "grid": smoke_grid(), "to_world": T().translate([-1.0, 0.001, -1.0]).scale(2.0)}}
+
+
+def sky_in_unbounded_smoke() -> dict:
+    """The sensor's medium heterogeneous smoke (``smoke_grid`` over a 2-unit box on the floor) and
+    nothing that bounds it, under a constant sky: a heterogeneous medium is empty outside its grid,
+    so the sky is seen and lights the floor through it. A 16x12 film."""
+    scene = base(sensor_medium=_sky_smoke_medium(), res=(16, 12))
+    scene["sky"] = environment(1.0)
+    return scene
+
+
+def sky_in_unbounded_smoke_twin() -> dict:
+    """``sky_in_unbounded_smoke`` written with a null box around the grid instead (the sensor in no
+    medium): the same light transport, which Mitsuba's ``volpath`` renders (it ends every ray that
+    leaves the scene inside a medium, so it cannot render the unbounded form)."""
+    scene = base(res=(16, 12))
+    scene["sky"] = environment(1.0)
+    scene["box"] = {"type": "cube", "to_world": T().translate([0, 1.001, 0]).scale(1.0), "bsdf": {"type": "null"},
+                    "interior": _sky_smoke_medium()}
+    return scene

@@ -1,7 +1,8 @@
 """The defaults a user gets from ``<integrator type="lab_vcm"/>`` (and lab_bdpt, lab_photon).
 
 * The first merging radius is one pixel's width at the first surfaces the camera sees
-  (``footprint.py``): on a wall facing the camera it is the wall's distance times the pixel's
+  (``footprint.py``) where light vertices are not sparse (``density_radius.py`` and
+  test_density_radius.py for where they are: the Cornell box keeps the footprint): on a wall facing the camera it is the wall's distance times the pixel's
   angular width (perspective, thin lens), or the view's width over the film's (orthographic),
   on a non-square film; it follows the film's resolution; a null-BSDF surface in front (a medium's
   boundary, such as a fog box around the camera) is looked through. Tolerance 4%: off-axis pixels of a

@@ -20,10 +20,14 @@ and only how the subpath goes on depends on the lobe sampled. A light subpath st
 emitter's medium, decided once per render for each emitter (``subpath_media.emitter_media``):
 the one the scene names for it, else the one its emitted rays find behind the first medium
 transition they meet through surfaces that transmit (an opaque lamp housing around a point light
-hides the fog beyond it); an emitter at infinity in a medium sends nothing (T = 0 over the infinite
-distance), and so does next-event estimation towards one whose shadow ray ends in unbounded
-homogeneous fog (``common.media.transmittance``'s ``unbounded``; Mitsuba's ``volpath`` instead
-puts the emitter 2 bounding-sphere radii away). The camera subpath starts in the sensor's medium.
+hides the fog beyond it); an emitter at infinity in a homogeneous medium sends nothing (T = 0
+over the infinite distance), and so does next-event estimation towards one whose shadow ray ends
+in unbounded homogeneous fog (``common.media.transmittance``'s ``unbounded``; Mitsuba's ``volpath``
+instead puts the emitter 2 bounding-sphere radii away). A heterogeneous medium is empty outside its
+grid: light from infinity crosses it with the grid's transmittance, a ray that leaves the scene in
+it flies only to the grid's far side (``media.within_grid``), and the weights' stand-in covers the
+part of a piece inside the grid (``subpath_media.stand_in``). The camera subpath starts in the
+sensor's medium.
 
 **Densities.** A vertex x_i reached from x_{i-1} has the area density
 

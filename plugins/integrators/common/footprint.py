@@ -1,4 +1,6 @@
-"""A pixel's footprint in the scene: the default merging radius of lab_vcm and lab_photon.
+"""A pixel's footprint in the scene: the default merging radius of lab_vcm and lab_photon where
+light vertices are dense enough (``density_radius.first_radius`` takes a larger one where a probe
+light pass finds them sparse at the median pixel; this module's probe pixels are its too).
 
 Merging blurs light over a disc of radius r; a disc about one pixel wide where the camera
 looks is as much blur as the film can show, so the first radius is the median, over a grid of
@@ -43,8 +45,10 @@ def is_null(bsdf) -> mi.Bool:
     return null
 
 
-def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor) -> float:
-    """Median width of one pixel at the first surfaces the camera sees, in scene units."""
+def first_hits(scene: mi.Scene, sensor: mi.Sensor):
+    """The probe pixels' centre rays carried to the first surface the camera sees (through
+    null-BSDF surfaces): (surface interactions, each pixel's width there; both Dr.Jit arrays,
+    one lane per probe pixel, a grid of at most PROBES_PER_SIDE per film side)."""
     film = sensor.film()
     size = np.array(film.crop_size(), dtype=np.int64)
     offset = np.array(film.crop_offset(), dtype=np.int64)
@@ -68,7 +72,13 @@ def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor) -> float:
     # a pixel's neighbour ray, carried to the centre ray's hit distance (ray differentials are one pixel apart)
     dx = (ray.o_x + ray.d_x * t) - (ray.o + ray.d * t)
     dy = (ray.o_y + ray.d_y * t) - (ray.o + ray.d * t)
-    width = dr.sqrt(dr.maximum(dr.norm(dx) * dr.norm(dy), 0.0))
+    return si, dr.sqrt(dr.maximum(dr.norm(dx) * dr.norm(dy), 0.0))
+
+
+def pixel_footprint(scene: mi.Scene, sensor: mi.Sensor, hits=None) -> float:
+    """Median width of one pixel at the first surfaces the camera sees, in scene units (``hits``:
+    ``first_hits``'s answer, if the caller has it)."""
+    si, width = hits or first_hits(scene, sensor)
     valid = np.array(si.is_valid() & dr.isfinite(width) & (width > 0))
     widths = np.array(width)[valid]
     if widths.size == 0:

@@ -113,6 +113,17 @@ def free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler,
     return mei, scattered, weight, ratios, nulls
 
 
+def within_grid(medium, ray: mi.Ray3f, t_max, active):
+    """``t_max``, or for a ray that meets no surface (``t_max`` infinite) in a heterogeneous
+    medium, the distance to where it leaves the medium's grid (0 where it misses the grid): such a
+    medium is empty outside its grid, so the light of an emitter at infinity reaches through it
+    with the grid's transmittance (tracking to an infinite distance would give T / p = 0 / 0)."""
+    escaping = active & ~dr.isfinite(t_max) & ~medium.is_homogeneous()
+    hit, _, box_maxt = medium.intersect_aabb(ray)
+    exit = dr.select(hit & dr.isfinite(box_maxt), dr.maximum(box_maxt, 0.0), 0.0)
+    return dr.select(escaping, exit, t_max)
+
+
 @dr.syntax
 def global_free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.Sampler, channel, active):
     """Delta tracking along ``ray`` inside ``medium`` up to distance ``t_max`` (the next surface).
@@ -127,7 +138,7 @@ def global_free_flight(medium: mi.MediumPtr, ray: mi.Ray3f, t_max, sampler: mi.S
     collisions.
     """
     ray = mi.Ray3f(ray)
-    ray.maxt = dr.select(active, t_max, 0.0)
+    ray.maxt = dr.select(active, within_grid(medium, ray, t_max, active), 0.0)
     weight = mi.UnpolarizedSpectrum(1.0)
     q = mi.UnpolarizedSpectrum(1.0)           # per channel, the steps' densities over the sampling channel's
     nulls = mi.Float(1.0)

@@ -109,10 +109,13 @@ def emitter_media(scene: mi.Scene, sensor: mi.Sensor, floor: float, plugin: str)
 def start_medium(emitter_media, emitter_index, infinite):
     """(medium, extinguished) of light subpaths (photons) from emitter ``emitter_index``: the
     medium it sits in (``emitter_media``'s, gathered), and whether they carry nothing: an emitter
-    at infinity in a medium (an environment in the sensor's unbounded fog), whose light crosses an
-    infinite stretch of it, T = 0."""
+    at infinity in a homogeneous medium (an environment in the sensor's unbounded fog), whose light
+    crosses an infinite stretch of it, T = 0. A heterogeneous medium is empty outside its grid, so
+    its light arrives, T tracked through the grid, as next-event estimation's shadow rays see it
+    (``media.transmittance``)."""
     medium = dr.gather(mi.MediumPtr, emitter_media, emitter_index)
-    return medium, infinite & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+    inside = infinite & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+    return medium, inside & medium.is_homogeneous()
 
 
 @dr.syntax
@@ -172,12 +175,20 @@ class Tracking:
 
 def stand_in(medium, start, end, wavelengths, channel, active):
     """The deterministic stand-in for the transmittance, in ``channel``, of the straight piece
-    ``start``-``end`` inside the heterogeneous ``medium``: exp(-|end - start| sigma_t,c(midpoint)),
-    its optical depth capped at TAU_CAP (and taken as TAU_CAP on an unbounded piece). Symmetric
-    in its ends, so both subpaths and every connection give a segment the same value."""
+    ``start``-``end`` inside the heterogeneous ``medium``: exp(-L sigma_t,c(midpoint)) over the part
+    of the piece inside the medium's grid (L its length; outside its grid the medium is empty),
+    its optical depth capped at TAU_CAP. Symmetric in its ends, so both subpaths and every
+    connection give a segment the same value; a piece towards an emitter at infinity has the same
+    value whether it ends where it leaves the grid or at Mitsuba's stand-in distance beyond."""
+    length = dr.norm(end - start)
+    piece = mi.Ray3f(start, (end - start) / dr.maximum(length, 1e-30))
+    hit, t0, t1 = medium.intersect_aabb(piece)
+    t0 = dr.clip(t0, 0.0, length)
+    t1 = dr.clip(t1, 0.0, length)
+    inside = dr.select(hit, dr.maximum(t1 - t0, 0.0), 0.0)
     mei = dr.zeros(mi.MediumInteraction3f)
-    mei.p, mei.wavelengths = 0.5 * (start + end), wavelengths
-    tau = dr.norm(end - start) * sigma_t_channel(medium, mei, channel, active)
+    mei.p, mei.wavelengths = piece(0.5 * (t0 + t1)), wavelengths
+    tau = inside * sigma_t_channel(medium, mei, channel, active & (inside > 0))
     tau = dr.select(dr.isfinite(tau), dr.minimum(tau, TAU_CAP), TAU_CAP)
     return dr.select(active, dr.exp(-tau), 1.0)
 
@@ -190,7 +201,7 @@ def tracked_flight(medium, ray: mi.Ray3f, t_max, sampler, channel, active, track
     mei, scattered, weight, T_c = exact
     mei_h, scattered_h, weight_h, _, _ = media.free_flight(medium, ray, t_max, sampler, channel, active,
                                                            tracking.grid)
-    end = dr.select(scattered_h, mei_h.p, ray(t_max))
+    end = dr.select(scattered_h, mei_h.p, ray(media.within_grid(medium, ray, t_max, active)))
     mei[active] = mei_h
     scattered = dr.select(active, scattered_h, scattered)
     weight = dr.select(active, weight_h, weight)

@@ -7,8 +7,8 @@ Nothing here renders: a chain's target I(u) and the payload a splat needs come f
 State
 -----
 ``chains`` chains, one per lane. Chain c's primary sample is a point u of [0, 1)^D held in one flat
-array at index ``d * chains + c`` (D = ``dims``; chains x D x 16 bytes with the lazy steps'
-counters and proposal), with
+array at index ``d * chains + c`` (D = ``dims``; chains x D x 8 bytes with the proposal, 16
+with the lazy steps' counters), with
 its target I(u) > 0 and its payload (for lab_pssmlt: contribution and film position). Dimensions
 d >= D are not stored: every evaluation draws them afresh (``PrimarySamples``), an independence
 proposal from their uniform density, whose density ratio is 1, so the step below is still a
@@ -20,10 +20,12 @@ One step (``run``)
 1. Propose v from u: with probability ``large_step`` (per chain) a *large step*, every stored
    number drawn afresh; else a *small step*, every stored number perturbed by a normal of
    standard deviation ``sigma`` or by Kelemen's exponential perturbation, and wrapped to [0, 1).
-   Both steps are symmetric on the torus, q(u -> v) = q(v -> u). The normal step is made lazily,
-   as pbrt-v4's ``MLTSampler`` makes it: a number is mutated only when the path reads it, by all
-   the accepted steps it missed at once (``LazyProposal``: the same process in distribution);
-   the exponential step eagerly, all D numbers at every step (no closed form for a sum of them).
+   Both steps are symmetric on the torus, q(u -> v) = q(v -> u). Eagerly (``lazy`` False, what
+   the plugins run): all D numbers at every step, in one flat kernel. With ``lazy`` the normal
+   step is made as pbrt-v4's ``MLTSampler`` makes it: a number is mutated only when the path
+   reads it, by all the accepted steps it missed at once (``LazyProposal``: the same process in
+   distribution, measured slower here, 2026-11-29-mlt-speed.md); the exponential step is always
+   eager (no closed form for a sum of them).
 2. Evaluate I(v) and its payload (for the lazy step, evaluating v is proposing it).
 3. Acceptance a = min(1, I(v) q(v -> u) / (I(u) q(u -> v))), 0 where I(v) is 0 or not finite
    (the lab's steps pass no q ratio: it is 1).
@@ -285,7 +287,7 @@ class MarkovChains:
         # (the lazy steps' counters: accepted iterations, the last accepted large step's, and per number)
         self.iteration = dr.zeros(mi.UInt32, self.chains)
         self.last_large = dr.zeros(mi.UInt32, self.chains)
-        self.last = dr.zeros(mi.UInt32, self.chains * self.dims)
+        self.last = dr.zeros(mi.UInt32, self.chains * self.dims) if self.lazy else None
         if self.lazy:
             self.proposal = dr.zeros(mi.Float, self.chains * self.dims)
             self.stamps = dr.zeros(mi.UInt32, self.chains * self.dims)
@@ -332,7 +334,7 @@ class MarkovChains:
         (``eager_proposal``); lazy: as the path reads them (``LazyProposal``)."""
         large = self.large_steps(key)
         if not self.lazy:
-            return self.samples(self.eager_proposal(key), key), large
+            return self.samples(self.eager_proposal(key, large), key), large
         lazy = LazyProposal(self.chains, self.sigma, key, self.iteration + 1, self.last_large, large, self.last,
                             self.proposal, self.stamps, index + 1)
         return PrimarySamples(self.chains, self.tail_keys(key), self.u, self.dims, lazy), large
@@ -341,12 +343,17 @@ class MarkovChains:
         """Which chains take a large step (Bool per chain)."""
         return uniform(key_of(key, P_LARGE), self.lane) < self.large_step
 
-    def eager_proposal(self, key):
-        """Every stored number of every chain moved: afresh (large step) or perturbed (flat, like ``u``)."""
+    def eager_proposal(self, key, large=None):
+        """Every stored number of every chain moved: afresh (large step) or perturbed (flat, like
+        ``u``). ``large``: ``large_steps(key)`` where the caller has it (gathered per number, not
+        drawn again: the same decisions)."""
         if not self.dims:
             return self.u
         chain = self.flat % self.chains
-        large_here = uniform(key_of(key, P_LARGE), chain) < self.large_step
+        if large is None:
+            large_here = uniform(key_of(key, P_LARGE), chain) < self.large_step
+        else:
+            large_here = dr.gather(mi.Bool, large, chain)
         xi = uniform(key_of(key, P_MUTATE), self.flat)
         return dr.select(large_here, xi, perturb(self.u, xi, self.small_step, self.sigma))
 
@@ -376,13 +383,14 @@ class MarkovChains:
             # (the chain's coin gathered, not drawn again per number: one hash per chain, not per number)
             chain = self.flat % self.chains
             moves_here = dr.gather(mi.Bool, moves, chain)
-            next_iteration = dr.gather(mi.UInt32, self.iteration, chain) + 1
             if samples.lazy is not None:             # the numbers its path read
                 moves_here &= self.stamps == samples.lazy.stamp
                 self.u = dr.select(moves_here, self.proposal, self.u)
             else:                                    # every number
                 self.u = dr.select(moves_here, samples.state, self.u)
-            self.last = dr.select(moves_here, next_iteration, self.last)
+            if self.lazy:                            # (read by the lazy steps only)
+                next_iteration = dr.gather(mi.UInt32, self.iteration, chain) + 1
+                self.last = dr.select(moves_here, next_iteration, self.last)
         self.iteration = dr.select(moves, self.iteration + 1, self.iteration)
         self.last_large = dr.select(moves & large, self.iteration, self.last_large)
         self.value = dr.select(moves, value, self.value)
@@ -396,7 +404,8 @@ class MarkovChains:
         self.steps += 1
 
     def arrays(self) -> tuple:
-        return (self.u, self.value, *self.payload, *self.counts.arrays(), self.iteration, self.last_large, self.last)
+        last = () if self.last is None else (self.last,)
+        return (self.u, self.value, *self.payload, *self.counts.arrays(), self.iteration, self.last_large, *last)
 
     #: Every attribute holding Dr.Jit arrays that a step reads or writes (``frozen.FrozenRounds``).
     STATE = ("key", "u", "value", "payload", "counts", "lane", "flat", "iteration", "last_large", "last",

@@ -25,6 +25,10 @@ import drjit as dr
 from . import chain
 
 
+def _nothing(index):
+    return index + 1
+
+
 class _Holder:
     """Holds the chains out of dr.freeze's sight: a plain object is keyed by its identity, not
     traversed, so the chains' Python counters do not force a new recording every round."""
@@ -47,6 +51,12 @@ class FrozenRounds:
             return held.state()
 
         self._frozen = dr.freeze(body, state_fn=lambda *args: captured)
+        # A recording keys on the kind of each input (a literal or an array in memory), and a round
+        # turns the chains' zeros and the film block's and the scene's literals into arrays, so the
+        # second round recorded anew. Made arrays first (a frozen no-op with auto_opaque off writes
+        # them back into the objects it traverses), one recording serves every round.
+        dr.make_opaque(chains.state())
+        dr.freeze(_nothing, state_fn=lambda *args: captured, auto_opaque=False)(chains.step_index())
 
     @property
     def recordings(self) -> int:

@@ -19,11 +19,17 @@ from mitsuba_lab.plugins.scene_traits import SceneTraits
 
 from . import chain
 from .estimator import PSSMLT
+from .frozen import FrozenRounds
 from .sampler import PrimarySampleSampler
 
 #: The most primary-sample dimensions a chain stores (chains x MAX_DIMS x 16 bytes);
 #: a path reading more draws the rest afresh at every step (``chain`` module docstring).
 MAX_DIMS = 256
+#: Full lock-step rounds recorded once per render and replayed (``frozen.FrozenRounds``): a traced
+#: round's Python (the path loop's trace) is paid once per render, not per round; the same images.
+#: Not in spectral variants nor with ``majorants`` = grid (values the round reads that the frozen
+#: function cannot take as inputs: the spectral tables, the grid kept on the integrator).
+FREEZE_ROUNDS = True
 
 
 @dataclass
@@ -79,7 +85,11 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     I, which makes the image unbiased (``mlt/chain.py`` has the argument; b's error adds
     variance, one factor on the whole image, no bias). spp is mutations per pixel, exactly:
     the render makes pixels x spp mutations, mutation k a step of chain k mod ``chains``, so the
-    last lock-step round may step only some chains (the rest wait, splatting nothing).
+    last lock-step round may step only some chains (the rest wait, splatting nothing). Full
+    rounds are recorded once per render with Dr.Jit's ``dr.freeze`` and replayed
+    (``mlt/frozen.py``: the same image for the same seed, without a traced round's Python),
+    except in spectral variants and with ``majorants`` = grid (``mlt.integrator.FREEZE_ROUNDS =
+    False`` traces every round).
 
     Progressive runs (the runner's ``experiment/execution/progressive.py``): a render with
     ``continue_chains`` set continues the last render's chains on the same scene and sensor
@@ -91,10 +101,11 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     Steps (``mlt/chain.py``): with probability ``large_step`` every stored number is drawn
     afresh, else every stored number is perturbed (``small_step``: a normal of standard deviation
     ``sigma``, pbrt-v4's, or Kelemen's exponential perturbation) and wrapped to [0, 1); both are
-    symmetric, so a = min(1, I(v) / I(u)). The normal step is lazy, as pbrt-v4's: a number moves
-    when the path reads it, by the accepted steps it missed; the exponential step is eager (all
-    stored numbers at every step). A chain stores D numbers, D the most any bootstrap path read
-    (at most 256: memory chains x D x 16 bytes, the numbers, their counters and the proposal's);
+    symmetric, so a = min(1, I(v) / I(u)). Both steps are eager: every stored number moves at
+    every step, in one flat kernel before the paths are traced (pbrt-v4's lazy normal step, a
+    number moved only when a path reads it, is the same process in distribution, but its
+    bookkeeping inside the path loop cost more: 2026-11-29-mlt-speed.md). A chain stores D
+    numbers, D the most any bootstrap path read (at most 256: memory chains x D x 8 bytes);
     numbers past D are drawn afresh by every proposal (an independence proposal in those
     dimensions, still exact).
 
@@ -131,6 +142,9 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     PARAMETERS = PSSMLT.PARAMETERS
     #: Chains take their starts in the bootstrap's order (lab_mmlt: lanes grouped by path length).
     SORT_STARTS = False
+    #: Normal small steps made lazily in the path loop (``chain.LazyProposal``), else eagerly in a
+    #: flat kernel per step: eager measured 1.2-1.8x cheaper per mutation (2026-11-29-mlt-speed.md).
+    LAZY_STEPS = False
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
@@ -208,7 +222,8 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
         # ---------------- The chains ----------------
         stats.chains = n_chains = self.chains
         stats.dims = dims = min(stats.dims_read_max, MAX_DIMS)
-        chains = chain.MarkovChains(n_chains, dims, key, self.large_step, self.small_step, self.sigma)
+        chains = chain.MarkovChains(n_chains, dims, key, self.large_step, self.small_step, self.sigma,
+                                    lazy=self.LAZY_STEPS)
         starts = chains.start(boot_keys, values, boot_value, boot_payload, sort=self.SORT_STARTS)
         stats.distinct_starts = int(np.unique(starts).size)
         del boot_value, boot_payload, boot_keys
@@ -277,7 +292,10 @@ class LabPSSMLTIntegrator(LabMISIntegrator):
     def _frozen_rounds(self, chains, evaluate, splat, captured: list):
         """``frozen.FrozenRounds`` for the full rounds of a render (``captured``: the Dr.Jit values
         ``evaluate`` and ``splat`` read besides the chains'), or None to trace every round."""
-        return None
+        if not FREEZE_ROUNDS or mi.is_spectral or (self._plan[1].media and self.majorants == "grid"):
+            return None
+        # (the path loop counts its rays into the counters' array: an input too)
+        return FrozenRounds(chains, evaluate, splat, captured + [vars(self.counters)], self.ESTIMATOR.plugin_name)
 
     def _count(self, chains: chain.MarkovChains) -> None:
         """The acceptance statistics of every step the chains took so far (continued renders

@@ -28,10 +28,11 @@ from .sampler import PrimarySampleSampler
 
 #: Russian roulette never starts (pbrt-v4's MLTIntegrator has none: the state picks the length).
 NO_ROULETTE = 1 << 30
-#: Full lock-step rounds recorded once and replayed (``frozen.FrozenRounds``): 1.28x faster per
-#: mutation at the default chains, the same images; off by default, since two sweeps aborted inside a
-#: recording before the garbage collector was kept out of it, and too few renders have run since.
-FREEZE_ROUNDS = False
+#: Full lock-step rounds recorded once per render and replayed (``frozen.FrozenRounds``): 1.7-2.5x
+#: cheaper per mutation at the default chains, the same images (2026-11-29-mlt-speed.md; two sweeps
+#: had aborted inside a recording before the garbage collector was kept out of it). False traces
+#: every round.
+FREEZE_ROUNDS = True
 #: The primary sample's streams, interleaved (``PrimarySampleSampler``): the camera's (the
 #: strategy, the film position, the camera subpath and its NEE) and the light's.
 CAMERA_STREAM, LIGHT_STREAM, STREAMS = 0, 1, 2
@@ -85,7 +86,7 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
 
     Hachisuka, Kaplanyan and Dachsbacher 2014 ("Multiplexed Metropolis light transport"), as
     pbrt-v4's ``MLTIntegrator`` makes it, over lab_bdpt's subpaths and MIS weights, with
-    lab_pssmlt's chains (``mlt/chain.py``: lock-step chains, lazy normal steps, expected-value
+    lab_pssmlt's chains (``mlt/chain.py``: lock-step chains, eager steps, expected-value
     splatting, bootstrap and start in proportion to the target). The primary sample holds two
     interleaved streams (pbrt-v4's ``MLTSampler`` streams): the camera's first number picks the
     strategy (s, t) with s + t = k + 1 vertices (each of the k + 1 with probability 1 / (k + 1)),
@@ -107,11 +108,10 @@ class LabMMLTIntegrator(LabPSSMLTIntegrator):
     mean is lab_bdpt's image at the same ``max_depth``. No Russian roulette (pbrt-v4's MMLT has
     none). Each side is traced only as far as the picked strategy needs (the camera subpath t - 1
     segments, the light subpath s, one more than needed so that its last needed vertex is stored),
-    and only that strategy's contribution is kept. Every lock-step round is traced; setting
-    ``mlt.mmlt.FREEZE_ROUNDS = True`` records a round once with Dr.Jit's ``dr.freeze`` and replays
-    it (``mlt/frozen.py``: the same image for the same seed, without a traced round's Python per
-    round; an experiment, off by default; scenes with a projector, and spectral variants
-    (not tried frozen), trace every round).
+    and only that strategy's contribution is kept. Full lock-step rounds are recorded once per
+    render with Dr.Jit's ``dr.freeze`` and replayed (``mlt/frozen.py``: the same image for the same
+    seed, without a traced round's Python per round); scenes with a projector and spectral
+    variants trace every round, as does ``mlt.mmlt.FREEZE_ROUNDS = False``.
 
     Variants: RGB, mono and spectral. In a spectral variant the wavelength sample is one more number
     of the camera stream (after the film position), so a chain walks over wavelengths as over the

@@ -13,7 +13,7 @@ from mitsuba_lab.plugins import params
 from mitsuba_lab.plugins.param_docs import documented
 from mitsuba_lab.plugins.integrators.common import spawn
 from mitsuba_lab.plugins.integrators.common.aim import AimedEmission
-from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
+from mitsuba_lab.plugins.integrators.common.density_radius import first_radius
 from mitsuba_lab.plugins.integrators.common.support import render_arguments, warn_if_unsupported
 from mitsuba_lab.plugins.samplers.layout import bind_film_layout
 from mitsuba_lab.plugins.variant import plugin_settings
@@ -200,6 +200,8 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         self.stats = PhotonStats()
         self._camera = CameraPass(self.settings_)
         self._camera_rays = 0
+        #: how the last render's automatic r_1 was made (``density_radius.FirstRadius``; None: ``radius`` given)
+        self.radius_probe = None
 
     # -- Driver -------------------------------------------------------------------
 
@@ -229,13 +231,15 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         self._camera_rays = int(size[0]) * int(size[1]) * spp * cfg.passes
         bind_film_layout(sensor)                         # lab_zsobol learns the film's shape
 
+        aim = AimedEmission(scene, cfg.aim, cfg.aim_at, "lab_photon")
         # Photons travel at most depth - 1 segments: the camera needs one to reach them.
         tracer = PhotonTracer(scene, max_segments=min(depth - 1, DEPTH_CAP), min_segments=min_segments,
                               rr_depth=cfg.rr_depth, offset_floor=floor,
-                              aim=AimedEmission(scene, cfg.aim, cfg.aim_at, "lab_photon"), media=media,
+                              aim=aim, media=media,
                               tracking=tracking,
                               emitter_media=emitter_media(scene, sensor, floor, "lab_photon") if media else None)
-        r1 = cfg.radius if cfg.radius > 0 else pixel_footprint(scene, sensor)
+        self.radius_probe = None
+        r1 = cfg.radius if cfg.radius > 0 else self.default_radius(scene, sensor, aim)
         radii = radius_schedule(r1, cfg.passes, cfg.alpha)
         stats.radius_first, stats.radius_last = radii[0], radii[-1]
         volume_radii = radius_schedule(cfg.radius_volume or r1, cfg.passes, cfg.alpha, dimension=3)
@@ -293,6 +297,15 @@ class LabPhotonIntegrator(mi.SamplingIntegrator):
         image = image * (1.0 / cfg.passes)
         dr.eval(image)
         return image
+
+    def default_radius(self, scene: mi.Scene, sensor: mi.Sensor, aim=None) -> float:
+        """The automatic r_1 (``common.density_radius``): a pixel's width, or more where a pass's
+        photons (``photons_per_pass``, stored from the second segment with ``direct = nee``) are sparse."""
+        cfg = self.settings_
+        aim = aim or AimedEmission(scene, cfg.aim, cfg.aim_at, "lab_photon")
+        self.radius_probe = first_radius(scene, sensor, cfg.photons_per_pass, min(cfg.depth_limit - 1, DEPTH_CAP),
+                                         2 if cfg.direct == "nee" else 1, aim)
+        return self.radius_probe.radius
 
     def _camera_pass(self, scene, sensor, camera_seed: int, spp: int, u):
         """One developed camera pass: Mitsuba's own ``SamplingIntegrator.render`` on the

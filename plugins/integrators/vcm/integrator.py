@@ -13,7 +13,8 @@ from mitsuba_lab.plugins.integrators.bdpt.integrator import LabBDPTIntegrator
 from mitsuba_lab.plugins.integrators.bdpt.passes import BdptStats, Passes
 from mitsuba_lab.plugins.integrators.bdpt.techniques import Technique
 from mitsuba_lab.plugins.integrators.bdpt.weights import BdptWeights, iteration_sizes
-from mitsuba_lab.plugins.integrators.common.footprint import pixel_footprint
+from mitsuba_lab.plugins.integrators.common.aim import AimedEmission
+from mitsuba_lab.plugins.integrators.common.density_radius import first_radius
 
 from .estimator import VertexMerging, merges_first
 from .merging import VertexGrid, table
@@ -284,6 +285,8 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         #: the ball's in media (``radius_volume``, or r_1)
         self.first_radius = 0.0
         self.first_volume_radius = 0.0
+        #: how the automatic r_1 was made (``density_radius.FirstRadius``; None: ``radius`` given)
+        self.radius_probe = None
         #: the pilot's choice and the renders it makes (``pilot.Pilot``)
         self.pilot = Pilot(self)
         if self.values["light_paths_max"] and not self.values["pilot"]:
@@ -324,8 +327,7 @@ class LabVCMIntegrator(LabBDPTIntegrator):
         if self._pass is None and self.merging:
             r1 = self.values["radius"]
             if not r1 > 0:
-                chosen = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
-                r1 = pixel_footprint(scene, chosen)
+                r1 = self.default_radius(scene, scene.sensors()[sensor] if isinstance(sensor, int) else sensor)
             self.first_radius = r1
             self.first_volume_radius = self.values["radius_volume"] or r1
         if self._pass is None and self.values["pilot"]:
@@ -333,6 +335,16 @@ class LabVCMIntegrator(LabBDPTIntegrator):
             self.refuse_unsupported(scene)         # (the pilot may choose path tracing, which would not)
             return self.pilot.render(scene, sensor, seed, spp, develop, evaluate)
         return super().render(scene, sensor, seed, spp, develop, evaluate)
+
+    def default_radius(self, scene: mi.Scene, sensor: mi.Sensor) -> float:
+        """The automatic r_1 (``common.density_radius``): a pixel's width, or more where this
+        render's light vertices (light_paths per pixel, aimed as ``aim`` aims them) are sparse."""
+        v = self.values
+        size = sensor.film().crop_size()
+        depth = v["max_depth"] if v["max_depth"] > 0 else 1 << 30
+        self.radius_probe = first_radius(scene, sensor, v["light_paths"] * int(size[0]) * int(size[1]), depth - 1,
+                                         aim=AimedEmission(scene, v["aim"], v["aim_at"], "lab_vcm"))
+        return self.radius_probe.radius
 
     def render_every(self, scene, sensor, seed, spp, develop=True, evaluate=True):
         """A render with every technique of this one's mode, without the pilot (what the pilot

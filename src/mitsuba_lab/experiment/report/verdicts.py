@@ -18,17 +18,18 @@ SEPARATION = 2.0
 MOST_SEEDS = 100_000
 
 
-def separation_factor(seeds: int | None = None) -> float:
+def separation_factor(seeds: int | None = None, quantile: float = 0.975) -> float:
     """How many standard errors separate a verdict: SEPARATION for an error taken over many
-    pixels (``seeds`` None), Student's t at 97.5% with seeds - 1 degrees of freedom for one
-    taken over the seeds (12.7 with 2 seeds, 4.3 with 3, 2.1 with 20); NaN with one seed."""
+    pixels (``seeds`` None), Student's t at ``quantile`` (97.5%: a two-sided 5% test) with seeds - 1
+    degrees of freedom for one taken over the seeds (12.7 with 2 seeds, 4.3 with 3, 2.1 with 20);
+    NaN with one seed."""
     if seeds is None:
         return SEPARATION
     if seeds < 2:
         return math.nan
     from scipy.stats import t
 
-    return float(t.ppf(0.975, seeds - 1))
+    return float(t.ppf(quantile, seeds - 1))
 
 
 def separated(gap: float, se: float, seeds: int | None = None) -> bool:
@@ -37,13 +38,13 @@ def separated(gap: float, se: float, seeds: int | None = None) -> bool:
     return bool(gap > separation_factor(seeds) * se) if math.isfinite(gap) and math.isfinite(se) else False
 
 
-def seeds_needed(seeds: int, gap: float, se: float, over_seeds: bool = True) -> int | None:
+def seeds_needed(seeds: int, gap: float, se: float, over_seeds: bool = True, quantile: float = 0.975) -> int | None:
     """About how many seeds would separate ``gap`` when the standard error ``se`` (measured
-    with ``seeds``) falls as 1/sqrt(seeds); None where no number of seeds would (no gap, no
-    error), MOST_SEEDS + 1 past MOST_SEEDS."""
+    with ``seeds``) falls as 1/sqrt(seeds), at ``separation_factor``'s ``quantile``; None where no
+    number of seeds would (no gap, no error), MOST_SEEDS + 1 past MOST_SEEDS."""
     if not (math.isfinite(gap) and math.isfinite(se)) or gap <= 0 or se <= 0 or seeds < 1:
         return None
-    factor = lambda m: separation_factor(m if over_seeds else None)        # noqa: E731
+    factor = lambda m: separation_factor(m if over_seeds else None, quantile)        # noqa: E731
     m = max(seeds + 1, math.ceil(seeds * (SEPARATION * se / gap) ** 2))
     while m <= MOST_SEEDS and not factor(m) * se * math.sqrt(seeds / m) < gap:
         m = max(m + 1, math.ceil(m * 1.05))
