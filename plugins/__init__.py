@@ -43,7 +43,8 @@ _ORDER = (
     "integrators.photon.tracer", "integrators.photon.integrator",
     # lab_bdpt, then lab_vcm on it
     "integrators.bdpt.endpoints", "integrators.bdpt.splats", "integrators.bdpt.vertices",
-    "integrators.bdpt.media_paths", "integrators.bdpt.light_subpath", "integrators.bdpt.camera_subpath", "integrators.bdpt.passes",
+    "integrators.bdpt.camera_flight", "integrators.bdpt.media_connections", "integrators.bdpt.media_paths",
+    "integrators.bdpt.light_subpath", "integrators.bdpt.camera_subpath", "integrators.bdpt.passes",
     "integrators.bdpt.integrator",
     "integrators.vcm.merging", "integrators.vcm.volume_merging", "integrators.vcm.pilot", "integrators.vcm.integrator",
     # the samplers

@@ -25,7 +25,6 @@ import difflib
 import math
 from dataclasses import replace
 
-
 from .param_types import Param, ParameterError, _int_at_least, _override, _show  # noqa: F401 (re-exported)
 
 
@@ -90,7 +89,6 @@ def _media(sampling_default: str) -> tuple[Param, ...]:
               "channel's density alone (volpath). No effect in grey media"),
     )
 
-
 #: lab_nee: the path tracer's and the medium sampling (distance by default: plain NEE).
 LAB_NEE = PATH_TRACER + _media("distance")
 #: lab_mis: the path tracer's and its own.
@@ -152,13 +150,10 @@ LAB_PHOTON = (
 
 
 def _techniques():
-    """``integrators.bdpt.techniques``, which parses lab_bdpt's ``strategies`` and
-    ``only_strategy`` (imported when first needed: this module imports only ``param_types`` of
-    the package when it loads)."""
+    """``integrators.bdpt.techniques`` (parses ``strategies``, ``only_strategy``; imported when first needed)."""
     from mitsuba_lab.plugins.integrators.bdpt import techniques
 
     return techniques
-
 
 #: lab_bdpt (bidirectional path tracing).
 LAB_BDPT = (
@@ -183,6 +178,11 @@ LAB_BDPT = (
           "(Veach's per-strategy images); empty = every strategy",
           check=lambda v: v == "" or _techniques().Strategy.parse(v) is not None,
           expected="empty or 's,t' with s >= 0, t >= 1 and s + t >= 2"),
+    Param("equiangular", float, 0.0, "share of camera flights in homogeneous media drawn equi-angularly towards a light "
+          "(the rest free flights; their density in every MIS weight). Both kinds: scenes of at most 8 emitters",
+          check=lambda v: 0.0 <= v <= 1.0, expected="a number in [0, 1]"),
+    Param("equiangular_nee", str, "all", "camera segments in homogeneous media adding an equi-angular NEE sample, a 2nd "
+          "s = 1 technique (lab_mis's; not with merging): off, first (the sensor's), all", choices=("off", "first", "all")),
 ) + tuple(p for p in _media("distance") if p.name in ("majorants", "majorant_resolution")) + AIM + (
     Param("count_rays", bool, True, "count camera, extension, shadow (NEE), connection, light-subpath and sensor "
           "(light tracing's) rays (ray_counts())"),
@@ -232,7 +232,6 @@ def _vcm_aim() -> tuple[Param, ...]:
                     "and ppm (merging carries the direct light there, and only the unaimed light subpaths bring it)"),
             aim_at)
 
-
 #: lab_vcm (vertex connection and merging).
 LAB_VCM = (
     Param("mode", str, "vcm", "which techniques: vcm (all), bpt (connections: lab_bdpt), bpm (merging), "
@@ -281,7 +280,7 @@ LAB_VCM = (
           "its light subpath (lab_bdpt), or one, to one of them picked uniformly and counted n times, the MIS "
           "weights counting a connection as 1 / (mean vertices per light subpath)", choices=("all", "one")),
 ) + tuple(p for p in LAB_BDPT if p.name in ("max_depth", "rr_depth", "hide_emitters", "heuristic", "beta",
-                                            "max_vertices")) + _vcm_aim() + (
+                                            "max_vertices", "equiangular", "equiangular_nee")) + _vcm_aim() + (
     replace(LAB_BDPT[-1], doc="count rays as lab_bdpt does, and under 'merge' the light vertices merging's grid "
                               "lookups read (ray_counts())"),
 )

@@ -33,7 +33,8 @@ import mitsuba as mi
 import backend
 import media_scenes
 import mitsuba_lab
-from agreement import SEEDS_LAB, SEEDS_REF, Z_BOUND, assert_agrees, renders, scene_path, z_scores
+from agreement import (SEEDS_LAB, SEEDS_REF, Z_BOUND, assert_agrees, assert_blocks_agree, block_test, renders,
+                       scene_path, z_scores)
 from mitsuba_lab.scene import SceneTraits, load_scene, make_integrator, strategy_applicability
 
 pytestmark = pytest.mark.slow      # statistical agreement: the full suite's tier
@@ -113,6 +114,34 @@ def test_strategy_subsets_agree_with_volpath(strategies, name):
     light seen directly through the fog box) and the camera's strategies alone (hit + NEE)."""
     scene = mi.load_dict(SCENES[name]())
     assert_agrees(bdpt(scene, strategies=strategies), reference(scene), f"lab_bdpt {strategies} on {name}")
+
+
+#: Equi-angular sampling in the camera subpaths (``bdpt/camera_flight.py``) against volpathmis by the block
+#: test: equi-angular NEE (the default) and the flights' mixture (``equiangular``) on a chromatic medium in glass
+#: (each segment inside the ball starts at a refraction, so both run there, aiming at the area light's centre);
+#: the full list, with fog_shafts.xml (a point light behind a louvre, the flights' first pieces ending at the
+#: window's null pane) and the power proofs, in benchmarks/agreement/test_bdpt_media_matrix.py.
+EQUIANGULAR_PARAMS = {"nee": {}, "mixture": {"equiangular": 0.5, "equiangular_nee": "off"}}
+ALL_EQUIANGULAR = [(name, kind) for name in ("chromatic_in_glass", "fog_shafts.xml") for kind in EQUIANGULAR_PARAMS]
+EQUIANGULAR = ALL_EQUIANGULAR[:2]
+
+
+def volpathmis_stack(scene, spp=SPP):
+    return renders(scene, make_integrator("volpathmis", {"max_depth": DEPTH}), spp, SEEDS_REF)
+
+
+@pytest.mark.parametrize("name, kind", EQUIANGULAR)
+def test_equiangular_sampling_passes_the_block_test(name, kind):
+    check_equiangular(name, kind)
+
+
+def check_equiangular(name, kind):
+    """The block test (tests/agreement.py: every 6 x 6 block's grey mean, Sidak bound at family-wise
+    alpha 0.01) of lab_bdpt with ``EQUIANGULAR_PARAMS[kind]`` against volpathmis, 16 seeds a side."""
+    scene = load(name)
+    params = EQUIANGULAR_PARAMS[kind]
+    lab = bdpt(scene, **params) if params or name not in _stacks else _stacks[name][0]
+    return assert_blocks_agree(lab, volpathmis_stack(scene), f"lab_bdpt {params or 'defaults'} on {name}")
 
 
 ALL_HETEROGENEOUS = [("ad_rgb", "spot_into_smoke", {}), ("ad_mono", "point_in_plume", {"majorants": "grid"})]

@@ -67,6 +67,7 @@ class CameraPass:
     sensor_medium: object = None         # in media: the sensor's medium (the camera subpaths start in it)
     camera_depth: object = None          # lab_mmlt: per lane, the last camera vertex its one strategy needs
     tracking: object = None              # heterogeneous media: ``subpath_media.Tracking``, else None
+    equiangular: object = None           # in media: ``camera_flight.EquiangularMixture``, else None (off)
 
 
 def sensor_constants(sensor: mi.Sensor, plugin: str = "lab_bdpt") -> tuple[float, tuple]:

@@ -23,6 +23,7 @@ from .camera_subpath import CameraPass, sensor_constants, trace_camera_subpaths
 from .endpoints import direction_is_delta
 from .estimator import Bidirectional
 from .light_subpath import LightTracer, check_variant
+from .camera_flight import EquiangularMixture
 from .media_paths import trace_camera, trace_light
 from mitsuba_lab.plugins.integrators.common.subpath_media import Tracking, emitter_media
 from .passes import PassPlan, Passes, pass_seed
@@ -85,7 +86,10 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
     Homogeneous participating media: both subpaths scatter in them (free flights in one colour
     channel per sample, the phase function at medium vertices, null boundaries passed without a
     vertex), every strategy's connecting segment carries its transmittance, and the MIS weights
-    use the distance-sampling densities (``media_paths``). Heterogeneous media: delta tracking
+    use the distance-sampling densities (``media_paths``); each camera segment's first flight in a
+    homogeneous medium adds an equi-angular NEE sample towards the lights (``equiangular_nee``,
+    lab_mis's technique, a second s = 1 strategy in the weights; not with merging), and may mix
+    equi-angular distances into the flight itself (``equiangular``; ``camera_flight``). Heterogeneous media: delta tracking
     (``majorants``: ``global`` or ``grid``), ratio-tracked connections and deterministic
     stand-in densities in the weights; ``hide_emitters`` with media is refused in one line. Light-subpath seeds come from the
     render's seed; each pass has its own.
@@ -170,6 +174,11 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
         tracer.tracking = Tracking(majorants.of_integrator(self, scene)) if media and traits.heterogeneous_media else None
         # where each emitter's light subpaths start (a one-line error where its rays disagree)
         tracer.emitter_media = emitter_media(scene, sensor, floor, self.ESTIMATOR.plugin_name) if media else None
+        # equi-angular flights in the camera subpaths (``camera_flight``; off where equiangular = 0)
+        tracer.equiangular = (EquiangularMixture(scene, v.get("equiangular", 0.0), v.get("equiangular_nee", "off"))
+                              if media else None)
+        tracer.sensor_medium = (mi.MediumPtr(sensor.get_medium()) if media and sensor.get_medium() is not None
+                                else dr.zeros(mi.MediumPtr, 1))
         inv_area, axis = sensor_constants(sensor, self.ESTIMATOR.plugin_name)
         passes = self.passes
         self.stats = stats = passes.stats_class()
@@ -204,7 +213,8 @@ class LabBDPTIntegrator(mi.SamplingIntegrator):
                                     traits.hittable_emitters, only, count,
                                     passes.grid(vertices, stored, plan, stats), passes.connect_share,
                                     passes.connect_one, counters, direction_is_delta(sensor), media, light_seed,
-                                    sensor.get_medium() if media else None, tracking=tracer.tracking)
+                                    sensor.get_medium() if media else None, tracking=tracer.tracking,
+                                    equiangular=tracer.equiangular)
             start = time.perf_counter()
             try:
                 if u is None:

@@ -53,6 +53,11 @@ given c: the estimator is unbiased with c random. A connection's contribution ca
 spectrum's T (exact: Beer-Lambert in homogeneous media through null boundaries,
 ``common.media.transmittance``), its weight only T_c.
 
+**Equi-angular sampling** (``camera_flight``): equi-angular NEE along each camera segment's first
+flight, a second s = 1 technique whose density ratio rho enters the sums that hold s = 1's term, and
+optionally a mixture of equi-angular and free flights, whose density ratio r enters ``after_hit``
+(camera: ``forward``; light: ``backward``) and each connecting segment.
+
 **Heterogeneous media** (``subpath_media.Tracking``, compiled only where the scene has one).
 The subpaths' flights there are the path family's delta tracking (``common.media.free_flight``,
 global majorants or ``majorants = grid``) and every connection's T is ratio tracking
@@ -80,8 +85,9 @@ from mitsuba_lab.plugins.integrators.common.subpath_media import (
     phase_reverse_pdf, sigma_t_channel, start_medium, vertex_eval)
 from mitsuba_lab.plugins.integrators.common.subpath_media import transmittance as through
 
-from . import splats
+from . import camera_flight, splats
 from .endpoints import nee_density
+from .media_connections import connect_to_light_subpath, splat_emitter, splat_vertex
 from .techniques import Technique
 from .vertices import NONE
 from .weights import SubpathMis
@@ -105,25 +111,12 @@ def trace_light(tracer, st, block, vertices, store_lanes):
     medium, extinguished = start_medium(tracer.emitter_media, st.emitter_index, infinite)
     phase_ctx = mi.PhaseFunctionContext(None, mi.TransportMode.Importance)
     tracing = Technique.LIGHT in w.techniques and tracer.reaches_sensor
+    mix = camera_flight.mixture(tracer)      # (equi-angular camera flights: their densities here)
 
     # ---------------- s = 1, t = 1: the emitter point seen directly, through the media ----------------
     u0 = mi.Point2f(rng.next_float32(), rng.next_float32())
     if dr.hint(tracing, mode="scalar"):
-        si0 = mi.SurfaceInteraction3f(ps, ray.wavelengths)
-        active0 = on_surface & (pmf > 0) & strategy_mask(only, 1, 1)
-        ds0, we0 = sensor.sample_direction(si0, u0, active0)
-        active0 &= ds0.pdf > 0
-        tally(tracer.counters, "sensor", active0)
-        si0.wi = si0.to_local(ds0.d)
-        cos0 = mi.Frame3f.cos_theta(si0.wi)
-        active0 &= cos0 > 0
-        T0, T0_c = through(scene, medium, si0, ds0.p, aux, channel, floor, active0, tracer.tracking)
-        active0 &= dr.max(T0) > 0
-        le0 = emitter.eval(si0, active0)
-        w0 = w.emitter_to_camera(sensor_pdf(ds0, we0), cos0 * T0_c, dr.square(ds0.dist),
-                                 pdf_pos, st.delta_pos)
-        value0 = le0 * cos0 * st.pos_weight * st.sel_weight * we0 * mi.Spectrum(T0) * float_or_zero(w0) * scale
-        splats.splat(block, ds0.uv, si0.wavelengths, value0, active0)
+        splat_emitter(tracer, st, block, ps, medium, u0, aux, channel, mix, scale)
 
     # ---------------- x_1, x_2, ..: the light subpath ----------------
     beta = mi.Spectrum(st.ray_weight) * st.sel_weight
@@ -144,6 +137,13 @@ def trace_light(tracer, st, block, vertices, store_lanes):
     seg = mi.Float(1.0)                       # T_c of the segment since the last vertex
     prev_p = mi.Point3f(ps.p)
     d_0 = mi.Vector3f(ray.d)                  # the emitted direction (null boundaries keep it)
+    # equi-angular camera flights: where the camera's first flight back along the segment ends
+    # (the start of the light's last flight) and whether that is a collision (``camera_flight``)
+    piece_o = mi.Point3f(ps.p) if mix is not None else 0.0
+    piece_collides = mi.Bool(False) if mix is not None else False
+    # equi-angular NEE: s = 1's term folded at the first vertex, until rho is known at the second
+    eq_nee = mix is not None and mix.nee_all and not w.merging
+    e_dvc, e_dvm, e_beyond = (mi.Float(0), mi.Float(0), mi.Float(dr.inf)) if eq_nee else (0.0, 0.0, 0.0)
     active = (beta_max0 > 0) & dr.isfinite(beta_max0) & (max_depth > 1)
     while dr.hint(active, max_iterations=-1, label="lab_bdpt light subpath in media"):
         si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
@@ -186,7 +186,18 @@ def trace_light(tracer, st, block, vertices, store_lanes):
         dvc = dr.select(start_here, start.dvc, dvc)
         dist2 = dr.select(start_here & infinite, 1.0, dist2)    # x_0 is a direction: no distance
         depth[vertex] = at
-        mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dist2, g_in, seg)
+        if dr.hint(mix is None, mode="scalar"):
+            mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dist2, g_in, seg)
+        else:                                  # the camera's density of the previous vertex
+            back = camera_flight.ratio(mix, medium, v.p, piece_o, piece_collides, ray.wavelengths, channel,
+                                       in_medium & ~(start_here & infinite))
+            mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dist2, g_in, seg, backward=back)
+        if dr.hint(eq_nee, mode="scalar"):
+            second = in_medium & piece_collides & (at == 2)
+            rho = camera_flight.rho(mix, medium, v.p, piece_o, dr.norm(v.p - piece_o) + e_beyond, back,
+                                    ray.wavelengths, channel, second)
+            e_after = w.after_hit(SubpathMis(0.0 * e_dvc, e_dvc, first, e_dvm), dist2, g_in, seg, backward=back)
+            mis = w.add_equiangular(mis, e_after, dr.select(second, rho, 0.0))
         splat_on = smooth & strategy_mask(only, at + 1, 1)
         # the medium on the far side of a surface vertex (a medium transition's other side)
         beyond = dr.select(surface & si.is_medium_transition(), si.target_medium(ray.d), medium)
@@ -206,21 +217,9 @@ def trace_light(tracer, st, block, vertices, store_lanes):
         # ---------- t = 1: join x_at to the sensor, through the media ----------
         u_sensor = mi.Point2f(rng.next_float32(), rng.next_float32())
         if dr.hint(tracing, mode="scalar"):
-            ds, we = sensor.sample_direction(v, u_sensor, splat_on)
-            connect = splat_on & (ds.pdf > 0)
-            tally(tracer.counters, "sensor", connect)
             sides = Sides(si.n, dr.dot(si.n, ray.d), scattered, medium, beyond)
-            T, T_c = through(scene, sides.toward(ds.d), v, ds.p, aux, channel, floor, connect, tracer.tracking)
-            connect &= dr.max(T) > 0
-            f_surface, rev_surface = transported(bsdf, si, si.to_local(ds.d), connect & ~scattered)
-            f_phase, _ = phase.eval_pdf(phase_ctx, mei, ds.d, connect & scattered)
-            rev_phase = phase_reverse_pdf(phase, phase_ctx, mei, ds.d, connect & scattered)
-            f_cam = dr.select(scattered, mi.Spectrum(f_phase), f_surface)
-            g_cam = dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, ds.d)))
-            w_cam = w.light_to_camera(mis, sensor_pdf(ds, we), g_cam * T_c,
-                                      dr.square(ds.dist), dr.select(scattered, rev_phase, rev_surface), scattered)
-            value = beta * f_cam * we * mi.Spectrum(T) * float_or_zero(w_cam) * scale
-            splats.splat(block, ds.uv, v.wavelengths, value, connect)
+            splat_vertex(tracer, w, block, v, si, bsdf, mei, phase, scattered, sides, beta, mis, sigma_c, u_sensor,
+                         splat_on, aux, channel, mix, scale, at)
 
         # ---------- the next direction: adjoint BSDF sampling, or the phase function ----------
         going = vertex & (depth + 1 < max_depth)
@@ -237,12 +236,20 @@ def trace_light(tracer, st, block, vertices, store_lanes):
                                         dr.select(scattered, rev_phase, rev_surface),
                                         dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, wo_world))), delta_lobe,
                                         scattered)
+        if dr.hint(eq_nee, mode="scalar"):
+            e_first = going & scattered & (at == 1)
+            e_term = w.equiangular_term(mis, phase_pdf, sigma_c)
+            e_dvc, e_dvm = dr.select(e_first, e_term.dvc, 0.0), dr.select(e_first, e_term.dvm, 0.0)
+            e_beyond = dr.select(e_first, camera_flight.beyond(scene, v.p, -wo_phase, e_first), dr.inf)
         dvcm = dr.select(vertex, float_or_zero(scattered_mis.dvcm), dvcm)
         dvc = dr.select(vertex, float_or_zero(scattered_mis.dvc), dvc)
         first = dr.select(vertex, mi.Float(scattered_mis.first), first)
         dvm = carried(w.merging, dr.select(vertex, scattered_mis.dvm, dvm), dvm)
         prev_p[vertex] = v.p
         seg[vertex] = 1.0
+        if dr.hint(mix is not None, mode="scalar"):
+            piece_o[vertex | passing] = v.p
+            piece_collides = dr.select(vertex | passing, scattered, piece_collides)
         # ---------- a null boundary: passed, no vertex ----------
         seg[passing] *= bs.pdf
         beta[passing] *= bsdf_weight
@@ -263,67 +270,6 @@ def trace_light(tracer, st, block, vertices, store_lanes):
 # ------------------------------------------------------------------------------------------
 # Camera subpaths
 # ------------------------------------------------------------------------------------------
-def connection(scene, cp, x, si, bsdf, mei, phase, scattered, sides, beta, mis: SubpathMis, depth, slot, on,
-               sampler, channel, phase_ctx):
-    """(weighted contribution, previous slot) of the connection from camera vertex ``x`` (``si``
-    at a surface, ``mei`` where ``scattered``; ``depth`` segments from the sensor) to the light
-    vertex at ``slot``, through the media between them."""
-    from .light_subpath import float_or_zero, strategy_mask
-
-    w, floor = cp.weights, cp.offset_floor
-    ctx = mi.BSDFContext(mi.TransportMode.Radiance)
-    ctx_imp = mi.BSDFContext(mi.TransportMode.Importance)
-    max_depth = dr.opaque(mi.UInt32, cp.max_depth)
-    y, bsdf_y, beta_y, mis_y, depth_y, prev = cp.vertices.load(slot, si.wavelengths, on)
-    medium_y, _, wi_y = cp.vertices.load_media(slot, on)
-    y_in_medium = on & (y.n.x == 0) & (y.n.y == 0) & (y.n.z == 0)
-    use = on & (depth_y + 1 + depth <= max_depth) & strategy_mask(cp.only, depth_y + 1, depth + 1)
-    d = y.p - x.p
-    dist2 = dr.squared_norm(d)
-    d = d * dr.rsqrt(dist2)
-    # the camera vertex
-    f_x, pdf_x_fwd, pdf_x_rev = vertex_eval(ctx, ctx_imp, phase_ctx, si, bsdf, mei, phase, scattered, d, use)
-    g_x = dr.select(scattered, media.channel_value(mei.sigma_t, channel), dr.abs(dr.dot(si.n, d)))
-    # the light vertex: its adjoint BSDF, or its medium's phase function
-    wo_y = y.to_local(-d)
-    f_ys, pdf_y_rev_s = transported(bsdf_y, y, wo_y, use & ~y_in_medium)
-    pdf_y_fwd_s = bsdf_y.pdf(ctx_imp, y, wo_y, use & ~y_in_medium)
-    mei_y = dr.zeros(mi.MediumInteraction3f)
-    mei_y.p, mei_y.wi, mei_y.sh_frame, mei_y.wavelengths = y.p, wi_y, mi.Frame3f(wi_y), si.wavelengths
-    mei_y.medium, mei_y.t = medium_y, mi.Float(1.0)
-    phase_y = medium_y.phase_function()
-    at_y = use & y_in_medium
-    f_yp, pdf_y_fwd_p = phase_y.eval_pdf(phase_ctx, mei_y, -d, at_y)
-    pdf_y_rev_p = phase_reverse_pdf(phase_y, phase_ctx, mei_y, -d, at_y)
-    f_y = dr.select(y_in_medium, mi.Spectrum(f_yp), f_ys)
-    g_y = dr.select(y_in_medium, sigma_t_channel(medium_y, mei_y, channel, at_y), dr.abs(dr.dot(y.n, d)))
-    value = spectrum_or_zero(beta * f_x * f_y * beta_y / dist2)
-    use &= dr.max(mi.unpolarized_spectrum(value)) > 0
-    tally(cp.counters, "connection", use)
-    T, T_c = through(scene, sides.toward(d), x, y.p, sampler, channel, floor, use, cp.tracking)
-    weight = w.connect(mis_y, mis, dr.select(y_in_medium, pdf_y_fwd_p, pdf_y_fwd_s),
-                       dr.select(y_in_medium, pdf_y_rev_p, pdf_y_rev_s), pdf_x_fwd, pdf_x_rev,
-                       g_y * T_c, g_x * T_c, dist2, depth, y_in_medium, scattered)
-    value = spectrum_or_zero(value * mi.Spectrum(T) * float_or_zero(weight))
-    return dr.select(use, value, 0.0), prev
-
-
-@dr.syntax
-def connect_to_light_subpath(scene, cp, x, si, bsdf, mei, phase, scattered, sides, beta, mis, depth, head,
-                             active, sampler, channel, phase_ctx):
-    """The s >= 2 strategies at camera vertex ``x``: its connections to every stored vertex of
-    its light subpath (the list ending at ``head``)."""
-    L = dr.zeros(mi.Spectrum, dr.width(head))
-    slot = dr.select(active, head, NONE)
-    while dr.hint(slot != NONE, max_iterations=-1, label="lab_bdpt connections in media"):
-        on = slot != NONE
-        value, prev = connection(scene, cp, x, si, bsdf, mei, phase, scattered, sides, beta, mis, depth,
-                                 slot, on, sampler, channel, phase_ctx)
-        L += value
-        slot = dr.select(on, prev, NONE)
-    return L
-
-
 @dr.syntax
 def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium, active):
     """(L, valid) of the camera subpaths in a scene with media (``camera_subpath.
@@ -366,6 +312,13 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
     valid_ray = active & (scene.environment() is not None)
     prev_p = mi.Point3f(ray.o)
     seg = mi.Float(1.0)
+    # equi-angular flights (``camera_flight``): on a segment's first flight (``fresh``); ``r_first``
+    # its density ratio once that flight ended at a null surface
+    mix = cp.equiangular if cp.equiangular is not None and cp.equiangular.on else None
+    fresh = dr.full(mi.Bool, True, lanes) if mix is not None else True
+    r_first = dr.full(mi.Float, 1.0, lanes) if mix is not None else 1.0
+    eq_nee = mix is not None and mix.nee and not merging     # equi-angular NEE, and rho of the last vertex
+    rho_prev = dr.zeros(mi.Float, lanes) if eq_nee else None
     pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
     tally(cp.counters, "camera", active)
 
@@ -376,8 +329,17 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.All, active=active)
         si = spawn.behind_null_face(scene, ray, si, floor, active)
         in_medium = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
-        mei, scattered, w_flight, p_flight = flight(medium, ray, si.t, sampler.next_1d(), sampler, channel,
-                                                    in_medium, cp.tracking)
+        if dr.hint(eq_nee, mode="scalar"):
+            L += camera_flight.equiangular_nee(scene, cp, mix, sampler, ray, si, medium, beta,
+                                               SubpathMis(dvcm, dvc, first, dvm), prev_p, depth + 1, channel, phase_ctx,
+                                               in_medium & fresh & medium.is_homogeneous() & (depth + 1 < max_depth)
+                                               & camera_flight.nee_segment(mix, depth))
+        u_flight = sampler.next_1d()
+        flown = flight(medium, ray, si.t, u_flight, sampler, channel, in_medium, cp.tracking)
+        if dr.hint(mix is not None and mix.mixes, mode="scalar"):
+            flown = camera_flight.flight(mix, medium, ray, si.t, u_flight, sampler.next_1d(), channel,
+                                         in_medium & fresh & medium.is_homogeneous(), flown)
+        mei, scattered, w_flight, p_flight = flown
         beta[in_medium] *= w_flight
         seg[in_medium] *= p_flight
         arrived = active & ~scattered
@@ -394,8 +356,19 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         phase[~scattered] = dr.zeros(mi.PhaseFunctionPtr)
         sigma_c = media.channel_value(mei.sigma_t, channel)
         g_in = dr.select(scattered, sigma_c, dr.select(escaped, 1.0, dr.abs(dr.dot(si.n, ray.d))))
-        mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dr.select(escaped, 1.0, dr.squared_norm(v.p - prev_p)),
-                          g_in, seg)
+        dist2 = dr.select(escaped, 1.0, dr.squared_norm(v.p - prev_p))
+        if dr.hint(mix is None, mode="scalar"):
+            mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dist2, g_in, seg)
+        else:                                  # the mixture's density of this vertex (``camera_flight``)
+            r_here = camera_flight.ratio(mix, medium, prev_p, v.p, scattered, ray.wavelengths, channel,
+                                         in_medium & fresh & ~escaped)
+            r_here = dr.select(fresh, r_here, r_first)
+            mis = w.after_hit(SubpathMis(dvcm, dvc, first, dvm), dist2, g_in, seg, forward=r_here)
+        rho_here = None
+        if dr.hint(eq_nee, mode="scalar"):
+            t_s = dr.select(si.is_valid(), dr.norm(si.p - prev_p), dr.inf)
+            rho_here = camera_flight.rho(mix, medium, prev_p, v.p, t_s, r_here, ray.wavelengths, channel,
+                                         scattered & fresh & camera_flight.nee_segment(mix, depth))
 
         # ---------------- s = 0: the camera subpath reaches an emitter ----------------
         if dr.hint(emitter_hits, mode="scalar"):
@@ -406,7 +379,8 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
             pdf_nee = nee_density(scene, prev_it, ds, infinite, hit & ((here > 1) | ~infinite))
             cos_light = dr.select(infinite, 1.0, dr.abs(dr.dot(si.n, ray.d)))
             pdf_pos, pdf_dir, _ = table.emission(emitter, cos_light, pdf_nee, hit, si.p, -ray.d)
-            w_hit = w.hit(mis, pdf_nee, pdf_pos * pdf_dir, dr.select(infinite, 0.0, pdf_pos))
+            w_hit = w.hit(mis, pdf_nee, pdf_pos * pdf_dir, dr.select(infinite, 0.0, pdf_pos),
+                          **({"rho": rho_prev} if eq_nee else {}))    # (lab_vcm's ppm weights take none)
             L += beta * float_or_zero(w_hit) * emitter.eval(si, hit)
 
         # a surface with a smooth lobe is x_here for NEE, connections and merges whichever lobe
@@ -432,8 +406,9 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         pdf_nee = dr.select(ds.delta, ds.pdf, ds.pdf * cos_light / dist2)
         pdf_pos, pdf_dir, delta = table.emission(ds.emitter, cos_light, pdf_nee, nee_on, ds.p, -ds.d)
         g_cam = dr.select(scattered, sigma_c, dr.abs(dr.dot(si.n, ds.d)))
-        w_nee = w.nee(mis, pdf_nee, pdf_pos * pdf_dir, cos_light * T_c, g_cam * T_c, dist2, pdf_fwd, pdf_rev,
-                      delta, here, scattered)
+        r = camera_flight.segment_ratio(scene, mix, sides.toward(ds.d), v, ds.p, False, floor, channel, nee_on)
+        w_nee = w.nee(mis, pdf_nee, pdf_pos * pdf_dir, cos_light * T_c * r, g_cam * T_c, dist2, pdf_fwd, pdf_rev,
+                      delta, here, scattered, rho=rho_here)
         L += dr.select(nee_on, spectrum_or_zero(beta * f * em_weight * mi.Spectrum(T) * float_or_zero(w_nee)), 0.0)
 
         # ---------------- s >= 2: connections to the light subpath ----------------
@@ -470,6 +445,11 @@ def trace_camera(scene: mi.Scene, cp, sampler: mi.Sampler, ray: mi.Ray3f, medium
         prev_p[vertex] = v.p
         seg[vertex] = 1.0
         depth[vertex] = here
+        if dr.hint(mix is not None, mode="scalar"):
+            r_first = dr.select(vertex, 1.0, dr.select(passing & fresh, r_here, r_first))
+            fresh = vertex | (fresh & ~passing)
+        if dr.hint(eq_nee, mode="scalar"):
+            rho_prev = dr.select(vertex, rho_here, rho_prev)
         # ---------------- a null boundary: passed, no vertex ----------------
         seg[passing] *= bs.pdf
         beta[passing] *= bsdf_weight

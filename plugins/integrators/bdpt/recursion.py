@@ -132,11 +132,12 @@ class Recursion:
         (``start_kind``: its kind while ``dvcm`` still comes from the subpath's start)."""
         return state.dvcm
 
-    def _hit_inner(self, camera: SubpathMis, pdf_pos_A, pdf_direct_A):
+    def _hit_inner(self, camera: SubpathMis, pdf_pos_A, pdf_direct_A, eq=1.0):
         """hook: the emitter hit's sum over the light side's strategies but connections: light
-        tracing at the camera's first vertex, next-event estimation after it."""
+        tracing at the camera's first vertex, next-event estimation after it (``eq``: its factor
+        1 + rho^beta, ``nee``)."""
         first = camera.first
-        return (first * self._m(pdf_pos_A) + (1.0 - first) * self._m(pdf_direct_A)) * camera.dvcm
+        return (first * self._m(pdf_pos_A) + (1.0 - first) * self._m(pdf_direct_A) * eq) * camera.dvcm
 
     def start_merges(self):
         """hook: ``merges`` at a light subpath's first vertex."""
@@ -191,7 +192,8 @@ class Recursion:
         dvcm = select(delta, 0.0 * pdf_cam_W, self._m(self.light_paths / pdf_cam_W))
         return SubpathMis(dvcm, 0.0 * pdf_cam_W, 1.0, 0.0 * pdf_cam_W)
 
-    def after_hit(self, state: SubpathMis, dist2, cos_in, transmittance=None) -> SubpathMis:
+    def after_hit(self, state: SubpathMis, dist2, cos_in, transmittance=None, forward=None,
+                  backward=None) -> SubpathMis:
         """State at a new vertex: ``dist2`` the squared segment length, ``cos_in`` |cos| at the new
         vertex (both 1 on a segment to or from an infinite emitter).
 
@@ -202,13 +204,50 @@ class Recursion:
         probabilities, and a mask's null-lobe probability, in the path's sampling channel). T
         enters ``dvcm`` (1 / p_A) only: ``dvc`` and ``dvm`` hold ratios of a vertex's reverse
         density to the next vertex's forward density, which cross the same segment and share
-        its T (it cancels); the T of a connection's own segment is passed with its cosines."""
+        its T (it cancels); the T of a connection's own segment is passed with its cosines.
+
+        Where the two directions sample the segment with different distance densities (lab_bdpt's
+        camera subpaths mix in equi-angular sampling, ``camera_flight``), ``forward`` is the
+        factor by which this subpath's distance density of the new vertex exceeds g T, and
+        ``backward`` the factor of the other direction's density of the previous vertex over the
+        segment: the new vertex's p_A gains ``forward``, the previous vertex's reverse density
+        ``backward``, so ``dvc`` and ``dvm`` (their ratio) gain backward / forward."""
         inv_cos = self._m(1.0 / cos_in)
         pending = self._pending_after_hit(state.pending, inv_cos)
         dvcm = state.dvcm * self._m(dist2) * inv_cos
         if transmittance is not None:
             dvcm = dvcm * self._m(1.0 / transmittance)
-        return SubpathMis(dvcm, state.dvc * inv_cos, state.first, state.dvm * inv_cos, state.merges, pending)
+        dvc, dvm = state.dvc * inv_cos, state.dvm * inv_cos
+        if forward is not None or backward is not None:
+            ratio = self._m((1.0 if backward is None else backward) / (1.0 if forward is None else forward))
+            if forward is not None:
+                dvcm = dvcm * self._m(1.0 / forward)
+            dvc, dvm, pending = dvc * ratio, dvm * ratio, pending * ratio
+        return SubpathMis(dvcm, dvc, state.first, dvm, state.merges, pending)
+
+    # -- equi-angular NEE (``camera_flight``): a second s = 1 technique --------------------
+    # It builds x_1 on the camera's side by equi-angular sampling along the segment from x_2
+    # (not by the subpath's own flight), with rho = p_E(x_1) / p_camera(x_1) times s = 1's
+    # density; every sum that holds s = 1's term holds it times 1 + rho^beta (``nee``, ``hit``,
+    # ``connect`` and ``light_to_camera`` at a light subpath's first vertex, and deeper on the
+    # light side ``equiangular_term`` and ``add_equiangular``). rho = 0: the textbook weights.
+    def _eq(self, rho):
+        return 1.0 if rho is None else 1.0 + self._m(rho)
+
+    def equiangular_term(self, state: SubpathMis, pdf_fwd_W, cos_out, delta=False) -> SubpathMis:
+        """The part of ``scatter_light``'s new ``dvc`` and ``dvm`` that is s = 1's term, at a
+        light subpath's first vertex (``state``: after ``after_hit`` there; none at a delta lobe):
+        carried to the next vertex (``after_hit`` it as the state), where rho is known
+        (``add_equiangular``)."""
+        inner = self._m(cos_out / pdf_fwd_W) * self._inner(state, Technique.NEE)
+        inner = select(delta, 0.0 * inner, inner)
+        return SubpathMis(0.0 * inner, inner, state.first, inner * self.inv_eta)
+
+    def add_equiangular(self, state: SubpathMis, carried: SubpathMis, rho) -> SubpathMis:
+        """``state`` at a light subpath's second vertex with s = 1's term, ``carried`` (after
+        ``after_hit``), counted 1 + rho^beta times."""
+        extra = self._m(rho)
+        return state._replace(dvc=state.dvc + extra * carried.dvc, dvm=state.dvm + extra * carried.dvm)
 
     def _scatter(self, state, pdf_fwd_W, pdf_rev_W, cos_out, delta, start_kind, merges=1.0, medium=None):
         """Shared by both sides; only the kind of the subpath's first ratio differs (``merges``:
@@ -242,39 +281,41 @@ class Recursion:
 
     # -- the weights of each technique ------------------------------------------------------
 
-    def hit(self, camera: SubpathMis, pdf_direct_A, pdf_emit_W, pdf_pos_A):
+    def hit(self, camera: SubpathMis, pdf_direct_A, pdf_emit_W, pdf_pos_A, rho=None):
         """s = 0: the camera subpath (state after ``after_hit`` at the emitter) hit a non-delta
         emitter. ``pdf_direct_A``, ``pdf_emit_W`` as in ``start_light`` for this point and the ray
         back along the segment; ``pdf_pos_A``: the emission position density of the point (used
-        when the emitter is the first camera vertex, where the competitor is light tracing)."""
-        w_camera = self._hit_inner(camera, pdf_pos_A, pdf_direct_A) + self._m(pdf_emit_W) * camera.dvc
+        when the emitter is the first camera vertex, where the competitor is light tracing); ``rho``:
+        equi-angular NEE's at the camera's vertex before the emitter)."""
+        w_camera = self._hit_inner(camera, pdf_pos_A, pdf_direct_A, self._eq(rho)) + self._m(pdf_emit_W) * camera.dvc
         return self._own(Technique.HIT) / (1.0 + w_camera)
 
     def nee(self, camera: SubpathMis, pdf_direct_A, pdf_emit_W, cos_light, cos_cam, dist2,
-            pdf_cam_fwd_W, pdf_cam_rev_W, delta=False, depth=None, medium=None):
+            pdf_cam_fwd_W, pdf_cam_rev_W, delta=False, depth=None, medium=None, rho=None):
         """s = 1, t >= 2: emitter sampling at a camera vertex. ``cos_light``, ``cos_cam``: |cos|
         at the emitter point and at the camera vertex along the segment, ``dist2`` its squared
         length (1, 1 for an infinite emitter); ``pdf_cam_fwd_W``: BSDF density at the camera
         vertex of the direction to the emitter, ``pdf_cam_rev_W``: of the direction back along
         the camera subpath given the emitter's; ``delta``: delta emitter (it cannot be hit);
-        ``depth``: the camera vertex's, in segments from the sensor; ``medium``: a medium vertex."""
+        ``depth``: the camera vertex's, in segments from the sensor; ``medium``: a medium vertex;
+        ``rho``: equi-angular NEE's there (its weight: this one times rho^beta)."""
         p_cam0 = pdf_cam_fwd_W * cos_light / dist2
         w_light = select(delta, 0.0 * p_cam0, self._term(Technique.HIT, self._m(p_cam0 / pdf_direct_A)))
         inner = (self._eta_at(medium) * self._joined_merges(depth) + self._inner(camera, Technique.LIGHT)
                  + camera.dvc * self._m(pdf_cam_rev_W))
         w_camera = self._m(pdf_emit_W * cos_cam / (dist2 * pdf_direct_A)) * inner
-        return self._own(Technique.NEE) / (w_light + 1.0 + w_camera)
+        return self._own(Technique.NEE) / (w_light + self._eq(rho) + w_camera)
 
     def connect(self, light: SubpathMis, camera: SubpathMis, pdf_light_fwd_W, pdf_light_rev_W,
                 pdf_cam_fwd_W, pdf_cam_rev_W, cos_light, cos_cam, dist2, depth=None, light_medium=None,
-                camera_medium=None):
+                camera_medium=None, rho=None):
         """s >= 2, t >= 2: a connection between a light vertex and a camera vertex (neither a
         delta lobe). ``pdf_light_fwd_W``: density at the light vertex of the direction to the
         camera vertex, ``pdf_light_rev_W``: of the direction back along the light subpath given
         that one; ``pdf_cam_*`` likewise; ``cos_*``: |cos| at each end; ``dist2``; ``depth``:
         the camera vertex's, in segments from the sensor; ``*_medium``: each end a medium vertex."""
         w_light = self._m(pdf_cam_fwd_W * cos_light / dist2) * (
-            self._eta_at(light_medium) * self._light_merges(light) + self._inner(light, Technique.NEE)
+            self._eta_at(light_medium) * self._light_merges(light) + self._inner(light, Technique.NEE) * self._eq(rho)
             + light.dvc * self._m(pdf_light_rev_W))
         w_camera = self._m(pdf_light_fwd_W * cos_cam / dist2) * (
             self._eta_at(camera_medium) * self._joined_merges(depth) + self._inner(camera, Technique.LIGHT)
@@ -284,14 +325,15 @@ class Recursion:
         # (this technique's term is its count n_c^beta, as each term of the sums carries its own)
         return self.connect_weight / (w_light + self.connect_weight + w_camera)
 
-    def light_to_camera(self, light: SubpathMis, pdf_cam_W, cos_light, dist2, pdf_light_rev_W, medium=None):
+    def light_to_camera(self, light: SubpathMis, pdf_cam_W, cos_light, dist2, pdf_light_rev_W, medium=None,
+                        rho=None):
         """t = 1, s >= 2: a light vertex (not a delta lobe) joined to the sensor. ``pdf_cam_W``:
         the sensor's direction density towards it (as in ``start_camera``), ``cos_light`` |cos|
         at the light vertex, ``pdf_light_rev_W``: density at the light vertex of the direction
         back along the light subpath given the sensor's. (The light vertex is the camera's
         first; ``medium``: a medium vertex.)"""
         w_light = self._m(pdf_cam_W * cos_light / (dist2 * self.light_paths)) * (
-            self._eta_at(medium) * self._sensor_merges(light) + self._inner(light, Technique.NEE)
+            self._eta_at(medium) * self._sensor_merges(light) + self._inner(light, Technique.NEE) * self._eq(rho)
             + light.dvc * self._m(pdf_light_rev_W))
         return self._own(Technique.LIGHT) / (1.0 + w_light)
 

@@ -92,10 +92,10 @@ class StrategySubsets(Recursion):
     def _inner(self, state, start_kind):
         return self._gated(state, start_kind)
 
-    def _hit_inner(self, camera, pdf_pos_A, pdf_direct_A):
+    def _hit_inner(self, camera, pdf_pos_A, pdf_direct_A, eq=1.0):
         first = camera.first
         inner = _gate(first * self.e[Technique.LIGHT], self._m(pdf_pos_A)) + _gate(
-            (1.0 - first) * self.e[Technique.NEE], self._m(pdf_direct_A))
+            (1.0 - first) * self.e[Technique.NEE], self._m(pdf_direct_A) * eq)
         return _gate(inner, camera.dvcm)
 
     @property
