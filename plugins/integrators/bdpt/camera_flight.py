@@ -159,12 +159,7 @@ def rho(mix, medium, o, x, t_s, r, wavelengths, channel, active):
     where it cannot build x (no homogeneous medium, or off)."""
     if mix is None or not mix.nee:
         return None
-    use = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
-    use &= medium.is_homogeneous()
-    to_x = x - o
-    t = dr.norm(to_x)
-    d = to_x / t
-    _, _, sigma_c = _sigma(medium, o, wavelengths, channel, use)
+    use, t, d, sigma_c = _piece(medium, o, x, wavelengths, channel, active)
     value = eq_density(mix, o, d, t, t_s) / (sigma_c * dr.exp(-sigma_c * t) * r)
     return dr.select(use & (t > 0) & (t < t_s) & dr.isfinite(value), value, 0.0)
 
@@ -195,6 +190,17 @@ def rho_towards(scene, mix, medium, x, y, r, floor, wavelengths, channel, active
     return dr.select(use, rho(mix, medium, x.p, y, t_s, r, wavelengths, channel, use), 0.0)
 
 
+def _piece(medium, o, x, wavelengths, channel, active):
+    """(use, t, d, sigma_t in ``channel``) of the straight piece from ``o`` to ``x``: ``use`` where
+    it lies in a homogeneous medium, its length and direction."""
+    use = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
+    use &= medium.is_homogeneous()
+    to_x = x - o
+    t = dr.norm(to_x)
+    _, _, sigma_c = _sigma(medium, o, wavelengths, channel, use)
+    return use, t, to_x / t, sigma_c
+
+
 def _sigma(medium, p, wavelengths, channel, active):
     """(sigma_s, sigma_t, sigma_t in ``channel``) of the homogeneous ``medium``."""
     mei = dr.zeros(mi.MediumInteraction3f)
@@ -219,12 +225,7 @@ def ratio(mix, medium, o, x, collides, wavelengths, channel, active):
     flight's, in ``medium`` (1 where it is no homogeneous medium, or the mixture is off)."""
     if not mix.mixes:
         return mi.Float(1.0)
-    use = active & (medium != None)  # noqa: E711 (Dr.Jit pointer test)
-    use &= medium.is_homogeneous()
-    to_x = x - o
-    t = dr.norm(to_x)
-    d = to_x / t
-    _, _, sigma_c = _sigma(medium, o, wavelengths, channel, use)
+    use, t, d, sigma_c = _piece(medium, o, x, wavelengths, channel, active)
     p, free = _mixed(mix, o, d, t, collides, sigma_c)
     r = p / free
     return dr.select(use & (free > 0) & (t > 0) & dr.isfinite(r), r, 1.0)
