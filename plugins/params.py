@@ -71,6 +71,10 @@ def _media(sampling_default: str) -> tuple[Param, ...]:
               "ray's origin; in heterogeneous media inside the medium's box, its transmittance tracked as "
               "the shadow rays') or mis (both, weighted by the estimator's MIS; in heterogeneous media over "
               "the null collisions, Miller et al. 2019)", choices=MEDIUM_SAMPLINGS),
+        Param("equiangular_samples", int, 1,
+              "with medium_sampling equiangular or mis: equi-angular samples along each segment of a camera ray "
+              "in a medium (up to its first real vertex; their mean, so splitting the single scattering seen "
+              "directly, the light the pixel sees first); every later segment takes one", **_int_at_least(1)),
         Param("transmittance", str, "ratio",
               "shadow rays' transmittance in heterogeneous media: ratio (ratio tracking) or delta (delta "
               "tracking, 0 or 1); exact (Beer-Lambert) in homogeneous media either way",
