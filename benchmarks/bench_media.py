@@ -7,7 +7,9 @@ alike; each time is taken after dr.eval and dr.sync_thread (mitsuba_lab.render).
 wall time of each and the median of the per-round ratios to volpath: lab_mis with free flights
 alone (``medium_sampling = distance``, volpath's estimator but for exact shadow-ray
 transmittance) and with equi-angular sampling added (``mis``, the default), whose ratio to
-``distance`` is the equi-angular step's cost.
+``distance`` is the equi-angular step's cost; and ``mis`` with two equi-angular samples on camera
+rays' segments (``equiangular_samples = 2``), alone and with the max heuristic, whose light samples
+of weight 0 trace no shadow ray (2026-11-29-fog-shafts-mis.md).
 
     .venv/bin/python benchmarks/bench_media.py [--scene scenes/fog_shafts.xml] [--res 128] [--spp 16]
 """
@@ -38,6 +40,8 @@ def main(argv=None) -> int:
         "lab_mis(distance)": make_integrator("lab_mis", {**depth, "medium_sampling": "distance"}),
         "lab_mis(mis)": make_integrator("lab_mis", depth),
         "lab_mis(equiangular)": make_integrator("lab_mis", {**depth, "medium_sampling": "equiangular"}),
+        "lab_mis(mis, n_E 2)": make_integrator("lab_mis", {**depth, "equiangular_samples": 2}),
+        "lab_mis(mis, max, n_E 2)": make_integrator("lab_mis", {**depth, "heuristic": "max", "equiangular_samples": 2}),
     }
     times = time_rounds(scene, contenders, args.spp, args.rounds)
 

@@ -70,9 +70,11 @@ def _media(sampling_default: str) -> tuple[Param, ...]:
               "ray's origin; in heterogeneous media inside the medium's box, its transmittance tracked as "
               "the shadow rays') or mis (both, weighted by the estimator's MIS; in heterogeneous media over "
               "the null collisions, Miller et al. 2019)", choices=MEDIUM_SAMPLINGS),
-        Param("transmittance", str, "ratio",
-              "shadow rays' transmittance in heterogeneous media: ratio (ratio tracking) or delta (delta "
-              "tracking, 0 or 1); exact (Beer-Lambert) in homogeneous media either way",
+        Param("equiangular_samples", int, 1, "with medium_sampling equiangular or mis: equi-angular samples on each "
+              "segment of a camera ray in a medium, their mean (splitting the single scattering the pixel sees "
+              "directly); every later segment takes one", **_int_at_least(1)),
+        Param("transmittance", str, "ratio", "shadow rays' transmittance in heterogeneous media: ratio (ratio "
+              "tracking) or delta (delta tracking, 0 or 1); exact (Beer-Lambert) in homogeneous media either way",
               choices=TRANSMITTANCES),
         Param("majorants", str, "global",
               "the bounds that delta and ratio tracking propose collisions against in a heterogeneous "
@@ -80,13 +82,11 @@ def _media(sampling_default: str) -> tuple[Param, ...]:
               "grid of local bounds, built once per scene from the sigma_t gridvolume and walked cell by "
               "cell; 4 bytes a cell; one heterogeneous medium per scene, its one-channel sigma_t grid "
               "scaled and translated, not rotated); homogeneous media need none", choices=MAJORANTS),
-        Param("majorant_resolution", int, 16,
-              "majorant grid cells along each axis (at most the sigma_t grid's own resolution there)",
-              **_int_at_least(1)),
-        Param("spectral_mis", bool, True,
-              "with chromatic extinction, weight the distances sampled with the path's channel by "
-              "one-sample MIS over all channels' densities (volpathmis); false: divide by the sampling "
-              "channel's density alone (volpath). No effect in grey media"),
+        Param("majorant_resolution", int, 16, "majorant grid cells along each axis (at most the sigma_t grid's own "
+              "resolution there)", **_int_at_least(1)),
+        Param("spectral_mis", bool, True, "with chromatic extinction, weight the distances sampled with the path's "
+              "channel by one-sample MIS over all channels' densities (volpathmis); false: divide by the "
+              "sampling channel's density alone (volpath). No effect in grey media"),
     )
 
 #: lab_nee: the path tracer's and the medium sampling (distance by default: plain NEE).

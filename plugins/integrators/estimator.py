@@ -28,7 +28,7 @@ from mitsuba_lab.plugins import params as declarations
 #: Parameters that do not change an estimator (only what is counted).
 NO_EFFECT = ("count_rays",)
 #: Parameters that change an estimator only in a scene with participating media.
-MEDIUM_PARAMETERS = ("medium_sampling", "transmittance", "majorants", "majorant_resolution", "spectral_mis")
+MEDIUM_PARAMETERS = ("medium_sampling", "equiangular_samples", "transmittance", "majorants", "majorant_resolution", "spectral_mis")
 #: Rank of a plugin that is not the lab's among identical estimators.
 OTHER_SIMPLICITY = 3
 

@@ -173,6 +173,7 @@ class LabPathIntegrator(mi.SamplingIntegrator):
         # equi-angular sampling of the light in media (medium_sampling equiangular or mis), and whether NEE at free-flight collisions is a technique beside it (mis)
         equiangular_on = has_media and emitter_sampling and self.medium_sampling != "distance"
         nee_in_media = self.medium_sampling != "equiangular"
+        n_E = self.equiangular_samples              # (on camera rays' segments; one on later ones)
         at_infinity = equiangular.lights_at_infinity(scene)
         spectral = has_media and self.spectral_mis and not mi.is_monochromatic   # (media.free_flight)
         tracking = self.tracking_kind
@@ -224,11 +225,17 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                     ea_lanes = in_medium & medium.use_emitter_sampling() & (depth + 1 < self.max_depth)
                     segment = equiangular.Segment.of_ray(medium, ray, si.t, ea_lanes)
                     ea_lanes &= segment.t_max > 0
-                    L += equiangular.equiangular_scatter(scene, sampler, phase_ctx, medium, segment, ray.wavelengths,
-                                                   beta, channel, estimator.equiangular_weight, n_L,
-                                                   nee_in_media, ea_lanes, floor, tracking, grid,
-                                                   ratios if spectral else None)
-                    n_shadow += dr.select(ea_lanes, 1, 0)
+                    L_ea = mi.Spectrum(0)
+                    for k in range(n_E):
+                        # n_E samples on a camera ray's segments (depth 0, null boundaries passed), their mean
+                        lanes_k = ea_lanes if k == 0 else ea_lanes & (depth == 0)
+                        L_ea += equiangular.equiangular_scatter(scene, sampler, phase_ctx, medium, segment,
+                                                                ray.wavelengths, beta, channel,
+                                                                estimator.equiangular_weight, n_L, nee_in_media,
+                                                                lanes_k, floor, tracking, grid,
+                                                                ratios if spectral else None)
+                        n_shadow += dr.select(lanes_k, 1, 0)
+                    L += dr.select(depth == 0, L_ea / n_E, L_ea) if n_E > 1 else L_ea
                 mei, scattered, w_flight, ratios_next, nulls = media.free_flight(
                     medium, ray, si.t, sampler, channel, in_medium, grid, ratios if spectral else None)
                 beta[in_medium] *= mi.Spectrum(w_flight)      # (a diagonal Mueller matrix in polarized variants)
@@ -414,7 +421,7 @@ class LabNEEIntegrator(LabPathIntegrator):
     Parameters: ``max_depth`` (default -1, unbounded), ``rr_depth`` (5), ``hide_emitters``
     (false), ``count_rays`` (true); see ``LabPathIntegrator``. In media ``medium_sampling``
     (``distance``, the default: NEE at free-flight collisions; ``equiangular``; or ``mis``, the two
-    light samples weighted by the balance heuristic), ``transmittance``, ``majorants``,
+    light samples weighted by the balance heuristic), ``equiangular_samples``, ``transmittance``, ``majorants``,
     ``majorant_resolution`` and ``spectral_mis`` (true). Estimator: ``nee.NEE``.
 
     .. code-block:: python
@@ -451,7 +458,12 @@ class LabMISIntegrator(LabPathIntegrator):
     Fajardo 2012). The three techniques (free flight + emitter sample, free flight + phase
     sample, equi-angular) are weighted by the heuristic over their densities per unit distance
     and solid angle (``mis_weight.mis_weight_many``); in heterogeneous media the free flight's
-    density is taken over its null collisions (``common.equiangular``). In chromatic media ``spectral_mis``
+    density is taken over its null collisions (``common.equiangular``). ``equiangular_samples``
+    (n_E, default 1) takes n_E equi-angular samples on the segments of camera rays and averages
+    them (splitting the single scattering the pixel sees directly, where a point light's
+    visibility through occluders is noisiest); later segments take one. A sample whose MIS weight
+    is 0 (``heuristic = max``: another technique's density is larger there) traces no shadow
+    ray, so with ``max`` each light sample in a medium costs a shadow ray only where it counts. In chromatic media ``spectral_mis``
     samples distances with one channel's coefficients and weights by the mean of every
     channel's density (one-sample MIS over the channels, as ``volpathmis``, Miller et al. 2019);
     in heterogeneous media ``majorants = grid`` tracks against local bounds of a coarse grid

@@ -40,7 +40,7 @@ def test_render_writes_exr_with_metadata_and_png(tmp_path):
     assert json.loads(meta["mitsuba_lab.params"]) == {      # as used: every default filled in
         "max_depth": 4, "rr_depth": 5, "hide_emitters": False, "count_rays": True,
         "heuristic": "balance", "beta": 2.0, "emitter_samples": 1, "medium_sampling": "mis",
-        "transmittance": "ratio", "majorants": "global", "majorant_resolution": 16,
+        "equiangular_samples": 1, "transmittance": "ratio", "majorants": "global", "majorant_resolution": 16,
         "spectral_mis": True}
     assert json.loads(meta["mitsuba_lab.sampler"]) == {"type": "independent", "params": {"sample_count": 4}}
     stats = json.loads(meta["mitsuba_lab.stats"])

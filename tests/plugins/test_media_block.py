@@ -50,6 +50,8 @@ CONFIGS = {
     "grid": ("lab_mis", {"majorants": "grid"}),
     "grid_delta": ("lab_mis", {"majorants": "grid", "transmittance": "delta"}),
     "one_channel": ("lab_mis", {"spectral_mis": False}),
+    "two_equiangular": ("lab_mis", {"equiangular_samples": 2}),
+    "max": ("lab_mis", {"heuristic": "max"}),
     "nee": ("lab_nee", {}),
     "naive": ("lab_naive", {}),
 }
@@ -131,10 +133,14 @@ SEEDS_LAB, SEEDS_REF = range(32), range(1000, 1032)
     ("ad_spectral", "chromatic_in_glass", "mis"),
     ("ad_mono", "fog_box", "equiangular"),
     ("ad_rgb", "point_in_smoke", "mis"),
+    ("ad_rgb", "point_in_smoke", "two_equiangular"),
+    ("ad_rgb", "fog_box", "max"),
 ])
 def test_medium_modes_pass_the_block_test(kind, name, config):
     """Equi-angular sampling under MIS behind a null boundary, the majorant grid with delta
-    tracking, spectral MIS inside glass in a spectral variant, equi-angular sampling alone in mono."""
+    tracking, spectral MIS inside glass in a spectral variant, equi-angular sampling alone in mono,
+    two equi-angular samples on camera segments in heterogeneous smoke, and the max heuristic (whose
+    light samples of weight 0 trace no shadow ray) behind a null boundary under an area light."""
     variant = backend.variant(kind)
     mitsuba_lab.use_variant(variant)
     try:

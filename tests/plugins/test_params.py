@@ -18,8 +18,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 LAB_INTEGRATORS = ("lab_naive", "lab_nee", "lab_mis", "lab_photon", "lab_bdpt", "lab_vcm", "lab_pssmlt",
                    "lab_mmlt")
 LAB_SAMPLERS = ("lab_independent", "lab_stratified", "lab_halton", "lab_sobol", "lab_zsobol")
-MIS_VALID = ("beta, count_rays, emitter_samples, heuristic, hide_emitters, majorant_resolution, majorants, max_depth, "
-             "medium_sampling, rr_depth, spectral_mis, transmittance")
+MIS_VALID = ("beta, count_rays, emitter_samples, equiangular_samples, heuristic, hide_emitters, majorant_resolution, "
+             "majorants, max_depth, medium_sampling, rr_depth, spectral_mis, transmittance")
 
 
 def load_error(d: dict) -> str:
@@ -127,7 +127,7 @@ def test_unknown_name_without_a_close_match():
     with pytest.raises(ValueError) as err:
         resolve("lab_nee", {"heuristic": "power"})
     assert str(err.value) == ("lab_nee: unknown parameter 'heuristic'; valid parameters: count_rays, "
-                              "hide_emitters, majorant_resolution, majorants, max_depth, medium_sampling, rr_depth, "
+                              "equiangular_samples, hide_emitters, majorant_resolution, majorants, max_depth, medium_sampling, rr_depth, "
                               "spectral_mis, transmittance")
     with pytest.raises(ValueError) as err:
         resolve("lab_zsobol", {"widht": 4, "zzz": 1})
@@ -159,14 +159,15 @@ PATH_DEFAULTS = {"max_depth": -1, "rr_depth": 5, "hide_emitters": False, "count_
 MEDIA_DEFAULTS = {"majorants": "global", "majorant_resolution": 16, "spectral_mis": True}
 DEFAULTS = {
     "lab_naive": PATH_DEFAULTS,
-    "lab_nee": {**PATH_DEFAULTS, "medium_sampling": "distance", "transmittance": "ratio", **MEDIA_DEFAULTS},
+    "lab_nee": {**PATH_DEFAULTS, "medium_sampling": "distance", "equiangular_samples": 1, "transmittance": "ratio",
+                **MEDIA_DEFAULTS},
     "lab_mis": {**PATH_DEFAULTS, "heuristic": "power", "beta": 2.0, "emitter_samples": 1, "medium_sampling": "mis",
-                "transmittance": "ratio", **MEDIA_DEFAULTS},
+                "equiangular_samples": 1, "transmittance": "ratio", **MEDIA_DEFAULTS},
     "lab_photon": {"photons_per_pass": 100_000, "passes": 16, "alpha": 2.0 / 3.0, "radius": 0.0, "radius_volume": 0.0,
                    "max_depth": -1, "rr_depth": 5, "direct": "nee", "max_records": 1 << 21,
                    "hide_emitters": False, "aim": 0.5, "aim_at": "specular"},
     "lab_pssmlt": {**PATH_DEFAULTS, "heuristic": "power", "beta": 2.0, "emitter_samples": 1, "medium_sampling": "mis",
-                   "transmittance": "ratio", **MEDIA_DEFAULTS, "chains": 8192, "bootstrap": 100_000,
+                   "equiangular_samples": 1, "transmittance": "ratio", **MEDIA_DEFAULTS, "chains": 8192, "bootstrap": 100_000,
                    "bootstrap_share": 0.25, "large_step": 0.3, "small_step": "normal", "sigma": 0.01},
     "lab_mmlt": {"max_depth": 8, "heuristic": "power", "beta": 2.0, "chains": 8192, "bootstrap": 100_000,
                  "bootstrap_share": 0.25, "large_step": 0.3, "small_step": "normal", "sigma": 0.01},

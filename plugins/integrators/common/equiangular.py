@@ -203,7 +203,6 @@ def equiangular_scatter(scene, sampler, phase_ctx, medium, segment: Segment, wav
     pdf_y = dr.select(ds.delta, ds.pdf, ds.pdf * cos_o / dr.square(dist_o) * dr.square(ds.dist) / cos_t)
     phase = medium.phase_function()
     f, pdf_phase = phase.eval_pdf(phase_ctx, mei, ds.d, ok)
-    T_light = transmittance(scene, medium, it, ds.p, sampler, channel, floor, ok, tracking_kind, grid)
     tracked = ok & ~medium.is_homogeneous()
     to_x = mi.Ray3f(segment.o, segment.d, t, ds_o.time, wavelengths)
     T_tracked, nulls = segment_transmittance(medium, to_x, sampler, channel, tracked, tracking_kind, grid)
@@ -213,5 +212,7 @@ def equiangular_scatter(scene, sampler, phase_ctx, medium, segment: Segment, wav
     p_e = pdf_t * pdf_y
     w = equiangular_weight(Densities(bsdf=p_d * pdf_phase, emitter=p_d * n_L * pdf_nee if nee else 0.0 * p_d,
                                      delta=ds.delta, equiangular=p_e))
+    # (after the weight, which needs no visibility: no shadow ray for a sample of weight 0)
+    T_light = transmittance(scene, medium, it, ds.p, sampler, channel, floor, ok & (w > 0), tracking_kind, grid)
     value = beta * mi.Spectrum(T_ray * sigma_s * w / p_e * T_light) * f * emitted
     return dr.select(ok & (p_e > 0) & dr.isfinite(p_e), spectrum_or_zero(value), 0.0)

@@ -38,7 +38,8 @@ from mitsuba_lab.plugins.integrators.common import majorants, spawn
 
 #: The medium parameters (``params._media``) as the path tracers hold them: (name, attribute,
 #: value where the plugin does not declare it: lab_naive's free flights, as Mitsuba's volpath).
-SETTINGS = (("medium_sampling", "medium_sampling", "distance"), ("transmittance", "tracking_kind", "ratio"),
+SETTINGS = (("medium_sampling", "medium_sampling", "distance"), ("equiangular_samples", "equiangular_samples", 1),
+            ("transmittance", "tracking_kind", "ratio"),
             ("majorants", "majorants", "global"), ("majorant_resolution", "majorant_resolution", 16),
             ("spectral_mis", "spectral_mis", False))
 
@@ -315,8 +316,6 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
         # a surface at a medium boundary sends the shadow ray into the medium on its side
         start = dr.select(~scattered & si.is_medium_transition(), si.target_medium(ds.d), medium)
         infinite = mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite) & sampled
-        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled, tracking_kind, grid,
-                          unbounded=infinite)
         f_bsdf, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), sampled & ~scattered)
         f_phase, pdf_phase = phase.eval_pdf(phase_ctx, mei, ds.d, sampled & scattered)
         f = dr.select(scattered, f_phase, f_bsdf)
@@ -324,6 +323,10 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
         if equiangular is not None:
             d = equiangular.densities(scene, d, it, ds, sampled, nee)
         w = sample_weight(d)
+        # the weight needs no visibility: a sample of weight 0 (``max`` heuristic) adds 0 whatever
+        # its T, so its shadow ray is not traced
+        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled & (w > 0), tracking_kind, grid,
+                          unbounded=infinite)
         L = L + emitter_sample_contribution(beta, ds, em_weight * mi.Spectrum(T), f, w / n_L, sampled)
     return L
 
