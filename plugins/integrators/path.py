@@ -229,12 +229,13 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                     for k in range(n_E):
                         # n_E samples on a camera ray's segments (depth 0, null boundaries passed), their mean
                         lanes_k = ea_lanes if k == 0 else ea_lanes & (depth == 0)
-                        L_ea += equiangular.equiangular_scatter(scene, sampler, phase_ctx, medium, segment,
-                                                                ray.wavelengths, beta, channel,
-                                                                estimator.equiangular_weight, n_L, nee_in_media,
-                                                                lanes_k, floor, tracking, grid,
-                                                                ratios if spectral else None)
-                        n_shadow += dr.select(lanes_k, 1, 0)
+                        L_k, traced = equiangular.equiangular_scatter(scene, sampler, phase_ctx, medium, segment,
+                                                                      ray.wavelengths, beta, channel,
+                                                                      estimator.equiangular_weight, n_L,
+                                                                      nee_in_media, lanes_k, floor, tracking, grid,
+                                                                      ratios if spectral else None)
+                        L_ea += L_k
+                        n_shadow += dr.select(traced, 1, 0)
                     L += dr.select(depth == 0, L_ea / n_E, L_ea) if n_E > 1 else L_ea
                 mei, scattered, w_flight, ratios_next, nulls = media.free_flight(
                     medium, ray, si.t, sampler, channel, in_medium, grid, ratios if spectral else None)
@@ -280,10 +281,11 @@ class LabPathIntegrator(mi.SamplingIntegrator):
                         in_medium_nee &= ~ea_here.lanes    # equi-angular sampling alone finds that light
                     active_em = further & ((surface & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
                                            | in_medium_nee)
-                    L = media.emitter_sampling(scene, sampler, bsdf_ctx, phase_ctx, it, si, bsdf, mei, phase,
-                                               scattered, medium, channel, beta, L, estimator.sample_weight,
-                                               n_L, active_em, floor, tracking, ea_here, nee_in_media, grid)
-                    n_shadow += dr.select(active_em, n_L, 0)
+                    L, traced = media.emitter_sampling(scene, sampler, bsdf_ctx, phase_ctx, it, si, bsdf, mei,
+                                                       phase, scattered, medium, channel, beta, L,
+                                                       estimator.sample_weight, n_L, active_em, floor, tracking,
+                                                       ea_here, nee_in_media, grid)
+                    n_shadow += traced
                 # null boundaries are crossed whatever the depth; real vertices scatter below max_depth
                 bsdf_sample, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), surface)
                 null = mi.has_flag(bsdf_sample.sampled_type, mi.BSDFFlags.Null)

@@ -357,3 +357,18 @@ def test_the_majorant_grid_follows_the_medium_s_data():
     params.update()
     rebuilt = majorants.of_integrator(integrator, scene)
     assert rebuilt is not grid and np.allclose(rebuilt.bounds, 2.0 * grid.bounds, rtol=1e-6)
+
+
+def test_light_samples_of_weight_zero_trace_and_count_no_shadow_ray():
+    """With Veach's ``max`` heuristic a light sample whose technique is not the densest there has
+    weight 0: it traces no shadow ray, and ``ray_counts`` counts none for it. On fog_box_point
+    (16x12, 16 spp, seed 3, max_depth 6) power counts 12220 shadow rays and max 10075 (0.82x);
+    counting the untraced ones, as before, gave max 12136 (0.99x). The images are those of before
+    (the skipped samples add 0)."""
+    scene = mi.load_dict(media_scenes.fog_box_point())
+    counts = {}
+    for heuristic in ("power", "max"):
+        integrator = make_integrator("lab_mis", {"heuristic": heuristic, "max_depth": 6})
+        mi.render(scene, integrator=integrator, spp=16, seed=3)
+        counts[heuristic] = integrator.ray_counts()["shadow"]
+    assert counts["max"] < 0.9 * counts["power"], counts

@@ -176,8 +176,9 @@ def equiangular_scatter(scene, sampler, phase_ctx, medium, segment: Segment, wav
     against NEE at a free flight's collision (``nee``: n_L samples) and phase-function sampling,
     both with the collision's density p_d(t) (``distance_pdf``, with ``ratios``). T(0, t) is
     Beer-Lambert in a homogeneous medium, else tracked as the shadow rays' T (``tracking_kind``,
-    ``grid``), whose null chain enters p_d(t). Returns the contribution (0 for emitters at
-    infinity, which have no point to aim at)."""
+    ``grid``), whose null chain enters p_d(t). Returns (the contribution, 0 for emitters at
+    infinity, which have no point to aim at; whether its shadow ray was traced: not for a sample of
+    MIS weight 0)."""
     from mitsuba_lab.plugins.integrators.common.direct import spectrum_or_zero
     from mitsuba_lab.plugins.integrators.estimator import Densities
 
@@ -213,6 +214,7 @@ def equiangular_scatter(scene, sampler, phase_ctx, medium, segment: Segment, wav
     w = equiangular_weight(Densities(bsdf=p_d * pdf_phase, emitter=p_d * n_L * pdf_nee if nee else 0.0 * p_d,
                                      delta=ds.delta, equiangular=p_e))
     # (after the weight, which needs no visibility: no shadow ray for a sample of weight 0)
-    T_light = transmittance(scene, medium, it, ds.p, sampler, channel, floor, ok & (w > 0), tracking_kind, grid)
+    shadow = ok & (w > 0)
+    T_light = transmittance(scene, medium, it, ds.p, sampler, channel, floor, shadow, tracking_kind, grid)
     value = beta * mi.Spectrum(T_ray * sigma_s * w / p_e * T_light) * f * emitted
-    return dr.select(ok & (p_e > 0) & dr.isfinite(p_e), spectrum_or_zero(value), 0.0)
+    return dr.select(ok & (p_e > 0) & dr.isfinite(p_e), spectrum_or_zero(value), 0.0), shadow

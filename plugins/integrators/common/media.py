@@ -303,13 +303,15 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
     null boundaries pass light, other surfaces block it), f and p_B the BSDF's (with its cosine)
     or the phase function's, and w = ``sample_weight(Densities)`` (direct.py's convention).
     ``equiangular``: None, or the ``Equiangular`` state of the path's vertex, whose medium
-    vertices then weigh their samples against equi-angular sampling too. An emitter at infinity
+    vertices then weigh their samples against equi-angular sampling too. Returns (L, the shadow
+    rays traced per lane: a sample of MIS weight 0 traces none). An emitter at infinity
     is infinitely far (``transmittance``'s ``unbounded``: none of its light crosses unbounded fog),
     not at Mitsuba's stand-in distance, 2 bounding-sphere radii, where ``volpath`` leaves it: an
     invisible speck far away that grows the bounding sphere must not change the image."""
     from mitsuba_lab.plugins.integrators.common.direct import emitter_sample_contribution
     from mitsuba_lab.plugins.integrators.estimator import Densities
 
+    traced = mi.UInt32(0)
     for _ in range(n_L):
         ds, em_weight = scene.sample_emitter_direction(it, sampler.next_2d(), False, active)
         sampled = active & (ds.pdf != 0)
@@ -325,8 +327,10 @@ def emitter_sampling(scene, sampler, ctx, phase_ctx, it, si, bsdf, mei, phase, s
         w = sample_weight(d)
         # the weight needs no visibility: a sample of weight 0 (``max`` heuristic) adds 0 whatever
         # its T, so its shadow ray is not traced
-        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, sampled & (w > 0), tracking_kind, grid,
+        shadow = sampled & (w > 0)
+        T = transmittance(scene, start, it, ds.p, sampler, channel, floor, shadow, tracking_kind, grid,
                           unbounded=infinite)
+        traced += dr.select(shadow, 1, 0)
         L = L + emitter_sample_contribution(beta, ds, em_weight * mi.Spectrum(T), f, w / n_L, sampled)
-    return L
+    return L, traced
 

@@ -94,11 +94,11 @@ def trace_camera(cp, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, medium
             it = dr.zeros(mi.Interaction3f)
             it[surface] = si
             it[scattered] = mei
-            L_em = media.emitter_sampling(scene, sampler, bsdf_ctx, phase_ctx, it, si, bsdf, mei, phase, scattered,
-                                          medium, channel, beta, mi.Spectrum(0), _emitter_sampling_alone, 1,
-                                          active_em, floor)
+            L_em, traced = media.emitter_sampling(scene, sampler, bsdf_ctx, phase_ctx, it, si, bsdf, mei, phase,
+                                                  scattered, medium, channel, beta, mi.Spectrum(0),
+                                                  _emitter_sampling_alone, 1, active_em, floor)
             L += L_em * direct_scale
-            n_shadow += dr.select(active_em, 1, 0)
+            n_shadow += traced
 
         # ------------------------- Density estimates -------------------------
         if dr.hint(grid is not None and grid.photon_count > 0, mode="scalar"):
