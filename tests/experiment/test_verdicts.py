@@ -130,19 +130,30 @@ def test_the_region_verdict_is_the_region_tables_verdict(region_report):
 # -- bias ----------------------------------------------------------------------------------------
 
 def test_a_bias_far_below_zero_is_flagged_as_an_unreliable_variance_estimate():
-    """The issue's -1.1e-4 +- 3.7e-5: three standard errors below zero, where no bias^2 can be."""
+    """-1.3e-4 +- 3.7e-5: 3.5 standard errors below zero, where no bias^2 can be (the issue's
+    -1.1e-4, 2.97 below, is within the three a "biased" needs since a table states one per point)."""
     point = SimpleNamespace(scene="s", strategy="photon", point="s/photon/i/t1s", seeds=2, variance=1e-3,
-                            bias2=-1.1e-4, bias2_se=3.7e-5, rel_variance=1e-3, rel_bias2=1e-5, rel_bias2_se=3.7e-5,
+                            bias2=-1.3e-4, bias2_se=3.7e-5, rel_variance=1e-3, rel_bias2=1e-5, rel_bias2_se=3.7e-5,
                             rel_mse_corrected=1e-3)
     table = "\n".join(SectionTables().bias_table([point]))
     row = next(line for line in table.splitlines() if line.startswith("| s/photon"))
     cells = [c.strip() for c in row.strip("|").split("|")]
-    assert cells[3] == f"-0.00011 +- 3.7e-05 ({UNRELIABLE})"
+    assert cells[3] == f"-0.00013 +- 3.7e-05 ({UNRELIABLE})"
     assert cells[5].startswith("1e-05 +- 3.7e-05 (not resolved with 2 seeds (needs about ")
-    assert bias_verdict(-5e-5, 3.7e-5, 2)[0].startswith("not resolved")          # within two: no flag
+    assert bias_verdict(-1.1e-4, 3.7e-5, 2)[0].startswith("not resolved")          # within three: no flag
 
 
-def test_a_negative_bias_within_two_errors_names_no_seed_count_and_prints_its_side_of_two():
+def test_unbiased_estimators_at_two_and_a_half_errors_are_not_called_biased():
+    """README's walk-through (3 seeds, 15 points) showed lab_nee and lab_mis at 16 spp "biased" with
+    relative bias^2 1.73e-4 +- 7.4e-5 and 1.65e-4 +- 6.9e-5 (2.3 and 2.4 standard errors); both are
+    unbiased (lab_nee 0.075220 +- 0.000051 against path's 0.075219 over 24 seeds). A "biased" needs
+    three; 3.2 errors still reads biased (power)."""
+    assert bias_verdict(1.73e-4, 7.4e-5, 3)[0].startswith("not resolved")
+    assert bias_verdict(1.65e-4, 6.9e-5, 3)[0].startswith("not resolved")
+    assert bias_verdict(2.37e-4, 7.4e-5, 3)[0] == "biased"
+
+
+def test_a_negative_bias_within_the_threshold_names_no_seed_count_and_prints_its_side_of_it():
     """The walkthrough's bdpt 1 s point: bias^2 -3.207e-4 +- 1.639e-4 (1.96 standard errors below
     zero) read "not resolved with 3 seeds (needs about 4)" and "-0.000321 +- 0.00016", which looks
     like 2.006 errors, past the flag's threshold. A negative estimate never resolves into a bias
@@ -150,16 +161,17 @@ def test_a_negative_bias_within_two_errors_names_no_seed_count_and_prints_its_si
     verdict, needed = bias_verdict(-3.207e-4, 1.639e-4, 3)
     assert needed is None and verdict.startswith("not resolved with 3 seeds") and "needs" not in verdict
     assert "below zero" in verdict
+    # the table's threshold is three errors (BIAS_SEPARATION): 2.96 below prints as under three
     point = SimpleNamespace(scene="s", strategy="bdpt", point="s/bdpt/i/t1s", seeds=3, variance=5e-3,
-                            bias2=-3.207e-4, bias2_se=1.639e-4, rel_variance=1e-3, rel_bias2=-4.05e-4,
+                            bias2=-4.85e-4, bias2_se=1.639e-4, rel_variance=1e-3, rel_bias2=-4.05e-4,
                             rel_bias2_se=7.6e-4, rel_mse_corrected=0.035)
     table = "\n".join(SectionTables().bias_table([point]))
     print(table)
     row = next(line for line in table.splitlines() if line.startswith("| s/bdpt"))
     cells = [c.strip() for c in row.strip("|").split("|")]
     value, error = (float(x) for x in cells[3].split(" (")[0].split(" +- "))
-    assert abs(value) / error < 2, cells[3]                       # as printed: within two errors
-    assert cells[3].startswith("-0.000321 +- 0.000164 (not resolved with 3 seeds (below zero")
+    assert abs(value) / error < 3, cells[3]                       # as printed: within three errors
+    assert cells[3].startswith("-0.000485 +- 0.000164 (not resolved with 3 seeds (below zero")
     assert "needs about" not in cells[3] and "needs about" not in cells[5]
     # above zero the same: 1.98 errors prints as under two (two digits of the error read 2.03)
     assert fmt_pm(3.25e-4, 1.64e-4) == "0.000325 +- 0.00016"

@@ -392,7 +392,7 @@ def bias_by_passes(points: list[PointStats], passes_of) -> dict:
 
     ``passes_of(point)`` gives a point's passes. Rows sorted by passes, each with relMSE, the
     relative variance, the relative bias^2 estimate, its standard error, whether it is
-    resolved (``separated`` from zero: more than two standard errors above it), ``verdict``
+    resolved (more than ``verdicts.BIAS_SEPARATION`` standard errors above zero), ``verdict``
     (``bias_verdict``) and ``needed`` (the seeds that would resolve it); ``slope`` is the
     log-log slope of bias^2 against passes over the resolved rows (NaN with fewer than two):
     negative when the bias shrinks as passes grow.

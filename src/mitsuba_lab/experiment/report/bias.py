@@ -12,7 +12,7 @@ from ...reporting import fmt, fmt_pm, markdown_table
 from ...reporting.numbers import digits_for_error
 from .analysis import region_bias_variance
 from ..pipeline.budget import missed_budget, off_budget_text
-from .verdicts import SEPARATION, UNRELIABLE, bias_verdict, not_resolved, seeds_needed, separation_factor
+from .verdicts import BIAS_SEPARATION, UNRELIABLE, bias_verdict, not_resolved, seeds_needed, separation_factor
 
 #: A "biased" image mean is a two-sided test at 1% (Student's t's and the normal's 99.5% quantiles): it
 #: takes a strategy out of the image's "most efficient" verdict, and three seeds of an unbiased but
@@ -35,13 +35,14 @@ class BiasTables:
                 "estimate (the seed mean's squared error minus its expected noise), so for an unbiased "
                 "estimator it scatters around zero and is negative about as often as positive. Its standard "
                 "error is taken over blocks of pixels (neighbouring pixels of a blurring estimator are not "
-                "independent). Marked \"biased\" more than two standard errors above zero; more than two below "
+                "independent). Marked \"biased\" more than three standard errors above zero (a table of many "
+                "points: at two, unbiased estimators would show one now and then); more than three below "
                 f"zero, where no bias^2 can be, \"{UNRELIABLE}\": the seeds' variance estimate is off, not "
                 "the bias absent; otherwise \"not resolved with N seeds (needs about M)\", M the seeds at "
-                "which an estimate of this size would be two standard errors from zero (an unbiased "
+                "which an estimate of this size would be three standard errors from zero (an unbiased "
                 "estimator's keeps shrinking, so no number of seeds resolves it); a negative estimate names "
                 "no M (more seeds would flag it, never resolve a bias). Estimate and error carry the digits "
-                "that show on which side of two standard errors it lies.", "",
+                "that show on which side of three standard errors it lies.", "",
                 *markdown_table(header, body)]
 
     def mean_table(self, groups, label) -> list[str]:
@@ -121,7 +122,7 @@ def bias_cell(bias2: float, se: float, seeds: int) -> str:
     """A bias^2 estimate with its standard error and its verdict (``verdicts.bias_verdict``)."""
     if math.isnan(bias2):
         return fmt(bias2)
-    return f"{fmt_pm(bias2, se, separation=SEPARATION)} ({bias_verdict(bias2, se, seeds)[0]})"
+    return f"{fmt_pm(bias2, se, separation=BIAS_SEPARATION)} ({bias_verdict(bias2, se, seeds)[0]})"
 
 
 def _interval(value: float, half: float) -> str:

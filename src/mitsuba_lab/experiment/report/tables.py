@@ -24,7 +24,7 @@ from ..pipeline.budget import BUDGET_RETRIES, budget_label, missed_budget, off_b
 from ..pipeline.config import PASS_PARAMETER
 from .bias import BiasTables, mean_biased
 from .veach import VeachSection
-from .verdicts import SEPARATION, UNRELIABLE, best_of, bias_verdict
+from .verdicts import BIAS_SEPARATION, SEPARATION, UNRELIABLE, best_of, bias_verdict
 from .spectrum import fit_slope, slope_cell, slope_note
 
 
@@ -341,13 +341,13 @@ class SectionTables(VeachSection, BiasTables):
             curves[label(key)] = result
             header = [unit, "seeds", "time s", "relMSE", "variance", "bias^2 (+- se)", "resolved", "bias^2 / relMSE"]
             body = [[r["passes"], r["seeds"], fmt(r["time_s"]), fmt(r["rel_mse"]), fmt(r["variance"]),
-                     fmt_pm(r["bias2"], r["bias2_se"], separation=SEPARATION), "yes" if r["resolved"] else r["verdict"],
+                     fmt_pm(r["bias2"], r["bias2_se"], separation=BIAS_SEPARATION), "yes" if r["resolved"] else r["verdict"],
                      fmt(r["bias2"] / r["rel_mse"] if r["rel_mse"] > 0 else math.nan, 2)] for r in result["rows"]]
             md += ["", f"### {label(key)}: bias^2 and variance against {unit}", "",
                    f"In relMSE's units (pixels weighted by 1 / (ref^2 + 0.01), so the light's edge pixels do "
                    f"not swamp the rest): relMSE = bias^2 + variance + reference floor ({fmt(rel_floor)}); "
-                   f"bias^2 +- one standard error (over blocks of pixels), resolved when more than two above "
-                   f"zero, \"{UNRELIABLE}\" when more than two below. Log-log slope "
+                   f"bias^2 +- one standard error (over blocks of pixels), resolved when more than three above "
+                   f"zero, \"{UNRELIABLE}\" when more than three below. Log-log slope "
                    f"of the resolved bias^2 against {unit}: {slope_cell(fit)}.", "",
                    *markdown_table(header, body),
                    *slope_note([(label(key), fit)], "above", "theory for progressive photon mapping (alpha 2/3): "

@@ -14,6 +14,11 @@ from dataclasses import dataclass
 
 #: A verdict from an error taken over pixels needs its estimate this many standard errors away.
 SEPARATION = 2.0
+#: ... and a "biased" bias^2 (``bias_verdict``) this many: a report's bias table holds a row per point,
+#: and at two (one-sided 2.3% each) fifteen rows of unbiased estimators showed one "biased" about
+#: every third report (README's walk-through: lab_nee and lab_mis at 16 spp, 2.3 and 2.4 standard
+#: errors); at three, 0.13% each.
+BIAS_SEPARATION = 3.0
 #: The most seeds a "needs about" names; past it, "more than" this.
 MOST_SEEDS = 100_000
 
@@ -38,14 +43,16 @@ def separated(gap: float, se: float, seeds: int | None = None) -> bool:
     return bool(gap > separation_factor(seeds) * se) if math.isfinite(gap) and math.isfinite(se) else False
 
 
-def seeds_needed(seeds: int, gap: float, se: float, over_seeds: bool = True, quantile: float = 0.975) -> int | None:
+def seeds_needed(seeds: int, gap: float, se: float, over_seeds: bool = True, quantile: float = 0.975,
+                 separation: float = SEPARATION) -> int | None:
     """About how many seeds would separate ``gap`` when the standard error ``se`` (measured
     with ``seeds``) falls as 1/sqrt(seeds), at ``separation_factor``'s ``quantile``; None where no
-    number of seeds would (no gap, no error), MOST_SEEDS + 1 past MOST_SEEDS."""
+    number of seeds would (no gap, no error), MOST_SEEDS + 1 past MOST_SEEDS. ``separation``: the
+    factor of an error over pixels (``over_seeds`` False)."""
     if not (math.isfinite(gap) and math.isfinite(se)) or gap <= 0 or se <= 0 or seeds < 1:
         return None
-    factor = lambda m: separation_factor(m if over_seeds else None, quantile)        # noqa: E731
-    m = max(seeds + 1, math.ceil(seeds * (SEPARATION * se / gap) ** 2))
+    factor = (lambda m: separation_factor(m, quantile)) if over_seeds else (lambda m: separation)  # noqa: E731
+    m = max(seeds + 1, math.ceil(seeds * ((SEPARATION if over_seeds else separation) * se / gap) ** 2))
     while m <= MOST_SEEDS and not factor(m) * se * math.sqrt(seeds / m) < gap:
         m = max(m + 1, math.ceil(m * 1.05))
     return m if m <= MOST_SEEDS else MOST_SEEDS + 1
@@ -109,24 +116,24 @@ def best_of(costs: dict, seeds: int) -> Best:
                 None if resolved else seeds_needed(seeds, gap, log_se))
 
 
-#: The verdict on a bias^2 estimate more than two standard errors below zero.
+#: The verdict on a bias^2 estimate more than BIAS_SEPARATION standard errors below zero.
 UNRELIABLE = "unreliable variance estimate (heavy tails)"
-#: Why a bias^2 estimate below zero (within two standard errors) names no number of seeds.
+#: Why a bias^2 estimate below zero (within BIAS_SEPARATION standard errors) names no number of seeds.
 BELOW_ZERO = "below zero: more seeds would not show a bias"
 
 
 def bias_verdict(bias2: float, se: float, seeds: int) -> tuple[str, int | None]:
     """(verdict, seeds needed) on a bias^2 estimate +- its standard error (an error over
-    pixels): "biased" more than two standard errors above zero; UNRELIABLE more than two
-    below, where bias^2 cannot be (the seeds' variance estimate is off: heavy tails, a few
+    pixels): "biased" more than BIAS_SEPARATION standard errors above zero; UNRELIABLE more than
+    that below, where bias^2 cannot be (the seeds' variance estimate is off: heavy tails, a few
     fireflies); else ``not_resolved``, with the seeds at which an estimate of this size would
-    be two standard errors from zero; without a seed count for a negative estimate (BELOW_ZERO):
-    with more seeds it would be flagged UNRELIABLE, never resolved as a bias."""
-    if separated(bias2, se):
+    be BIAS_SEPARATION standard errors from zero; without a seed count for a negative estimate
+    (BELOW_ZERO): with more seeds it would be flagged UNRELIABLE, never resolved as a bias."""
+    if bias2 > BIAS_SEPARATION * se:
         return "biased", None
-    if separated(-bias2, se):
+    if -bias2 > BIAS_SEPARATION * se:
         return UNRELIABLE, None
     if bias2 < 0:
         return f"{not_resolved(seeds, None)} ({BELOW_ZERO})", None
-    needed = seeds_needed(seeds, abs(bias2), se, over_seeds=False)
+    needed = seeds_needed(seeds, abs(bias2), se, over_seeds=False, separation=BIAS_SEPARATION)
     return not_resolved(seeds, needed), needed
