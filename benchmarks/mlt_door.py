@@ -15,7 +15,8 @@ and the dividing wall's far faces reflect through it). Veach's door has almost n
 ``time``: chain settings at equal time, one render per seed (not a progressive run, so a render
 knows its whole mutation count and settings can be chosen from it). Per plan, the mutations per
 pixel that fill ``--budget`` seconds are fitted (time = fixed + per spp x spp through two pilot
-renders, ``--pilots``), then each seed renders that many. Plans (``--plans``), each with
+renders, ``--pilots``), then each seed renders that many. Plans (``--plans``): ``shipped`` (every
+strategy as it ships, ``bootstrap_share`` included); the others with the chain estimators'
 ``bootstrap_share`` 0: ``defaults`` (otherwise the defaults: 8192 chains, 100000 bootstrap paths);
 ``long``: fewer, longer chains, chains = pixels x N / ``--min-steps`` (N the defaults' fitted count,
 so each chain runs at least that many mutations; between 256 and 8192); ``boot``: a bootstrap that
@@ -162,8 +163,11 @@ def equal_time(args) -> None:
         kind = base.pop("type")
         n_default = None
         for plan in args.plans:
-            settings = {"bootstrap_share": 0.0}
-            if plan != "defaults":
+            # (the chain estimators' bootstrap fixed, as before bootstrap_share; the others have none)
+            settings = {"bootstrap_share": 0.0} if kind in ("lab_pssmlt", "lab_mmlt") else {}
+            if plan == "shipped":
+                settings = {}
+            elif plan != "defaults":
                 if n_default is None:
                     sys.exit("time: --plans must start with defaults (the others are chosen from its count)")
                 settings = plan_settings(plan, pixels, n_default, args.min_steps, args.boot_share, args.boot_cap)
@@ -243,7 +247,7 @@ def main(argv=None) -> None:
     parser.add_argument("--budget", type=float, default=16.0, help="time: seconds per render")
     parser.add_argument("--pilots", type=int, nargs=2, default=[16, 64], help="time: the pilot renders' spp")
     parser.add_argument("--plans", nargs="+", default=["defaults", "long", "boot", "long+boot"],
-                        choices=("defaults", "long", "boot", "long+boot"))
+                        choices=("shipped", "defaults", "long", "boot", "long+boot"))
     parser.add_argument("--freeze", action="store_true", help="time: lab_mmlt with frozen rounds (every plan)")
     parser.add_argument("--min-steps", type=int, default=1024, help="time: plan long's mutations per chain")
     parser.add_argument("--boot-cap", type=int, default=MAX_BOOTSTRAP, help="time: plan boot's most paths")
