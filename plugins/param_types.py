@@ -84,6 +84,10 @@ def _int_at_least(lo: int) -> dict:
     return {"check": lambda v: v >= lo, "expected": f"an integer >= {lo}"}
 
 
+#: The check of a length in scene units whose 0 means "automatic" (the merging and gathering radii).
+AUTOMATIC_LENGTH = {"check": lambda v: v >= 0.0 and math.isfinite(v), "expected": "0 (automatic) or a finite number > 0"}
+
+
 def _override(parameters: tuple[Param, ...], *replacements: Param) -> tuple[Param, ...]:
     """``parameters`` with the entries of the same names replaced, order kept."""
     by_name = {p.name: p for p in replacements}

@@ -25,7 +25,7 @@ import difflib
 import math
 from dataclasses import replace
 
-from .param_types import Param, ParameterError, _int_at_least, _override, _show  # noqa: F401 (re-exported)
+from .param_types import AUTOMATIC_LENGTH, Param, ParameterError, _int_at_least, _override, _show  # noqa: F401 (re-exported)
 
 
 # ---------------------------------------------------------------------------
@@ -133,11 +133,11 @@ LAB_PHOTON = (
           check=lambda v: 0.0 < v < 1.0, expected="a number in (0, 1)"),
     Param("radius", float, 0.0, "first-pass radius in scene units; 0 = automatic: a pixel's width where the camera "
           "looks, or wider where photons are sparse there (1/64 per pass in it: common/density_radius.py)",
-          check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
+          **AUTOMATIC_LENGTH),
     Param("radius_volume", float, 0.0, "first-pass radius r_v,1 of the ball volumetric photons are gathered in "
           "(scenes with participating media), in scene units; 0 = automatic (the surfaces' first radius); "
           "r_v,{i+1}^3 = r_v,i^3 (i + alpha) / (i + 1)",
-          check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
+          **AUTOMATIC_LENGTH),
     Param("max_depth", int, UNBOUNDED, "longest path in segments (camera + light subpath), -1 unbounded",
           check=lambda v: v == UNBOUNDED or v >= 1, expected="-1 (unbounded) or an integer >= 1"),
     replace(PATH_TRACER[1], doc="depth at which Russian roulette starts, on both subpaths"),
@@ -239,11 +239,11 @@ LAB_VCM = (
           choices=VCM_MODES),
     Param("radius", float, 0.0, "first iteration's merging radius r_1 in scene units; 0 = automatic: a pixel's "
           "width where the camera looks, or wider where light vertices are sparse there (common/density_radius.py)",
-          check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
+          **AUTOMATIC_LENGTH),
     Param("radius_volume", float, 0.0, "first iteration's radius r_v,1 of the ball medium vertices merge in "
           "(scenes with participating media), in scene units; 0 = automatic (the surfaces' r_1); "
           "r_v,i = r_v,1 i^((alpha - 1) / 3)",
-          check=lambda v: v >= 0.0 and math.isfinite(v), expected="0 (automatic) or a finite number > 0"),
+          **AUTOMATIC_LENGTH),
     Param("alpha", float, 0.75, "radius schedule r_i = r_1 i^((alpha - 1) / 2), iteration i = sample i",
           check=lambda v: 0.0 < v < 1.0, expected="a number in (0, 1)"),
     Param("light_paths", float, 1.0, "light subpaths traced per camera subpath in each iteration: all of "
